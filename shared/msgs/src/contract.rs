@@ -1,0 +1,384 @@
+//! The payloads, their topics, and the constants that give their fields meaning.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::message::{define_struct, message, nested, topics};
+
+/// Glove finger order used by every glove field: little, ring, middle, index, thumb.
+pub const GLOVE_FINGERS: [&str; 5] = ["little", "ring", "middle", "index", "thumb"];
+/// Glove position channels: the five fingers, then the thumb's lateral rotation.
+pub const GLOVE_CHANNELS: [&str; 6] = ["little", "ring", "middle", "index", "thumb", "thumb_rotation"];
+/// Revo2 joint order (the device's `finger_index_t`).
+pub const REVO2_JOINTS: [&str; 6] = ["thumb_flex", "thumb_abduct", "index", "middle", "ring", "pinky"];
+/// Revo2 fingertip order of the tactile arrays.
+pub const REVO2_FINGERTIPS: [&str; 5] = ["thumb", "index", "middle", "ring", "pinky"];
+/// Most joints a [`HandCommand`] or [`HandState`] can carry (Shadow Hand has 24 with the wrist).
+pub const MAX_JOINTS: usize = 24;
+/// Most fingertips a [`Tactile`] sample can carry.
+pub const MAX_FINGERTIPS: usize = 5;
+
+/// Hand model ids (`hand_model` fields).
+pub mod hand_model {
+    /// Not known.
+    pub const UNKNOWN: u8 = 0;
+    /// BrainCo Revo2 (6 joints, EtherCAT).
+    pub const REVO2: u8 = 1;
+    /// Wonik Allegro Hand (16 joints, CAN).
+    pub const ALLEGRO: u8 = 2;
+    /// Shadow Dexterous Hand (EtherCAT).
+    pub const SHADOW: u8 = 3;
+}
+
+/// Control modes of a [`HandCommand`].
+pub mod control_mode {
+    /// Position targets; `speed_limit` (if non-zero) bounds the joint speed.
+    pub const POSITION: u8 = 1;
+    /// Position targets reached in `duration_ms` of the joint record's `limit`.
+    pub const POSITION_TIME: u8 = 2;
+    /// Velocity targets.
+    pub const VELOCITY: u8 = 3;
+    /// Effort (motor current or torque) targets.
+    pub const EFFORT: u8 = 4;
+    /// Raw duty-cycle targets in [-1, 1].
+    pub const DUTY: u8 = 5;
+}
+
+/// Units of joint values (`units` fields).
+pub mod units {
+    /// Positions as a fraction of travel (0 = open, 1 = closed), speeds in travel per second,
+    /// efforts as a fraction of the maximum.
+    pub const NORMALISED: u8 = 0;
+    /// Radians, radians per second, amperes (or newton-metres for torque hands).
+    pub const PHYSICAL: u8 = 1;
+}
+
+/// Bits of [`HandCommand::flags`].
+pub mod command_flags {
+    /// The command repeats the last one because the input went stale.
+    pub const HELD: u8 = 1 << 0;
+    /// At least one target was clamped to a joint limit.
+    pub const CLAMPED: u8 = 1 << 1;
+    /// At least one target was slew limited.
+    pub const SLEW_LIMITED: u8 = 1 << 2;
+}
+
+/// Bits of [`GloveForceCommand::flags`].
+pub mod force_flags {
+    /// Forces are ramping to zero because an input is stale.
+    pub const STALE: u8 = 1 << 0;
+    /// The emergency stop is engaged: all forces are zero.
+    pub const ESTOP: u8 = 1 << 1;
+    /// At least one force was saturated at the configured maximum.
+    pub const CLAMPED: u8 = 1 << 2;
+}
+
+/// Where a finger's force feedback came from (`source` of [`GloveForceCommand`]).
+pub mod contact_source {
+    /// No contact.
+    pub const NONE: u8 = 0;
+    /// Fingertip tactile normal force.
+    pub const TACTILE: u8 = 1;
+    /// Estimated from commanded minus measured joint position.
+    pub const POSITION_ERROR: u8 = 2;
+    /// Estimated from motor current.
+    pub const CURRENT: u8 = 3;
+    /// Ramping to zero after an input went stale.
+    pub const RAMPING: u8 = 4;
+    /// Held at zero by the emergency stop.
+    pub const ESTOP: u8 = 5;
+}
+
+/// Bits of [`Fingertip::status`] (the Revo2 touch-status low byte).
+pub mod touch_status {
+    /// The sensor's raw value is invalid.
+    pub const INVALID: u8 = 1 << 0;
+    /// The raw value has not been updated.
+    pub const NOT_UPDATED: u8 = 1 << 1;
+    /// The sensor timed out.
+    pub const TIMEOUT: u8 = 1 << 2;
+}
+
+nested! {
+    /// The header every payload starts with.
+    SampleHeader("teleop_msgs/SampleHeader", "teleop::SampleHeader") {
+        /// Per-publisher sequence number, starting at 1; gaps mean lost samples.
+        seq: u64 => "uint64",
+        /// CLOCK_MONOTONIC nanoseconds when this sample was made.
+        stamp_ns: u64 => "uint64",
+        /// `stamp_ns` of the device sample this one ultimately descends from (equal to
+        /// `stamp_ns` for device samples): `stamp_ns - origin_ns` is the latency so far.
+        origin_ns: u64 => "uint64",
+        /// Who made it: `source_id(node name)`.
+        source_id: u32 => "uint32",
+        /// Zero.
+        reserved: u32 => "uint32",
+    }
+}
+
+nested! {
+    /// One joint of a [`HandCommand`].
+    JointCommand("teleop_msgs/JointCommand", "teleop::JointCommand") {
+        /// Target in the command's units and mode.
+        target: f32 => "float32",
+        /// Speed limit (0 = none), or the motion time in ms for `POSITION_TIME`.
+        speed_limit: f32 => "float32",
+        /// Effort limit (0 = none).
+        effort_limit: f32 => "float32",
+    }
+}
+
+nested! {
+    /// One joint of a [`HandState`].
+    JointState("teleop_msgs/JointState", "teleop::JointState") {
+        /// Measured position in the state's units.
+        position: f32 => "float32",
+        /// Measured speed in the state's units.
+        speed: f32 => "float32",
+        /// Motor current in milliamperes.
+        current_ma: f32 => "float32",
+        /// Device-specific joint status word.
+        status: u32 => "uint32",
+    }
+}
+
+nested! {
+    /// One fingertip of a [`Tactile`] sample.
+    Fingertip("teleop_msgs/Fingertip", "teleop::Fingertip") {
+        /// Normal force in newtons.
+        normal_n: f32 => "float32",
+        /// Tangential force in newtons.
+        tangential_n: f32 => "float32",
+        /// Direction of the tangential force in degrees (0 = towards the fingertip, clockwise);
+        /// meaningful only when `direction_valid` is 1.
+        direction_deg: f32 => "float32",
+        /// Proximity (raw sensor units, larger = closer).
+        proximity: u32 => "uint32",
+        /// Sensor status bits, see [`touch_status`].
+        status: u8 => "uint8",
+        /// The sensor's update counter (changes when the sensor produced new data).
+        update_counter: u8 => "uint8",
+        /// 1 when `direction_deg` is valid.
+        direction_valid: u8 => "uint8",
+        /// Zero.
+        reserved: u8 => "uint8",
+    }
+}
+
+message! {
+    /// The glove's six positions as reported and normalised, and its measured finger forces.
+    GloveState("teleop_msgs/msg/GloveState", topic "glove/state", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// Raw positions in [`GLOVE_CHANNELS`] order: 0 = bent (thumb rotation: innermost),
+        /// 1000 = open (outermost).
+        raw_position: [u16; 6] => "uint16[6]",
+        /// Last measured finger forces in [`GLOVE_FINGERS`] order, glove units (-1000..1000;
+        /// positive = the finger pushes towards a fist).
+        force: [i16; 5] => "int16[5]",
+        /// 1 while the serial link answers.
+        link_up: u8 => "uint8",
+        /// The glove's device id.
+        glove_id: u8 => "uint8",
+        /// `raw_position / 1000`, clamped to [0, 1] (same sense as `raw_position`).
+        position: [f32; 6] => "float32[6]",
+        /// Exchanges completed since the node started.
+        exchanges: u32 => "uint32",
+        /// Timeouts and bad frames since the node started.
+        errors: u32 => "uint32",
+    }
+}
+
+message! {
+    /// Slow-rate glove diagnostics read from its registers.
+    GloveDiagnostics("teleop_msgs/msg/GloveDiagnostics", topic "glove/diagnostics", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// Actual finger forces (register 1582), glove units.
+        force: [i16; 5] => "int16[5]",
+        /// Actuator currents in mA (register 1594).
+        current_ma: [u16; 5] => "uint16[5]",
+        /// System voltage register 1472 as read (the manual gives no unit).
+        voltage_raw: u16 => "uint16",
+        /// Actuator error bits (register 1606): bit0 locked rotor, bit1 over-temperature,
+        /// bit2 over-current, bit3 abnormal operation, bit4 communication.
+        error_bits: [u8; 5] => "uint8[5]",
+        /// Actuator temperatures in degrees Celsius (register 1618).
+        temperature_c: [u8; 5] => "uint8[5]",
+    }
+}
+
+message! {
+    /// Per-finger force the glove should apply.
+    GloveForceCommand("teleop_msgs/msg/GloveForceCommand", topic "glove/force_command", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// Force per finger in [`GLOVE_FINGERS`] order, glove units -1000..1000; positive pushes
+        /// the operator's hand open.
+        force: [i16; 5] => "int16[5]",
+        /// See [`force_flags`].
+        flags: u8 => "uint8",
+        /// Per finger, where the force came from; see [`contact_source`].
+        source: [u8; 5] => "uint8[5]",
+    }
+}
+
+message! {
+    /// A hand-agnostic joint command.
+    HandCommand("teleop_msgs/msg/HandCommand", topic "hand/command", nested [SampleHeader, JointCommand]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// See [`hand_model`].
+        hand_model: u8 => "uint8",
+        /// How many entries of `joints` are used.
+        joint_count: u8 => "uint8",
+        /// See [`control_mode`].
+        control_mode: u8 => "uint8",
+        /// See [`units`].
+        units: u8 => "uint8",
+        /// See [`command_flags`].
+        flags: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 3] => "uint8[3]",
+        /// Joint targets in the hand's joint order (Revo2: [`REVO2_JOINTS`]).
+        joints: [JointCommand; MAX_JOINTS] => "teleop_msgs/JointCommand[24]",
+    }
+}
+
+message! {
+    /// Measured joint state and link status of a hand.
+    HandState("teleop_msgs/msg/HandState", topic "hand/state", nested [SampleHeader, JointState]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// See [`hand_model`].
+        hand_model: u8 => "uint8",
+        /// How many entries of `joints` are used.
+        joint_count: u8 => "uint8",
+        /// 1 while the hand's link is up and cycling.
+        link_up: u8 => "uint8",
+        /// EtherCAT AL state (1 INIT, 2 PRE-OP, 3 BOOT, 4 SAFE-OP, 8 OP; bit 4 = error).
+        al_state: u8 => "uint8",
+        /// See [`units`].
+        units: u8 => "uint8",
+        /// 1 when the hand is holding because its command went stale.
+        holding: u8 => "uint8",
+        /// EtherCAT AL status code (0 = no error).
+        al_status_code: u16 => "uint16",
+        /// Cycles with a wrong working counter since start.
+        wkc_errors: u32 => "uint32",
+        /// Cycles whose frame was lost since start.
+        lost_frames: u32 => "uint32",
+        /// Joints in the hand's joint order.
+        joints: [JointState; MAX_JOINTS] => "teleop_msgs/JointState[24]",
+    }
+}
+
+message! {
+    /// Fingertip tactile forces.
+    Tactile("teleop_msgs/msg/Tactile", topic "hand/tactile", nested [SampleHeader, Fingertip]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// See [`hand_model`].
+        hand_model: u8 => "uint8",
+        /// How many entries of `fingertips` are used.
+        fingertip_count: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 2] => "uint8[2]",
+        /// Fingertips in the hand's order (Revo2: [`REVO2_FINGERTIPS`]).
+        fingertips: [Fingertip; MAX_FINGERTIPS] => "teleop_msgs/Fingertip[5]",
+    }
+}
+
+message! {
+    /// A node's periodic health report.
+    NodeHealth("teleop_msgs/msg/NodeHealth", topic "health", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// Node name, UTF-8, zero padded.
+        node_name: [u8; 32] => "uint8[32]",
+        /// Main loop rate over the last report period, in Hz.
+        loop_rate_hz: f32 => "float32",
+        /// How many entries of `input_age_ms` are used.
+        input_count: u8 => "uint8",
+        /// Node-specific state, e.g. the force-feedback contact source per finger.
+        detail: [u8; 7] => "uint8[7]",
+        /// Age of the newest sample of each input in ms, -1 if never received.
+        input_age_ms: [f32; 5] => "float32[5]",
+        /// Input watchdog timeouts since start.
+        timeouts: u64 => "uint64",
+        /// Values clamped to configured limits since start.
+        clamps: u64 => "uint64",
+        /// Errors since start (bad frames, failed sends, ...).
+        errors: u64 => "uint64",
+        /// Samples lost on inputs (sequence gaps) since start.
+        dropped: u64 => "uint64",
+    }
+}
+
+message! {
+    /// Emergency stop: while engaged, the glove applies no force.
+    EStop("teleop_msgs/msg/EStop", topic "estop", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// 1 = engaged, 0 = released.
+        engaged: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 7] => "uint8[7]",
+    }
+}
+
+topics!(
+    GloveState,
+    GloveDiagnostics,
+    GloveForceCommand,
+    HandCommand,
+    HandState,
+    Tactile,
+    NodeHealth,
+    EStop,
+);
+
+impl NodeHealth {
+    /// Stores `name` (truncated to 32 bytes at a character boundary).
+    pub fn set_name(&mut self, name: &str) {
+        self.node_name = [0; 32];
+        let mut end = name.len().min(32);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        self.node_name[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+
+    /// The node name (invalid UTF-8 is replaced).
+    pub fn name(&self) -> String {
+        let end = self.node_name.iter().position(|&b| b == 0).unwrap_or(32);
+        String::from_utf8_lossy(&self.node_name[..end]).into_owned()
+    }
+}
+
+impl HandCommand {
+    /// The used joints.
+    pub fn active_joints(&self) -> &[JointCommand] {
+        &self.joints[..usize::from(self.joint_count).min(MAX_JOINTS)]
+    }
+}
+
+impl HandState {
+    /// The used joints.
+    pub fn active_joints(&self) -> &[JointState] {
+        &self.joints[..usize::from(self.joint_count).min(MAX_JOINTS)]
+    }
+}
+
+impl Tactile {
+    /// The used fingertips.
+    pub fn active_fingertips(&self) -> &[Fingertip] {
+        &self.fingertips[..usize::from(self.fingertip_count).min(MAX_FINGERTIPS)]
+    }
+}
+
+impl Fingertip {
+    /// True when the sensor reports its values as usable (no invalid/timeout bit).
+    pub fn is_valid(&self) -> bool {
+        self.status & (touch_status::INVALID | touch_status::TIMEOUT) == 0
+    }
+}

@@ -1,0 +1,43 @@
+//! The message contract of the teleoperation pipeline.
+//!
+//! Owns every payload that crosses a process boundary: fixed-size `#[repr(C)]` structs with
+//! `ZeroCopySend`, an explicit iceoryx2 type name, no heap, no pointers and no padding (checked
+//! at compile time). Every payload starts with the same [`SampleHeader`] (sequence number, stamp,
+//! origin stamp, source id) so that end-to-end latency can be attributed per stage.
+//!
+//! Each payload also carries its ROS 2 `.msg` schema ([`Message::schema`]): the raw struct bytes
+//! behind the 4-byte CDR little-endian encapsulation header are valid ROS 2 CDR for that schema, so
+//! a recorder can write them to MCAP unchanged and any ROS 2 tool decodes them. The `cdr_layout`
+//! test checks every schema against the struct's real field offsets.
+//!
+//! [`topics`] lists every topic with its payload type; [`visit_topic`] lets generic tools
+//! (echo, stats, recorder) work on any topic without per-topic code.
+//!
+//! Must not depend on: anything but `iceoryx2` (for the `ZeroCopySend` derive). No I/O here.
+
+mod contract;
+mod message;
+
+pub use contract::*;
+pub use message::{DecodeError, Field, Message, Nested, TopicInfo, TopicVisitor};
+
+/// The CDR encapsulation header (little-endian, no options) that turns a payload's bytes into a
+/// ROS 2 CDR message.
+pub const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+
+/// Prefix of every iceoryx2 service name used by the pipeline: topic `glove/state` is the service
+/// `teleop/glove/state`.
+pub const SERVICE_PREFIX: &str = "teleop/";
+
+/// FNV-1a hash of a node name: the `source_id` a node writes into every header it stamps.
+pub const fn source_id(name: &str) -> u32 {
+    let bytes = name.as_bytes();
+    let mut hash: u32 = 0x811c_9dc5;
+    let mut i = 0;
+    while i < bytes.len() {
+        hash ^= bytes[i] as u32;
+        hash = hash.wrapping_mul(0x0100_0193);
+        i += 1;
+    }
+    hash
+}
