@@ -1,0 +1,127 @@
+//! The node's wait loop: sleep in an iceoryx2 WaitSet until an input arrives, an input's
+//! watchdog deadline passes, or the periodic tick is due. No busy polling.
+
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::{CallbackProgression, WaitSetBuilder};
+use iceoryx2::waitset::WaitSetRunResult;
+
+use crate::ipc::RuntimeError;
+use crate::Service;
+
+/// One input of an [`EventLoop`]: the listener of a [`Subscriber`](crate::Subscriber) and an
+/// optional watchdog deadline.
+pub struct Input<'a> {
+    listener: &'a Listener<Service>,
+    deadline: Option<Duration>,
+}
+
+impl<'a> Input<'a> {
+    /// An input that wakes the loop whenever it receives.
+    pub fn new(listener: &'a Listener<Service>) -> Self {
+        Self {
+            listener,
+            deadline: None,
+        }
+    }
+
+    /// An input with a watchdog: the loop also wakes with [`Wake::Timeout`] whenever nothing
+    /// arrived for `deadline`.
+    pub fn with_deadline(listener: &'a Listener<Service>, deadline: Duration) -> Self {
+        Self {
+            listener,
+            deadline: Some(deadline),
+        }
+    }
+}
+
+/// Why the loop woke the node.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    /// Input `i` (index into the inputs given to [`EventLoop::run`]) has new data.
+    Input(usize),
+    /// Input `i` received nothing within its deadline.
+    Timeout(usize),
+    /// The periodic tick.
+    Tick,
+}
+
+/// Why [`EventLoop::run`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// SIGINT.
+    Interrupt,
+    /// SIGTERM.
+    Terminate,
+    /// The node's callback asked to stop.
+    Requested,
+}
+
+/// Whether the loop goes on after a wake-up.
+pub type Flow = core::ops::ControlFlow<()>;
+
+/// The wait loop of a node.
+pub struct EventLoop {
+    tick: Duration,
+}
+
+impl EventLoop {
+    /// A loop that also wakes every `tick` (health reports, stale checks, periodic output).
+    pub fn new(tick: Duration) -> Self {
+        Self { tick }
+    }
+
+    /// Sleeps until something happens and calls `on_wake` for it, until SIGINT/SIGTERM or until
+    /// `on_wake` returns `Break`.
+    pub fn run(
+        &self,
+        inputs: &[Input<'_>],
+        mut on_wake: impl FnMut(Wake) -> Flow,
+    ) -> Result<StopReason, RuntimeError> {
+        let waitset = WaitSetBuilder::new()
+            .create::<Service>()
+            .map_err(|e| RuntimeError::ipc("creating waitset", "event loop", e))?;
+        let mut guards = Vec::with_capacity(inputs.len());
+        for input in inputs {
+            let guard = match input.deadline {
+                Some(deadline) => waitset.attach_deadline(input.listener, deadline),
+                None => waitset.attach_notification(input.listener),
+            }
+            .map_err(|e| RuntimeError::ipc("attaching input", "event loop", e))?;
+            guards.push(guard);
+        }
+        let tick = waitset
+            .attach_interval(self.tick)
+            .map_err(|e| RuntimeError::ipc("attaching tick", "event loop", e))?;
+
+        let result = waitset
+            .wait_and_process(|id| {
+                let wake = if id.has_event_from(&tick) {
+                    Some(Wake::Tick)
+                } else {
+                    guards.iter().enumerate().find_map(|(i, g)| {
+                        if id.has_missed_deadline(g) {
+                            Some(Wake::Timeout(i))
+                        } else if id.has_event_from(g) {
+                            Some(Wake::Input(i))
+                        } else {
+                            None
+                        }
+                    })
+                };
+                match wake.map(&mut on_wake) {
+                    Some(Flow::Break(())) => CallbackProgression::Stop,
+                    _ => CallbackProgression::Continue,
+                }
+            })
+            .map_err(|e| RuntimeError::ipc("waiting", "event loop", e))?;
+        Ok(match result {
+            WaitSetRunResult::Interrupt => StopReason::Interrupt,
+            WaitSetRunResult::TerminationRequest => StopReason::Terminate,
+            WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {
+                StopReason::Requested
+            }
+        })
+    }
+}

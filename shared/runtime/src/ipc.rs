@@ -1,0 +1,252 @@
+//! iceoryx2 settings, the node, and service creation with the pipeline's QoS.
+
+use iceoryx2::config::Config;
+use iceoryx2::node::{Node, NodeBuilder};
+use iceoryx2::prelude::{FileName, NodeName, Path, SemanticString, ServiceName};
+use teleop_msgs::{Message, SERVICE_PREFIX};
+
+use crate::ports::{Publisher, Subscriber};
+use crate::Service;
+
+/// Environment variable with the iceoryx2 root path (a directory).
+pub const ENV_IPC_ROOT: &str = "TELEOP_IPC_ROOT";
+/// Environment variable with the iceoryx2 prefix for shared-memory and lock files.
+pub const ENV_IPC_PREFIX: &str = "TELEOP_IPC_PREFIX";
+
+/// Samples a subscriber can queue before the oldest is overwritten (and counted as dropped).
+pub(crate) const SUBSCRIBER_BUFFER: usize = 256;
+const MAX_PUBLISHERS: usize = 16;
+const MAX_SUBSCRIBERS: usize = 16;
+const MAX_NODES: usize = 32;
+
+/// Errors of the runtime. Each names the operation and the service or node it concerns.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    /// The IPC settings are not usable.
+    #[error("invalid iceoryx2 setting {what}: {value:?} ({reason})")]
+    Settings {
+        /// Which setting.
+        what: &'static str,
+        /// Its value.
+        value: String,
+        /// Why it was refused.
+        reason: String,
+    },
+    /// An iceoryx2 call failed.
+    #[error("{operation} {name:?} failed: {detail}")]
+    Ipc {
+        /// What was being done.
+        operation: &'static str,
+        /// The node or service name.
+        name: String,
+        /// iceoryx2's error.
+        detail: String,
+    },
+}
+
+impl RuntimeError {
+    pub(crate) fn ipc(operation: &'static str, name: &str, detail: impl core::fmt::Debug) -> Self {
+        Self::Ipc {
+            operation,
+            name: name.to_string(),
+            detail: format!("{detail:?}"),
+        }
+    }
+}
+
+/// Where the pipeline's iceoryx2 resources live. Processes see each other only with equal
+/// settings; `teleop launch` passes its own to every child through [`ENV_IPC_ROOT`] and
+/// [`ENV_IPC_PREFIX`].
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct IpcSettings {
+    /// Root directory for iceoryx2's files (default: iceoryx2's `/tmp/iceoryx2/`).
+    pub root: Option<String>,
+    /// Prefix of shared-memory and lock files (default: `teleop_`).
+    pub prefix: Option<String>,
+}
+
+impl IpcSettings {
+    /// Settings from [`ENV_IPC_ROOT`] and [`ENV_IPC_PREFIX`] (unset or empty = default).
+    pub fn from_env() -> Self {
+        let get = |k| std::env::var(k).ok().filter(|v: &String| !v.is_empty());
+        Self {
+            root: get(ENV_IPC_ROOT),
+            prefix: get(ENV_IPC_PREFIX),
+        }
+    }
+
+    /// Settings no other process or test uses: root `root_dir`, a prefix unique to this process
+    /// and call. For tests and for throw-away sessions.
+    pub fn isolated(root_dir: &std::path::Path) -> Self {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        Self {
+            root: Some(root_dir.to_string_lossy().into_owned()),
+            prefix: Some(format!("t{}x{n}_", std::process::id())),
+        }
+    }
+
+    /// The environment variables that carry these settings to a child process.
+    pub fn to_env(&self) -> Vec<(&'static str, String)> {
+        let mut env = Vec::new();
+        if let Some(root) = &self.root {
+            env.push((ENV_IPC_ROOT, root.clone()));
+        }
+        if let Some(prefix) = &self.prefix {
+            env.push((ENV_IPC_PREFIX, prefix.clone()));
+        }
+        env
+    }
+
+    /// The iceoryx2 configuration for these settings.
+    pub fn config(&self) -> Result<Config, RuntimeError> {
+        let mut config = Config::default();
+        let prefix = self.prefix.as_deref().unwrap_or("teleop_");
+        config.global.prefix =
+            FileName::new(prefix.as_bytes()).map_err(|e| RuntimeError::Settings {
+                what: "prefix",
+                value: prefix.to_string(),
+                reason: format!("{e:?}; use letters, digits, '_' or '-'"),
+            })?;
+        if let Some(root) = &self.root {
+            let mut root = root.clone();
+            if !root.ends_with('/') {
+                root.push('/');
+            }
+            std::fs::create_dir_all(&root).map_err(|e| RuntimeError::Settings {
+                what: "root path",
+                value: root.clone(),
+                reason: e.to_string(),
+            })?;
+            let path = Path::new(root.as_bytes()).map_err(|e| RuntimeError::Settings {
+                what: "root path",
+                value: root.clone(),
+                reason: format!("{e:?}"),
+            })?;
+            config.global.set_root_path(&path);
+        }
+        Ok(config)
+    }
+}
+
+/// A pipeline process's iceoryx2 node and the factory for its ports.
+pub struct NodeRuntime {
+    node: Node<Service>,
+    name: String,
+    source_id: u32,
+}
+
+impl NodeRuntime {
+    /// Creates the iceoryx2 node `name` (visible in `teleop nodes`).
+    pub fn new(name: &str, settings: &IpcSettings) -> Result<Self, RuntimeError> {
+        let config = settings.config()?;
+        let node_name = NodeName::new(name).map_err(|e| RuntimeError::Settings {
+            what: "node name",
+            value: name.to_string(),
+            reason: format!("{e:?}"),
+        })?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&config)
+            .create::<Service>()
+            .map_err(|e| RuntimeError::ipc("creating node", name, e))?;
+        Ok(Self {
+            node,
+            name: name.to_string(),
+            source_id: teleop_msgs::source_id(name),
+        })
+    }
+
+    /// The node's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The id this node writes into the headers it stamps.
+    pub fn source_id(&self) -> u32 {
+        self.source_id
+    }
+
+    /// The underlying iceoryx2 node.
+    pub fn node(&self) -> &Node<Service> {
+        &self.node
+    }
+
+    /// A publisher for `M`'s topic (creates the service if needed).
+    pub fn publisher<M: Message>(&self) -> Result<Publisher<M>, RuntimeError> {
+        let service = service_name::<M>()?;
+        let pubsub = self.pubsub::<M>(&service)?;
+        let publisher = pubsub
+            .publisher_builder()
+            .create()
+            .map_err(|e| RuntimeError::ipc("creating publisher", M::TOPIC, e))?;
+        let notifier = self
+            .event(&service, M::TOPIC)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| RuntimeError::ipc("creating notifier", M::TOPIC, e))?;
+        Ok(Publisher::new(publisher, notifier, self.source_id))
+    }
+
+    /// A subscriber for `M`'s topic (creates the service if needed). It receives the newest
+    /// sample published before it existed, if any.
+    pub fn subscriber<M: Message>(&self) -> Result<Subscriber<M>, RuntimeError> {
+        let service = service_name::<M>()?;
+        let pubsub = self.pubsub::<M>(&service)?;
+        let subscriber = pubsub
+            .subscriber_builder()
+            .buffer_size(SUBSCRIBER_BUFFER)
+            .create()
+            .map_err(|e| RuntimeError::ipc("creating subscriber", M::TOPIC, e))?;
+        let listener = self
+            .event(&service, M::TOPIC)?
+            .listener_builder()
+            .create()
+            .map_err(|e| RuntimeError::ipc("creating listener", M::TOPIC, e))?;
+        Ok(Subscriber::new(subscriber, listener))
+    }
+
+    fn pubsub<M: Message>(
+        &self,
+        service: &ServiceName,
+    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>, RuntimeError>
+    {
+        self.node
+            .service_builder(service)
+            .publish_subscribe::<M>()
+            .history_size(1)
+            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+            .enable_safe_overflow(true)
+            .max_publishers(MAX_PUBLISHERS)
+            .max_subscribers(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| RuntimeError::ipc("opening publish-subscribe service", M::TOPIC, e))
+    }
+
+    fn event(
+        &self,
+        service: &ServiceName,
+        topic: &str,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, RuntimeError> {
+        self.node
+            .service_builder(service)
+            .event()
+            .max_notifiers(MAX_PUBLISHERS)
+            .max_listeners(MAX_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .open_or_create()
+            .map_err(|e| RuntimeError::ipc("opening event service", topic, e))
+    }
+}
+
+/// The iceoryx2 service name of a topic: `teleop/<topic>`.
+pub(crate) fn service_name<M: Message>() -> Result<ServiceName, RuntimeError> {
+    let name = format!("{SERVICE_PREFIX}{}", M::TOPIC);
+    ServiceName::new(&name).map_err(|e| RuntimeError::Settings {
+        what: "service name",
+        value: name.clone(),
+        reason: format!("{e:?}"),
+    })
+}

@@ -1,0 +1,32 @@
+//! The node runtime: the one way a pipeline process talks to the others.
+//!
+//! Owns the plumbing every node shares, so that a node's own code is its loop and its pure step:
+//! - [`IpcSettings`]: the iceoryx2 root path and prefix (set by `teleop launch` through the
+//!   environment; tests give each test its own so they never see each other's services);
+//! - [`NodeRuntime`]: the iceoryx2 node, typed [`Publisher`]s and [`Subscriber`]s for the topics of
+//!   `teleop-msgs`, each paired with an event service so that receivers sleep until data arrives;
+//! - [`EventLoop`]: a WaitSet over the inputs with per-input deadlines (input watchdogs) and a
+//!   periodic tick; returns on SIGINT/SIGTERM so the node can stop cleanly;
+//! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
+//! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`init_logging`]: `tracing`.
+//!
+//! Must not depend on: any device protocol, the retargeting or force-feedback logic, or the CLI.
+//!
+//! [`NodeHealth`]: teleop_msgs::NodeHealth
+
+mod clock;
+mod event_loop;
+mod health;
+mod ipc;
+mod logging;
+mod ports;
+
+pub use clock::now_ns;
+pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
+pub use health::Health;
+pub use ipc::{IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT};
+pub use logging::init_logging;
+pub use ports::{Publisher, Subscriber};
+
+/// iceoryx2 service type used everywhere (inter-process, shared memory).
+pub type Service = iceoryx2::service::ipc::Service;

@@ -1,0 +1,194 @@
+//! Typed ports: a publish-subscribe port paired with an event port, so that a publisher wakes
+//! its subscribers, plus the bookkeeping every node needs (stamping, freshness, drop counting).
+
+use core::cell::{Cell, RefCell};
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use teleop_msgs::Message;
+
+use crate::clock::now_ns;
+use crate::ipc::RuntimeError;
+use crate::Service;
+
+/// Sends `M` samples and wakes every subscriber of the topic.
+pub struct Publisher<M: Message> {
+    publisher: iceoryx2::port::publisher::Publisher<Service, M, ()>,
+    notifier: Notifier<Service>,
+    source_id: u32,
+    seq: u64,
+}
+
+impl<M: Message> Publisher<M> {
+    pub(crate) fn new(
+        publisher: iceoryx2::port::publisher::Publisher<Service, M, ()>,
+        notifier: Notifier<Service>,
+        source_id: u32,
+    ) -> Self {
+        Self {
+            publisher,
+            notifier,
+            source_id,
+            seq: 0,
+        }
+    }
+
+    /// Stamps `msg` (next sequence number, `stamp_ns` = now, this node's source id; an
+    /// `origin_ns` of 0 becomes the stamp, i.e. the sample is its own origin), sends it and wakes
+    /// the subscribers. Returns the header as sent.
+    pub fn publish(&mut self, msg: &M) -> Result<teleop_msgs::SampleHeader, RuntimeError> {
+        let mut msg = *msg;
+        self.seq += 1;
+        let header = msg.header_mut();
+        header.seq = self.seq;
+        header.stamp_ns = now_ns();
+        if header.origin_ns == 0 {
+            header.origin_ns = header.stamp_ns;
+        }
+        header.source_id = self.source_id;
+        let sent = *msg.header();
+        self.send_as_is(&msg)?;
+        Ok(sent)
+    }
+
+    /// Sends `msg` exactly as given (for replay: the recorded header is kept) and wakes the
+    /// subscribers.
+    pub fn send_as_is(&mut self, msg: &M) -> Result<(), RuntimeError> {
+        let sample = self
+            .publisher
+            .loan_uninit()
+            .map_err(|e| RuntimeError::ipc("loaning sample", M::TOPIC, e))?;
+        sample
+            .write_payload(*msg)
+            .send()
+            .map_err(|e| RuntimeError::ipc("sending sample", M::TOPIC, e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| RuntimeError::ipc("notifying subscribers", M::TOPIC, e))?;
+        Ok(())
+    }
+}
+
+/// Most distinct publishers per topic whose sequence numbers are tracked for drop counting.
+const TRACKED_SOURCES: usize = 16;
+
+/// Receives `M` samples. All methods take `&self`, so a subscriber can be attached to an
+/// [`EventLoop`](crate::EventLoop) and read from its callback at the same time.
+pub struct Subscriber<M: Message> {
+    subscriber: iceoryx2::port::subscriber::Subscriber<Service, M, ()>,
+    listener: Listener<Service>,
+    latest: Cell<Option<M>>,
+    received_at: Cell<Option<Instant>>,
+    received: Cell<u64>,
+    dropped: Cell<u64>,
+    errors: Cell<u64>,
+    last_seq: RefCell<[(u32, u64); TRACKED_SOURCES]>,
+}
+
+impl<M: Message> Subscriber<M> {
+    pub(crate) fn new(
+        subscriber: iceoryx2::port::subscriber::Subscriber<Service, M, ()>,
+        listener: Listener<Service>,
+    ) -> Self {
+        Self {
+            subscriber,
+            listener,
+            latest: Cell::new(None),
+            received_at: Cell::new(None),
+            received: Cell::new(0),
+            dropped: Cell::new(0),
+            errors: Cell::new(0),
+            last_seq: RefCell::new([(0, 0); TRACKED_SOURCES]),
+        }
+    }
+
+    /// The event port that wakes this subscriber (for [`EventLoop`](crate::EventLoop)).
+    pub fn listener(&self) -> &Listener<Service> {
+        &self.listener
+    }
+
+    /// Consumes pending wake-ups and every queued sample, calling `f` for each in order.
+    /// Updates [`latest`](Self::latest), the receive time and the drop count. Returns how many
+    /// samples were taken.
+    pub fn drain(&self, mut f: impl FnMut(&M)) -> usize {
+        if self.listener.try_wait(|_| {}).is_err() {
+            self.errors.set(self.errors.get() + 1);
+        }
+        let mut n = 0;
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(sample)) => {
+                    let msg = *sample.payload();
+                    drop(sample);
+                    self.account(&msg);
+                    f(&msg);
+                    n += 1;
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    self.errors.set(self.errors.get() + 1);
+                    tracing::warn!(topic = M::TOPIC, error = ?e, "receive failed");
+                    break;
+                }
+            }
+        }
+        n
+    }
+
+    /// Drains the queue and returns the newest sample ever received (None if none yet).
+    pub fn poll_latest(&self) -> Option<M> {
+        self.drain(|_| {});
+        self.latest.get()
+    }
+
+    /// The newest sample received so far, without receiving.
+    pub fn latest(&self) -> Option<M> {
+        self.latest.get()
+    }
+
+    /// Time since the newest sample was received, `None` if nothing was received yet.
+    pub fn age(&self, now: Instant) -> Option<Duration> {
+        self.received_at.get().map(|t| now.saturating_duration_since(t))
+    }
+
+    /// True when a sample was received within `timeout` of `now`.
+    pub fn is_fresh(&self, now: Instant, timeout: Duration) -> bool {
+        self.age(now).is_some_and(|age| age <= timeout)
+    }
+
+    /// Samples received since creation.
+    pub fn received(&self) -> u64 {
+        self.received.get()
+    }
+
+    /// Samples lost before they were received, from gaps in the publishers' sequence numbers.
+    pub fn dropped(&self) -> u64 {
+        self.dropped.get()
+    }
+
+    /// Receive errors since creation.
+    pub fn errors(&self) -> u64 {
+        self.errors.get()
+    }
+
+    fn account(&self, msg: &M) {
+        let header = msg.header();
+        self.latest.set(Some(*msg));
+        self.received_at.set(Some(Instant::now()));
+        self.received.set(self.received.get() + 1);
+        let mut table = self.last_seq.borrow_mut();
+        let slot = table
+            .iter()
+            .position(|(id, seq)| *id == header.source_id && *seq != 0)
+            .or_else(|| table.iter().position(|(_, seq)| *seq == 0));
+        if let Some(i) = slot {
+            let (_, last) = table[i];
+            // A publisher that restarted begins at 1 again: not a loss.
+            if last != 0 && header.seq > last + 1 {
+                self.dropped.set(self.dropped.get() + (header.seq - last - 1));
+            }
+            table[i] = (header.source_id, header.seq);
+        }
+    }
+}

@@ -1,0 +1,155 @@
+//! The runtime's ports and event loop over real iceoryx2 shared memory, each test in its own
+//! iceoryx2 root and prefix.
+#![allow(clippy::unwrap_used)]
+
+use std::ops::ControlFlow;
+use std::time::{Duration, Instant};
+
+use teleop_msgs::{GloveState, HandCommand, Message};
+use teleop_runtime::*;
+
+fn settings() -> (tempfile::TempDir, IpcSettings) {
+    let dir = tempfile::tempdir().unwrap();
+    let settings = IpcSettings::isolated(dir.path());
+    (dir, settings)
+}
+
+#[test]
+fn publish_stamps_and_subscriber_receives_in_order() {
+    let (_dir, ipc) = settings();
+    let a = NodeRuntime::new("pub-node", &ipc).unwrap();
+    let b = NodeRuntime::new("sub-node", &ipc).unwrap();
+    let mut publisher = a.publisher::<GloveState>().unwrap();
+    let subscriber = b.subscriber::<GloveState>().unwrap();
+    let before = now_ns();
+    for i in 0..5u16 {
+        let mut s = GloveState::default();
+        s.raw_position[0] = i;
+        let header = publisher.publish(&s).unwrap();
+        assert_eq!(header.seq, u64::from(i) + 1);
+        assert_eq!(header.origin_ns, header.stamp_ns, "a fresh sample is its own origin");
+        assert_eq!(header.source_id, teleop_msgs::source_id("pub-node"));
+    }
+    let mut seen = Vec::new();
+    assert_eq!(subscriber.drain(|s| seen.push((s.header.seq, s.raw_position[0]))), 5);
+    assert_eq!(seen, (1..=5).map(|i| (i, (i - 1) as u16)).collect::<Vec<_>>());
+    let latest = subscriber.latest().unwrap();
+    assert!(latest.header.stamp_ns >= before);
+    assert_eq!(subscriber.dropped(), 0);
+    assert!(subscriber.is_fresh(Instant::now(), Duration::from_secs(1)));
+}
+
+#[test]
+fn origin_is_kept_when_set() {
+    let (_dir, ipc) = settings();
+    let n = NodeRuntime::new("origin", &ipc).unwrap();
+    let mut p = n.publisher::<HandCommand>().unwrap();
+    let s = n.subscriber::<HandCommand>().unwrap();
+    let mut cmd = HandCommand::default();
+    cmd.header.origin_ns = 42;
+    p.publish(&cmd).unwrap();
+    assert_eq!(s.poll_latest().unwrap().header.origin_ns, 42);
+}
+
+#[test]
+fn settings_isolate_pipelines() {
+    let (_d1, one) = settings();
+    let (_d2, two) = settings();
+    let a = NodeRuntime::new("a", &one).unwrap();
+    let b = NodeRuntime::new("b", &two).unwrap();
+    let mut p = a.publisher::<GloveState>().unwrap();
+    let s = b.subscriber::<GloveState>().unwrap();
+    p.publish(&GloveState::default()).unwrap();
+    assert_eq!(s.drain(|_| {}), 0);
+}
+
+#[test]
+fn gaps_in_sequence_numbers_count_as_drops() {
+    let (_dir, ipc) = settings();
+    let n = NodeRuntime::new("gaps", &ipc).unwrap();
+    let mut p = n.publisher::<GloveState>().unwrap();
+    let s = n.subscriber::<GloveState>().unwrap();
+    let mut msg = GloveState::default();
+    for seq in [1u64, 2, 5, 6, 10] {
+        msg.header.seq = seq;
+        p.send_as_is(&msg).unwrap();
+    }
+    s.drain(|_| {});
+    assert_eq!(s.dropped(), 2 + 3);
+}
+
+#[test]
+fn event_loop_wakes_on_input_and_reports_missed_deadlines() {
+    let (_dir, ipc) = settings();
+    let n = NodeRuntime::new("loop", &ipc).unwrap();
+    let s = n.subscriber::<GloveState>().unwrap();
+    let publisher_thread = {
+        let ipc = ipc.clone();
+        std::thread::spawn(move || {
+            let n = NodeRuntime::new("loop-pub", &ipc).unwrap();
+            let mut p = n.publisher::<GloveState>().unwrap();
+            for _ in 0..3 {
+                std::thread::sleep(Duration::from_millis(20));
+                p.publish(&GloveState::default()).unwrap();
+            }
+            // then go quiet: the subscriber's deadline must fire
+            std::thread::sleep(Duration::from_millis(400));
+        })
+    };
+    let mut received = 0;
+    let mut timeouts_after_data = 0;
+    let stop = EventLoop::new(Duration::from_millis(50))
+        .run(
+            &[Input::with_deadline(s.listener(), Duration::from_millis(100))],
+            |wake| {
+                match wake {
+                    Wake::Input(0) => received += s.drain(|_| {}),
+                    Wake::Timeout(0) if received == 3 => timeouts_after_data += 1,
+                    _ => {}
+                }
+                if timeouts_after_data > 0 {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            },
+        )
+        .unwrap();
+    publisher_thread.join().unwrap();
+    assert_eq!(stop, StopReason::Requested);
+    assert_eq!(received, 3);
+    assert_eq!(timeouts_after_data, 1);
+}
+
+#[test]
+fn health_reports_counters_and_input_ages() {
+    let (_dir, ipc) = settings();
+    let n = NodeRuntime::new("healthy", &ipc).unwrap();
+    let reader = n.subscriber::<teleop_msgs::NodeHealth>().unwrap();
+    let mut health = Health::new(&n).unwrap();
+    health.count_timeout();
+    health.count_clamps(3);
+    health.count_error();
+    health.count_loop();
+    health
+        .publish(&[Some(Duration::from_millis(5)), None])
+        .unwrap();
+    let h = reader.poll_latest().unwrap();
+    assert_eq!(h.name(), "healthy");
+    assert_eq!((h.timeouts, h.clamps, h.errors), (1, 3, 1));
+    assert_eq!(h.input_count, 2);
+    assert!((h.input_age_ms[0] - 5.0).abs() < 1e-3);
+    assert_eq!(h.input_age_ms[1], -1.0);
+    assert!(h.loop_rate_hz > 0.0);
+    assert_eq!(GloveState::TOPIC, "glove/state");
+}
+
+#[test]
+fn bad_settings_are_refused_with_the_setting_named() {
+    let bad = IpcSettings {
+        root: None,
+        prefix: Some("bad/prefix".into()),
+    };
+    let err = NodeRuntime::new("x", &bad).err().unwrap().to_string();
+    assert!(err.contains("prefix") && err.contains("bad/prefix"), "{err}");
+}
