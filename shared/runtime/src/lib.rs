@@ -8,6 +8,7 @@
 //! - [`EventLoop`]: a WaitSet over the inputs with per-input deadlines (input watchdogs) and a
 //!   periodic tick; returns on SIGINT/SIGTERM so the node can stop cleanly;
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
+//! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`init_logging`]: `tracing`.
 //!
 //! Must not depend on: any device protocol, the retargeting or force-feedback logic, or the CLI.
@@ -15,6 +16,7 @@
 //! [`NodeHealth`]: teleop_msgs::NodeHealth
 
 mod clock;
+mod config_file;
 mod event_loop;
 mod health;
 mod ipc;
@@ -22,6 +24,7 @@ mod logging;
 mod ports;
 
 pub use clock::now_ns;
+pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use health::Health;
 pub use ipc::{IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT};

@@ -1,0 +1,233 @@
+//! Configuration of the force-feedback law: TOML parsing and validation.
+
+use serde::{Deserialize, Serialize};
+
+use crate::GLOVE_FINGERS;
+
+/// Origin reported by [`FeedbackConfig::validate`] when the configuration was
+/// not read from a file (for example built in code and handed to
+/// [`crate::ForceFeedback::new`]).
+pub const IN_MEMORY_ORIGIN: &str = "<feedback config>";
+
+/// Largest `max_force` the glove accepts (glove units, full scale).
+pub const GLOVE_FULL_SCALE: i16 = 1000;
+
+/// Tuning of the force-feedback law.
+///
+/// Every field has a default (see [`FeedbackConfig::default`]), so a TOML file
+/// only needs the keys it changes; unknown keys are rejected.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FeedbackConfig {
+    /// Fingertip normal force (N) below which the tactile sensor reports no
+    /// contact. Default 0.3 N.
+    pub contact_threshold_n: f32,
+    /// Glove units per newton above `contact_threshold_n`. Default 250
+    /// (4 N above the threshold gives full scale, 1000).
+    pub gain_per_n: f32,
+    /// Saturation of the force command in glove units, `0..=1000`.
+    /// Default 800.
+    pub max_force: i16,
+    /// Largest change of the output per second, in glove units per second.
+    /// Default 20000 (full scale in 50 ms).
+    pub rate_limit_per_s: f32,
+    /// Time constant (s) of the first-order low-pass on the demand.
+    /// Default 0.01; 0 disables smoothing.
+    pub smoothing_tau_s: f32,
+    /// When inputs go stale, the force ramps to zero at
+    /// `max_force / stale_ramp_s` units per second, so from `max_force` it
+    /// reaches zero within this time (s). Default 0.1; must be > 0.
+    pub stale_ramp_s: f32,
+    /// Contact estimation from joint state, used when tactile data is absent
+    /// or invalid for a finger.
+    pub estimate: EstimateConfig,
+    /// Per glove finger scale (operator preference), glove order
+    /// `[little, ring, middle, index, thumb]`, each in `[0, 2]`. Default 1.
+    pub finger_gain: [f32; GLOVE_FINGERS],
+}
+
+impl Default for FeedbackConfig {
+    fn default() -> Self {
+        Self {
+            contact_threshold_n: 0.3,
+            gain_per_n: 250.0,
+            max_force: 800,
+            rate_limit_per_s: 20_000.0,
+            smoothing_tau_s: 0.01,
+            stale_ramp_s: 0.1,
+            estimate: EstimateConfig::default(),
+            finger_gain: [1.0; GLOVE_FINGERS],
+        }
+    }
+}
+
+/// Contact estimation from the hand's joint state, the fallback when a
+/// fingertip has no valid tactile reading.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimateConfig {
+    /// Estimate contact from `commanded - measured` joint position.
+    /// Default true.
+    pub use_position_error: bool,
+    /// Position error (normalised, 0 = open .. 1 = closed) below which there
+    /// is no contact. Default 0.05.
+    pub position_error_threshold: f32,
+    /// Glove units per normalised position error above the threshold.
+    /// Default 4000.
+    pub position_gain: f32,
+    /// Estimate contact from the magnitude of the motor current.
+    /// Default true.
+    pub use_current: bool,
+    /// Motor current magnitude (mA) below which there is no contact.
+    /// Default 300.
+    pub current_threshold_ma: f32,
+    /// Glove units per mA above the threshold. Default 1.0.
+    pub current_gain_per_ma: f32,
+}
+
+impl Default for EstimateConfig {
+    fn default() -> Self {
+        Self {
+            use_position_error: true,
+            position_error_threshold: 0.05,
+            position_gain: 4000.0,
+            use_current: true,
+            current_threshold_ma: 300.0,
+            current_gain_per_ma: 1.0,
+        }
+    }
+}
+
+/// Error reading or validating a [`FeedbackConfig`].
+///
+/// `Display` always starts with the origin (normally the file path), then
+/// names the offending field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ConfigError {
+    /// The text is not valid TOML, has an unknown key or a value of the wrong
+    /// type. The message keeps toml's line and column and the offending line.
+    #[error("{origin}: {source}")]
+    Parse {
+        /// Where the text came from (file path).
+        origin: String,
+        /// The underlying toml error (message, line/column, snippet).
+        #[source]
+        source: toml::de::Error,
+    },
+    /// A value parsed but is out of its allowed range.
+    #[error("{origin}: invalid `{field}` = {value}: {reason}")]
+    Invalid {
+        /// Where the configuration came from (file path, or
+        /// [`IN_MEMORY_ORIGIN`]).
+        origin: String,
+        /// Dotted field path, e.g. `estimate.position_gain` or
+        /// `finger_gain[3]`.
+        field: String,
+        /// The rejected value, formatted.
+        value: String,
+        /// What the value must satisfy.
+        reason: &'static str,
+    },
+}
+
+impl ConfigError {
+    /// The origin (file path) this error refers to.
+    pub fn origin(&self) -> &str {
+        match self {
+            Self::Parse { origin, .. } | Self::Invalid { origin, .. } => origin,
+        }
+    }
+
+    /// The same error attributed to `new_origin` (e.g. the file the configuration came from).
+    pub fn with_origin(self, new_origin: &str) -> Self {
+        match self {
+            Self::Parse { source, .. } => Self::Parse {
+                origin: new_origin.to_owned(),
+                source,
+            },
+            Self::Invalid {
+                field,
+                value,
+                reason,
+                ..
+            } => Self::Invalid {
+                origin: new_origin.to_owned(),
+                field,
+                value,
+                reason,
+            },
+        }
+    }
+}
+
+fn invalid(field: impl Into<String>, value: impl ToString, reason: &'static str) -> ConfigError {
+    ConfigError::Invalid {
+        origin: IN_MEMORY_ORIGIN.to_owned(),
+        field: field.into(),
+        value: value.to_string(),
+        reason,
+    }
+}
+
+/// Finite and `>= 0`.
+fn check_non_negative(field: &str, value: f32) -> Result<(), ConfigError> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, value, "must be finite and >= 0"))
+    }
+}
+
+/// Finite and `> 0`.
+fn check_positive(field: &str, value: f32) -> Result<(), ConfigError> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, value, "must be finite and > 0"))
+    }
+}
+
+impl FeedbackConfig {
+    /// Parses a TOML document and validates it.
+    ///
+    /// `origin` (normally the file path) is put at the start of every error
+    /// message. Missing keys take their defaults; unknown keys are errors.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let config: Self = toml::from_str(text).map_err(|source| ConfigError::Parse {
+            origin: origin.to_owned(),
+            source,
+        })?;
+        config.validate().map_err(|e| e.with_origin(origin))?;
+        Ok(config)
+    }
+
+    /// Checks every value is in range: all floats finite, thresholds and
+    /// gains `>= 0`, `rate_limit_per_s > 0`, `stale_ramp_s > 0`,
+    /// `max_force` in `0..=1000`, each `finger_gain` in `[0, 2]`.
+    ///
+    /// Errors carry the origin [`IN_MEMORY_ORIGIN`].
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check_non_negative("contact_threshold_n", self.contact_threshold_n)?;
+        check_non_negative("gain_per_n", self.gain_per_n)?;
+        if !(0..=GLOVE_FULL_SCALE).contains(&self.max_force) {
+            return Err(invalid("max_force", self.max_force, "must be in 0..=1000"));
+        }
+        check_positive("rate_limit_per_s", self.rate_limit_per_s)?;
+        check_non_negative("smoothing_tau_s", self.smoothing_tau_s)?;
+        check_positive("stale_ramp_s", self.stale_ramp_s)?;
+        let e = &self.estimate;
+        check_non_negative(
+            "estimate.position_error_threshold",
+            e.position_error_threshold,
+        )?;
+        check_non_negative("estimate.position_gain", e.position_gain)?;
+        check_non_negative("estimate.current_threshold_ma", e.current_threshold_ma)?;
+        check_non_negative("estimate.current_gain_per_ma", e.current_gain_per_ma)?;
+        for (i, &g) in self.finger_gain.iter().enumerate() {
+            if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
+                return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));
+            }
+        }
+        Ok(())
+    }
+}

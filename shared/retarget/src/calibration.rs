@@ -1,0 +1,505 @@
+//! Operator calibration profile: raw glove values at the extreme poses.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN};
+use crate::{GLOVE_CHANNELS, REVO2_JOINTS};
+
+/// Largest raw value the glove is specified to report.
+pub const GLOVE_RAW_MAX: u16 = 1000;
+
+/// Smallest accepted distance (raw units) between the two calibration values
+/// of one channel (open/closed, inner/outer).
+pub const MIN_CALIBRATION_SPAN: u16 = 50;
+
+/// Names of the glove channels, glove order (also the TOML section names of a
+/// calibration profile).
+pub const GLOVE_CHANNEL_NAMES: [&str; GLOVE_CHANNELS] = [
+    "little",
+    "ring",
+    "middle",
+    "index",
+    "thumb",
+    "thumb_rotation",
+];
+
+/// For each Revo2 joint (Revo2 order), the glove channel (glove index) that drives it.
+pub const GLOVE_CHANNEL_FOR_JOINT: [usize; REVO2_JOINTS] = [4, 5, 3, 2, 1, 0];
+
+/// Index of the thumb rotation channel in the glove order.
+const THUMB_ROTATION: usize = 5;
+
+/// Calibration of one finger's flexion channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FingerCalibration {
+    /// Raw value with the hand fully open.
+    pub open: u16,
+    /// Raw value with the hand in a fist.
+    pub closed: u16,
+}
+
+/// Calibration of the thumb rotation channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RotationCalibration {
+    /// Raw value with the thumb rotated in toward the palm.
+    pub inner: u16,
+    /// Raw value with the thumb rotated out, away from the palm.
+    pub outer: u16,
+}
+
+/// Operator calibration profile (TOML). Glove order for fingers: little, ring,
+/// middle, index, thumb.
+///
+/// In TOML each finger is a table named after it (`[little]`, `[ring]`,
+/// `[middle]`, `[index]`, `[thumb]`) with `open` and `closed`, and the thumb
+/// rotation is `[thumb_rotation]` with `inner` and `outer`. All six tables
+/// are required and unknown keys are rejected. Serde (de)serialisation uses
+/// that same shape; note that plain serde deserialisation does not
+/// [`validate`](Self::validate) (use [`from_toml_str`](Self::from_toml_str)).
+///
+/// Either direction is accepted for each channel (`open` may be above or
+/// below `closed`), as long as the two values are at least
+/// [`MIN_CALIBRATION_SPAN`] apart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(from = "CalibrationToml", into = "CalibrationToml")]
+pub struct Calibration {
+    /// Flexion channels in glove order: little, ring, middle, index, thumb.
+    pub fingers: [FingerCalibration; 5],
+    /// Thumb rotation channel.
+    pub thumb_rotation: RotationCalibration,
+}
+
+/// Human-friendly TOML mirror of [`Calibration`].
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CalibrationToml {
+    little: FingerCalibration,
+    ring: FingerCalibration,
+    middle: FingerCalibration,
+    index: FingerCalibration,
+    thumb: FingerCalibration,
+    thumb_rotation: RotationCalibration,
+}
+
+impl From<CalibrationToml> for Calibration {
+    fn from(t: CalibrationToml) -> Self {
+        Calibration {
+            fingers: [t.little, t.ring, t.middle, t.index, t.thumb],
+            thumb_rotation: t.thumb_rotation,
+        }
+    }
+}
+
+impl From<Calibration> for CalibrationToml {
+    fn from(c: Calibration) -> Self {
+        let [little, ring, middle, index, thumb] = c.fingers;
+        CalibrationToml {
+            little,
+            ring,
+            middle,
+            index,
+            thumb,
+            thumb_rotation: c.thumb_rotation,
+        }
+    }
+}
+
+impl Default for FingerCalibration {
+    fn default() -> Self {
+        FingerCalibration {
+            open: GLOVE_RAW_MAX,
+            closed: 0,
+        }
+    }
+}
+
+impl Default for RotationCalibration {
+    fn default() -> Self {
+        RotationCalibration {
+            inner: 0,
+            outer: GLOVE_RAW_MAX,
+        }
+    }
+}
+
+impl Default for Calibration {
+    /// The glove's nominal range: open 1000, closed 0, inner 0, outer 1000.
+    fn default() -> Self {
+        Calibration {
+            fingers: [FingerCalibration::default(); 5],
+            thumb_rotation: RotationCalibration::default(),
+        }
+    }
+}
+
+/// `(from - raw) / (from - to)` clamped to `[0, 1]`; 0 for a degenerate span.
+fn fraction(raw: u16, from: u16, to: u16) -> f32 {
+    let span = i32::from(from) - i32::from(to);
+    if span == 0 {
+        return 0.0;
+    }
+    let v = (i32::from(from) - i32::from(raw)) as f32 / span as f32;
+    v.clamp(0.0, 1.0)
+}
+
+fn check_pair(
+    origin: &str,
+    section: &str,
+    (a_name, a): (&str, u16),
+    (b_name, b): (&str, u16),
+) -> Result<(), ConfigError> {
+    let field = format!("[{section}]");
+    for (name, v) in [(a_name, a), (b_name, b)] {
+        if v > GLOVE_RAW_MAX {
+            return Err(ConfigError::invalid(
+                origin,
+                field,
+                format!("{name} ({v}) is above the glove's maximum {GLOVE_RAW_MAX}"),
+            ));
+        }
+    }
+    let span = a.abs_diff(b);
+    if span < MIN_CALIBRATION_SPAN {
+        let reason = if span == 0 {
+            format!(
+                "{a_name} and {b_name} are both {a}; need at least {MIN_CALIBRATION_SPAN} apart"
+            )
+        } else {
+            format!(
+                "{a_name} ({a}) and {b_name} ({b}) are only {span} apart; need at least {MIN_CALIBRATION_SPAN}"
+            )
+        };
+        return Err(ConfigError::invalid(origin, field, reason));
+    }
+    Ok(())
+}
+
+impl Calibration {
+    /// Parses and validates a TOML profile. `origin` (normally the file path)
+    /// prefixes every error message.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let cal: Calibration = toml::from_str(text).map_err(|e| ConfigError::parse(origin, &e))?;
+        cal.validate().map_err(|e| e.with_origin(origin))?;
+        Ok(cal)
+    }
+
+    /// The profile as TOML, in the form [`from_toml_str`](Self::from_toml_str) reads.
+    pub fn to_toml_string(&self) -> String {
+        let mut out = String::new();
+        for (name, f) in GLOVE_CHANNEL_NAMES.iter().zip(&self.fingers) {
+            out.push_str(&format!(
+                "[{name}]\nopen = {}\nclosed = {}\n\n",
+                f.open, f.closed
+            ));
+        }
+        out.push_str(&format!(
+            "[{}]\ninner = {}\nouter = {}\n",
+            GLOVE_CHANNEL_NAMES[THUMB_ROTATION],
+            self.thumb_rotation.inner,
+            self.thumb_rotation.outer
+        ));
+        out
+    }
+
+    /// Checks every value is at most [`GLOVE_RAW_MAX`] and each channel's two
+    /// values are at least [`MIN_CALIBRATION_SPAN`] apart. The error names the
+    /// finger (e.g. `[ring]`) and field; its origin is `"calibration"`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        for (name, f) in GLOVE_CHANNEL_NAMES.iter().zip(&self.fingers) {
+            check_pair(
+                CALIBRATION_ORIGIN,
+                name,
+                ("open", f.open),
+                ("closed", f.closed),
+            )?;
+        }
+        check_pair(
+            CALIBRATION_ORIGIN,
+            GLOVE_CHANNEL_NAMES[THUMB_ROTATION],
+            ("inner", self.thumb_rotation.inner),
+            ("outer", self.thumb_rotation.outer),
+        )
+    }
+
+    /// From the four captured poses (raw glove vectors, glove order): open
+    /// hand, fist, thumb in, thumb out.
+    ///
+    /// All five flexion channels (thumb flexion included) come from `open` and
+    /// `fist`; the rotation comes from index 5 of `thumb_in` and `thumb_out`.
+    /// Raw values above [`GLOVE_RAW_MAX`] (devices overshoot slightly) are
+    /// clamped to it. The result is validated; errors have the origin
+    /// `"calibration poses"`.
+    pub fn from_poses(
+        open: [u16; GLOVE_CHANNELS],
+        fist: [u16; GLOVE_CHANNELS],
+        thumb_in: [u16; GLOVE_CHANNELS],
+        thumb_out: [u16; GLOVE_CHANNELS],
+    ) -> Result<Self, ConfigError> {
+        let c = |v: u16| v.min(GLOVE_RAW_MAX);
+        let fingers = std::array::from_fn(|i| FingerCalibration {
+            open: c(open[i]),
+            closed: c(fist[i]),
+        });
+        let cal = Calibration {
+            fingers,
+            thumb_rotation: RotationCalibration {
+                inner: c(thumb_in[THUMB_ROTATION]),
+                outer: c(thumb_out[THUMB_ROTATION]),
+            },
+        };
+        cal.validate().map_err(|e| e.with_origin(POSES_ORIGIN))?;
+        Ok(cal)
+    }
+
+    /// Normalises a raw glove vector (glove order, any `u16`) into Revo2
+    /// order: flexion `(open - raw) / (open - closed)` for the fingers and
+    /// `(outer - raw) / (outer - inner)` for thumb abduction, each clamped to
+    /// `[0, 1]` (0 = open / thumb out, 1 = closed / thumb in).
+    pub fn normalise(&self, raw: &[u16; GLOVE_CHANNELS]) -> [f32; REVO2_JOINTS] {
+        std::array::from_fn(|joint| {
+            let ch = GLOVE_CHANNEL_FOR_JOINT[joint];
+            if ch == THUMB_ROTATION {
+                let r = self.thumb_rotation;
+                fraction(raw[ch], r.outer, r.inner)
+            } else {
+                let f = self.fingers[ch];
+                fraction(raw[ch], f.open, f.closed)
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    const SAMPLE: &str = r#"
+[little]
+open = 980
+closed = 40
+
+[ring]
+open = 970
+closed = 60
+
+[middle]
+open = 990
+closed = 20
+
+[index]
+open = 960
+closed = 30
+
+[thumb]
+open = 900
+closed = 200
+
+[thumb_rotation]
+inner = 30
+outer = 970
+"#;
+
+    #[test]
+    fn default_maps_open_to_zero_and_fist_to_one() {
+        let cal = Calibration::default();
+        cal.validate().unwrap();
+        assert_eq!(cal.normalise(&[1000; 6])[2..], [0.0; 4]);
+        assert_eq!(cal.normalise(&[0; 6])[2..], [1.0; 4]);
+        // thumb flex
+        assert_eq!(cal.normalise(&[1000; 6])[0], 0.0);
+        assert_eq!(cal.normalise(&[0; 6])[0], 1.0);
+        // thumb rotation: 1000 = outermost = abduct 0 (thumb out)
+        assert_eq!(cal.normalise(&[1000; 6])[1], 0.0);
+        assert_eq!(cal.normalise(&[0; 6])[1], 1.0);
+    }
+
+    #[test]
+    fn out_of_range_raw_is_clamped() {
+        let cal = Calibration::default();
+        assert_eq!(cal.normalise(&[u16::MAX; 6]), [0.0; 6]);
+        assert_eq!(cal.normalise(&[1001; 6]), [0.0; 6]);
+    }
+
+    #[test]
+    fn joint_order_and_rotation_sign() {
+        let cal = Calibration::default();
+        // glove order: little, ring, middle, index, thumb, thumb_rotation
+        let raw = [900, 800, 700, 600, 500, 100];
+        let n = cal.normalise(&raw);
+        let expect = [0.5, 0.9, 0.4, 0.3, 0.2, 0.1]; // thumb_flex, abduct, index, middle, ring, pinky
+        for (a, b) in n.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-6, "{n:?} vs {expect:?}");
+        }
+    }
+
+    #[test]
+    fn toml_round_trip() {
+        let cal = Calibration::from_toml_str(SAMPLE, "cal.toml").unwrap();
+        assert_eq!(
+            cal.fingers[0],
+            FingerCalibration {
+                open: 980,
+                closed: 40
+            }
+        );
+        assert_eq!(
+            cal.fingers[4],
+            FingerCalibration {
+                open: 900,
+                closed: 200
+            }
+        );
+        assert_eq!(
+            cal.thumb_rotation,
+            RotationCalibration {
+                inner: 30,
+                outer: 970
+            }
+        );
+        let text = cal.to_toml_string();
+        assert_eq!(Calibration::from_toml_str(&text, "x").unwrap(), cal);
+        // serde form matches the hand-written form
+        let via_serde = toml::to_string(&cal).unwrap();
+        assert_eq!(Calibration::from_toml_str(&via_serde, "x").unwrap(), cal);
+        let d = Calibration::default();
+        assert_eq!(
+            Calibration::from_toml_str(&d.to_toml_string(), "x").unwrap(),
+            d
+        );
+    }
+
+    #[test]
+    fn partial_profile_names_missing_finger() {
+        let text = SAMPLE.replace("[ring]\nopen = 970\nclosed = 60\n", "");
+        let err = Calibration::from_toml_str(&text, "cal.toml").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.starts_with("cal.toml: "), "{msg}");
+        assert!(msg.contains("missing field `ring`"), "{msg}");
+    }
+
+    #[test]
+    fn missing_field_in_finger_is_named() {
+        let text = SAMPLE.replace("closed = 60\n", "");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("missing field `closed`"), "{msg}");
+    }
+
+    #[test]
+    fn unknown_keys_are_errors() {
+        let text = format!("{SAMPLE}\n[pinky]\nopen = 1\nclosed = 2\n");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("cal.toml: "), "{msg}");
+        assert!(msg.contains("unknown field `pinky`"), "{msg}");
+
+        let text = SAMPLE.replace("closed = 60\n", "closed = 60\nmiddle = 3\n");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("unknown field `middle`"), "{msg}");
+    }
+
+    #[test]
+    fn syntax_error_keeps_line_and_column() {
+        let text = SAMPLE.replace("closed = 60", "closed = = 60");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("cal.toml: "), "{msg}");
+        assert!(msg.contains("line 8"), "{msg}");
+        assert!(msg.contains("column"), "{msg}");
+    }
+
+    #[test]
+    fn validation_messages_name_origin_and_finger() {
+        let text = SAMPLE.replace("open = 970\nclosed = 60", "open = 500\nclosed = 480");
+        let err = Calibration::from_toml_str(&text, "calibration.toml").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "calibration.toml: [ring]: open (500) and closed (480) are only 20 apart; need at least 50"
+        );
+        assert_eq!(err.origin(), "calibration.toml");
+
+        let text = SAMPLE.replace("inner = 30", "inner = 1200");
+        let msg = Calibration::from_toml_str(&text, "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("c.toml: [thumb_rotation]: inner (1200)"),
+            "{msg}"
+        );
+
+        let text = SAMPLE.replace("inner = 30", "inner = 970");
+        let msg = Calibration::from_toml_str(&text, "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("c.toml: [thumb_rotation]: inner and outer"),
+            "{msg}"
+        );
+
+        let text = SAMPLE.replace("inner = 30", "inner = -3");
+        let msg = Calibration::from_toml_str(&text, "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("c.toml: "), "{msg}");
+    }
+
+    #[test]
+    fn inverted_channels_are_accepted_and_invert() {
+        let mut cal = Calibration::default();
+        cal.fingers[3] = FingerCalibration {
+            open: 100,
+            closed: 900,
+        };
+        cal.validate().unwrap();
+        let n = cal.normalise(&[0, 0, 0, 900, 0, 0]);
+        assert_eq!(n[2], 1.0);
+    }
+
+    #[test]
+    fn from_poses_builds_and_validates() {
+        let open = [980, 970, 990, 960, 900, 500];
+        let fist = [40, 60, 20, 30, 200, 520];
+        let thumb_in = [500, 500, 500, 500, 500, 30];
+        let thumb_out = [500, 500, 500, 500, 500, 1004];
+        let cal = Calibration::from_poses(open, fist, thumb_in, thumb_out).unwrap();
+        assert_eq!(
+            cal.fingers[1],
+            FingerCalibration {
+                open: 970,
+                closed: 60
+            }
+        );
+        assert_eq!(
+            cal.fingers[4],
+            FingerCalibration {
+                open: 900,
+                closed: 200
+            }
+        );
+        assert_eq!(
+            cal.thumb_rotation,
+            RotationCalibration {
+                inner: 30,
+                outer: 1000
+            }
+        );
+
+        let mut bad_fist = fist;
+        bad_fist[2] = 970;
+        let err = Calibration::from_poses(open, bad_fist, thumb_in, thumb_out).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "calibration poses: [middle]: open (990) and closed (970) are only 20 apart; need at least 50"
+        );
+        let err = Calibration::from_poses(open, fist, thumb_in, thumb_in).unwrap_err();
+        assert!(err.to_string().contains("[thumb_rotation]"), "{err}");
+    }
+}

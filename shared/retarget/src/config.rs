@@ -1,0 +1,520 @@
+//! Retargeting parameters: filter, deadband, slew limit, per-joint curves and limits.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{ConfigError, RETARGET_ORIGIN};
+use crate::{REVO2_JOINTS, REVO2_JOINT_NAMES};
+
+/// Largest accepted [`RetargetConfig::deadband`].
+pub const MAX_DEADBAND: f32 = 0.2;
+
+/// One Euro filter parameters (Casiez et al. 2012), in normalised units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OneEuroParams {
+    /// Cutoff frequency at rest (Hz); lower = smoother but laggier. Default 1.5.
+    pub min_cutoff_hz: f32,
+    /// Speed coefficient: how fast the cutoff rises with speed (per normalised
+    /// unit/s); higher = less lag during fast motion. Default 0.5. `0` makes a
+    /// plain first-order low-pass at `min_cutoff_hz`.
+    pub beta: f32,
+    /// Cutoff frequency (Hz) of the derivative estimate. Default 1.0.
+    pub d_cutoff_hz: f32,
+}
+
+impl Default for OneEuroParams {
+    fn default() -> Self {
+        OneEuroParams {
+            min_cutoff_hz: 1.5,
+            beta: 0.5,
+            d_cutoff_hz: 1.0,
+        }
+    }
+}
+
+/// Response curve applied to a normalised joint value in `[0, 1]`.
+///
+/// TOML: `curve = { kind = "linear" }`, `curve = { kind = "gamma", gamma = 0.8 }`,
+/// `curve = { kind = "piecewise", points = [[0, 0], [0.5, 0.3], [1, 1]] }`.
+/// Every valid curve maps `[0, 1]` monotonically (non-decreasing) into `[0, 1]`.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(from = "CurveToml", into = "CurveToml")]
+pub enum Curve {
+    /// Identity.
+    #[default]
+    Linear,
+    /// `x.powf(gamma)`: `gamma < 1` makes the joint respond more at the start
+    /// of the glove motion, `gamma > 1` less.
+    Gamma {
+        /// The exponent; finite and `> 0`.
+        gamma: f32,
+    },
+    /// Linear interpolation through `[x, y]` points.
+    Piecewise {
+        /// At least two points; the first has `x = 0`, the last `x = 1`, `x`
+        /// strictly increasing, `y` in `[0, 1]` and non-decreasing.
+        points: Vec<[f32; 2]>,
+    },
+}
+
+/// Serde mirror of [`Curve`]: `Linear {}` is a struct variant so that
+/// unknown keys next to `kind = "linear"` are rejected too.
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+enum CurveToml {
+    Linear {},
+    Gamma { gamma: f32 },
+    Piecewise { points: Vec<[f32; 2]> },
+}
+
+impl From<CurveToml> for Curve {
+    fn from(c: CurveToml) -> Self {
+        match c {
+            CurveToml::Linear {} => Curve::Linear,
+            CurveToml::Gamma { gamma } => Curve::Gamma { gamma },
+            CurveToml::Piecewise { points } => Curve::Piecewise { points },
+        }
+    }
+}
+
+impl From<Curve> for CurveToml {
+    fn from(c: Curve) -> Self {
+        match c {
+            Curve::Linear => CurveToml::Linear {},
+            Curve::Gamma { gamma } => CurveToml::Gamma { gamma },
+            Curve::Piecewise { points } => CurveToml::Piecewise { points },
+        }
+    }
+}
+
+impl Curve {
+    /// Applies the curve to `x` (clamped to `[0, 1]` first). The result is in
+    /// `[0, 1]` for a valid curve; a non-finite result is mapped to 0.
+    pub fn apply(&self, x: f32) -> f32 {
+        let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
+        let y = match self {
+            Curve::Linear => x,
+            Curve::Gamma { gamma } => x.powf(*gamma),
+            Curve::Piecewise { points } => piecewise(points, x),
+        };
+        if y.is_finite() {
+            y.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
+    fn validate(&self, field: &str) -> Result<(), ConfigError> {
+        let bad = |reason: String| Err(ConfigError::invalid(RETARGET_ORIGIN, field, reason));
+        match self {
+            Curve::Linear => Ok(()),
+            Curve::Gamma { gamma } => {
+                if gamma.is_finite() && *gamma > 0.0 {
+                    Ok(())
+                } else {
+                    bad(format!("gamma ({gamma}) must be finite and > 0"))
+                }
+            }
+            Curve::Piecewise { points } => {
+                if points.len() < 2 {
+                    return bad(format!(
+                        "piecewise curve needs at least 2 points, got {}",
+                        points.len()
+                    ));
+                }
+                for (i, [x, y]) in points.iter().enumerate() {
+                    if !x.is_finite() || !y.is_finite() {
+                        return bad(format!("point {i} ([{x}, {y}]) is not finite"));
+                    }
+                    if !(0.0..=1.0).contains(y) {
+                        return bad(format!("point {i} ([{x}, {y}]): y must be in [0, 1]"));
+                    }
+                }
+                let first = points[0][0];
+                let last = points[points.len() - 1][0];
+                if first != 0.0 {
+                    return bad(format!("the first point must have x = 0, got {first}"));
+                }
+                if last != 1.0 {
+                    return bad(format!("the last point must have x = 1, got {last}"));
+                }
+                for (i, w) in points.windows(2).enumerate() {
+                    let ([x0, y0], [x1, y1]) = (w[0], w[1]);
+                    if x1 <= x0 {
+                        return bad(format!(
+                            "x must be strictly increasing: point {} has x = {x1} after x = {x0}",
+                            i + 1
+                        ));
+                    }
+                    if y1 < y0 {
+                        return bad(format!(
+                            "y must be non-decreasing (monotone map): point {} has y = {y1} after y = {y0}",
+                            i + 1
+                        ));
+                    }
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+fn piecewise(points: &[[f32; 2]], x: f32) -> f32 {
+    let Some(&[x_first, y_first]) = points.first() else {
+        return x;
+    };
+    if x <= x_first {
+        return y_first;
+    }
+    for w in points.windows(2) {
+        let ([x0, y0], [x1, y1]) = (w[0], w[1]);
+        if x <= x1 {
+            let span = x1 - x0;
+            if span <= 0.0 {
+                return y1;
+            }
+            let t = ((x - x0) / span).clamp(0.0, 1.0);
+            // Convex combination: stays within [y0, y1].
+            return (y0 + t * (y1 - y0)).clamp(y0.min(y1), y0.max(y1));
+        }
+    }
+    points.last().map_or(x, |p| p[1])
+}
+
+/// Per-joint shaping and limits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct JointConfig {
+    /// Response curve. Default linear.
+    pub curve: Curve,
+    /// Lower position limit (normalised). Default 0.0.
+    pub min: f32,
+    /// Upper position limit (normalised). Default 1.0.
+    pub max: f32,
+}
+
+impl Default for JointConfig {
+    fn default() -> Self {
+        JointConfig {
+            curve: Curve::Linear,
+            min: 0.0,
+            max: 1.0,
+        }
+    }
+}
+
+/// Retargeting parameters (a TOML table; every field has a sensible default;
+/// unknown keys are rejected).
+///
+/// In TOML, `joints` is a table keyed by Revo2 joint name (see
+/// [`REVO2_JOINT_NAMES`]); joints left out get [`JointConfig::default`]. See
+/// the crate documentation for an example.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetargetConfig {
+    /// One Euro filter parameters (shared by all joints).
+    pub filter: OneEuroParams,
+    /// Normalised; the output does not change for filtered-input changes
+    /// smaller than this. In `[0, 0.2]`. Default 0.005.
+    pub deadband: f32,
+    /// Slew limit per joint in normalised units per second. Default 3.0.
+    pub max_speed: f32,
+    /// Per-joint configuration, Revo2 order.
+    #[serde(with = "joints_by_name")]
+    pub joints: [JointConfig; REVO2_JOINTS],
+}
+
+impl Default for RetargetConfig {
+    fn default() -> Self {
+        RetargetConfig {
+            filter: OneEuroParams::default(),
+            deadband: 0.005,
+            max_speed: 3.0,
+            joints: std::array::from_fn(|_| JointConfig::default()),
+        }
+    }
+}
+
+fn positive(field: &str, v: f32) -> Result<(), ConfigError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            RETARGET_ORIGIN,
+            field,
+            format!("{v} must be finite and > 0"),
+        ))
+    }
+}
+
+impl RetargetConfig {
+    /// Parses and validates a TOML table. `origin` (normally the file path)
+    /// prefixes every error message.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, ConfigError> {
+        let cfg: RetargetConfig =
+            toml::from_str(text).map_err(|e| ConfigError::parse(origin, &e))?;
+        cfg.validate().map_err(|e| e.with_origin(origin))?;
+        Ok(cfg)
+    }
+
+    /// Checks ranges: `0 <= min < max <= 1` per joint, curves valid (gamma
+    /// finite and `> 0`, piecewise points monotone from x = 0 to x = 1),
+    /// `min_cutoff_hz` and `d_cutoff_hz` finite and `> 0`, `beta` finite and
+    /// `>= 0`, `deadband` in `[0, 0.2]`, `max_speed` finite and `> 0`. The error
+    /// names the field (e.g. `joints.index.min`); its origin is
+    /// `"retarget config"`.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive("filter.min_cutoff_hz", self.filter.min_cutoff_hz)?;
+        positive("filter.d_cutoff_hz", self.filter.d_cutoff_hz)?;
+        let beta = self.filter.beta;
+        if !(beta.is_finite() && beta >= 0.0) {
+            return Err(ConfigError::invalid(
+                RETARGET_ORIGIN,
+                "filter.beta",
+                format!("{beta} must be finite and >= 0"),
+            ));
+        }
+        let db = self.deadband;
+        if !(0.0..=MAX_DEADBAND).contains(&db) {
+            return Err(ConfigError::invalid(
+                RETARGET_ORIGIN,
+                "deadband",
+                format!("{db} must be in [0, {MAX_DEADBAND}]"),
+            ));
+        }
+        positive("max_speed", self.max_speed)?;
+        for (name, j) in REVO2_JOINT_NAMES.iter().zip(&self.joints) {
+            let field = format!("joints.{name}");
+            for (what, v) in [("min", j.min), ("max", j.max)] {
+                if !(0.0..=1.0).contains(&v) {
+                    return Err(ConfigError::invalid(
+                        RETARGET_ORIGIN,
+                        format!("{field}.{what}"),
+                        format!("{v} must be in [0, 1]"),
+                    ));
+                }
+            }
+            if j.min >= j.max {
+                return Err(ConfigError::invalid(
+                    RETARGET_ORIGIN,
+                    field,
+                    format!("min ({}) must be less than max ({})", j.min, j.max),
+                ));
+            }
+            j.curve.validate(&format!("{field}.curve"))?;
+        }
+        Ok(())
+    }
+}
+
+/// (De)serialises `[JointConfig; 6]` as a table keyed by joint name.
+mod joints_by_name {
+    use super::JointConfig;
+    use crate::REVO2_JOINTS;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Default, Serialize, Deserialize)]
+    #[serde(deny_unknown_fields, default)]
+    struct Joints {
+        thumb_flex: JointConfig,
+        thumb_abduct: JointConfig,
+        index: JointConfig,
+        middle: JointConfig,
+        ring: JointConfig,
+        pinky: JointConfig,
+    }
+
+    pub(super) fn serialize<S: Serializer>(
+        joints: &[JointConfig; REVO2_JOINTS],
+        s: S,
+    ) -> Result<S::Ok, S::Error> {
+        let [thumb_flex, thumb_abduct, index, middle, ring, pinky] = joints.clone();
+        Joints {
+            thumb_flex,
+            thumb_abduct,
+            index,
+            middle,
+            ring,
+            pinky,
+        }
+        .serialize(s)
+    }
+
+    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
+        d: D,
+    ) -> Result<[JointConfig; REVO2_JOINTS], D::Error> {
+        let j = Joints::deserialize(d)?;
+        Ok([
+            j.thumb_flex,
+            j.thumb_abduct,
+            j.index,
+            j.middle,
+            j.ring,
+            j.pinky,
+        ])
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_text_is_default() {
+        let cfg = RetargetConfig::from_toml_str("", "r.toml").unwrap();
+        assert_eq!(cfg, RetargetConfig::default());
+        cfg.validate().unwrap();
+    }
+
+    #[test]
+    fn parses_full_example() {
+        let text = r#"
+deadband = 0.01
+max_speed = 2
+
+[filter]
+min_cutoff_hz = 2.0
+beta = 0.3
+
+[joints.index]
+curve = { kind = "gamma", gamma = 0.8 }
+max = 0.9
+
+[joints.thumb_abduct]
+min = 0.1
+curve = { kind = "piecewise", points = [[0, 0], [0.5, 0.3], [1, 1]] }
+"#;
+        let cfg = RetargetConfig::from_toml_str(text, "r.toml").unwrap();
+        assert_eq!(cfg.deadband, 0.01);
+        assert_eq!(cfg.max_speed, 2.0);
+        assert_eq!(cfg.filter.min_cutoff_hz, 2.0);
+        assert_eq!(cfg.filter.beta, 0.3);
+        assert_eq!(cfg.filter.d_cutoff_hz, 1.0);
+        assert_eq!(cfg.joints[2].curve, Curve::Gamma { gamma: 0.8 });
+        assert_eq!(cfg.joints[2].max, 0.9);
+        assert_eq!(cfg.joints[2].min, 0.0);
+        assert_eq!(cfg.joints[1].min, 0.1);
+        assert_eq!(
+            cfg.joints[1].curve,
+            Curve::Piecewise {
+                points: vec![[0.0, 0.0], [0.5, 0.3], [1.0, 1.0]]
+            }
+        );
+        assert_eq!(cfg.joints[0], JointConfig::default());
+        assert_eq!(cfg.joints[5], JointConfig::default());
+
+        // serde round trip
+        let back = toml::to_string(&cfg).unwrap();
+        assert_eq!(RetargetConfig::from_toml_str(&back, "x").unwrap(), cfg);
+    }
+
+    #[test]
+    fn curves() {
+        assert_eq!(Curve::Linear.apply(0.25), 0.25);
+        assert_eq!(Curve::Linear.apply(2.0), 1.0);
+        assert_eq!(Curve::Linear.apply(f32::NAN), 0.0);
+        let g = Curve::Gamma { gamma: 2.0 };
+        assert!((g.apply(0.5) - 0.25).abs() < 1e-6);
+        assert_eq!(g.apply(0.0), 0.0);
+        assert_eq!(g.apply(1.0), 1.0);
+        let g = Curve::Gamma { gamma: 0.5 };
+        assert!((g.apply(0.25) - 0.5).abs() < 1e-6);
+        let p = Curve::Piecewise {
+            points: vec![[0.0, 0.0], [0.5, 0.3], [1.0, 1.0]],
+        };
+        assert_eq!(p.apply(0.0), 0.0);
+        assert!((p.apply(0.25) - 0.15).abs() < 1e-6);
+        assert!((p.apply(0.5) - 0.3).abs() < 1e-6);
+        assert!((p.apply(0.75) - 0.65).abs() < 1e-6);
+        assert_eq!(p.apply(1.0), 1.0);
+        let flat = Curve::Piecewise {
+            points: vec![[0.0, 0.2], [1.0, 0.2]],
+        };
+        assert_eq!(flat.apply(0.7), 0.2);
+    }
+
+    fn err_of(text: &str) -> String {
+        RetargetConfig::from_toml_str(text, "r.toml")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn errors_name_origin_and_field() {
+        let m = err_of("[joints.index]\nmin = 0.6\nmax = 0.5\n");
+        assert_eq!(
+            m,
+            "r.toml: joints.index: min (0.6) must be less than max (0.5)"
+        );
+        let m = err_of("[joints.ring]\nmax = 1.5\n");
+        assert!(m.starts_with("r.toml: joints.ring.max: "), "{m}");
+        let m = err_of("[joints.pinky]\ncurve = { kind = \"gamma\", gamma = 0 }\n");
+        assert!(
+            m.starts_with("r.toml: joints.pinky.curve: gamma (0)"),
+            "{m}"
+        );
+        let m = err_of("[joints.pinky]\ncurve = { kind = \"gamma\", gamma = nan }\n");
+        assert!(m.starts_with("r.toml: joints.pinky.curve: "), "{m}");
+        let m = err_of(
+            "[joints.middle]\ncurve = { kind = \"piecewise\", points = [[0, 0], [0.5, 0.6], [0.4, 0.7], [1, 1]] }\n",
+        );
+        assert!(
+            m.starts_with("r.toml: joints.middle.curve: x must be strictly"),
+            "{m}"
+        );
+        let m = err_of(
+            "[joints.middle]\ncurve = { kind = \"piecewise\", points = [[0, 0], [0.5, 0.6], [1, 0.5]] }\n",
+        );
+        assert!(m.contains("non-decreasing"), "{m}");
+        let m = err_of(
+            "[joints.middle]\ncurve = { kind = \"piecewise\", points = [[0.1, 0], [1, 1]] }\n",
+        );
+        assert!(m.contains("x = 0"), "{m}");
+        let m = err_of(
+            "[joints.middle]\ncurve = { kind = \"piecewise\", points = [[0, 0], [0.9, 1]] }\n",
+        );
+        assert!(m.contains("x = 1"), "{m}");
+        let m = err_of(
+            "[joints.middle]\ncurve = { kind = \"piecewise\", points = [[0, 0], [1, 1.5]] }\n",
+        );
+        assert!(m.contains("y must be in [0, 1]"), "{m}");
+        let m = err_of("deadband = 0.5\n");
+        assert!(m.starts_with("r.toml: deadband: "), "{m}");
+        let m = err_of("deadband = -0.1\n");
+        assert!(m.starts_with("r.toml: deadband: "), "{m}");
+        let m = err_of("max_speed = 0\n");
+        assert!(m.starts_with("r.toml: max_speed: "), "{m}");
+        let m = err_of("max_speed = inf\n");
+        assert!(m.starts_with("r.toml: max_speed: "), "{m}");
+        let m = err_of("[filter]\nmin_cutoff_hz = -1\n");
+        assert!(m.starts_with("r.toml: filter.min_cutoff_hz: "), "{m}");
+        let m = err_of("[filter]\nd_cutoff_hz = 0\n");
+        assert!(m.starts_with("r.toml: filter.d_cutoff_hz: "), "{m}");
+        let m = err_of("[filter]\nbeta = -1\n");
+        assert!(m.starts_with("r.toml: filter.beta: "), "{m}");
+    }
+
+    #[test]
+    fn unknown_keys_are_errors() {
+        let m = err_of("dead_band = 0.1\n");
+        assert!(
+            m.starts_with("r.toml: ") && m.contains("unknown field `dead_band`"),
+            "{m}"
+        );
+        let m = err_of("[joints.thumb]\nmin = 0.1\n");
+        assert!(m.contains("unknown field `thumb`"), "{m}");
+        let m = err_of("[joints.index]\nmaximum = 0.1\n");
+        assert!(m.contains("unknown field `maximum`"), "{m}");
+        let m = err_of("[filter]\ncutoff = 1\n");
+        assert!(m.contains("unknown field `cutoff`"), "{m}");
+        let m = err_of("[joints.index]\ncurve = { kind = \"gamma\", gamma = 1, extra = 2 }\n");
+        assert!(m.contains("extra"), "{m}");
+        let m = err_of("[joints.index]\ncurve = { kind = \"linear\", gamma = 0.5 }\n");
+        assert!(m.contains("unknown field `gamma`"), "{m}");
+        let m = err_of("[joints.index]\ncurve = { kind = \"cubic\" }\n");
+        assert!(m.contains("cubic"), "{m}");
+        let m = err_of("[joints.index]\ncurve = { kind = \"gamma\" }\n");
+        assert!(m.contains("missing field `gamma`"), "{m}");
+    }
+}

@@ -1,0 +1,419 @@
+//! The per-sample retargeting pipeline.
+
+use crate::calibration::Calibration;
+use crate::config::RetargetConfig;
+use crate::error::ConfigError;
+use crate::filter::OneEuro;
+use crate::{GLOVE_CHANNELS, REVO2_JOINTS};
+
+/// Longest time step (seconds) a single [`Retargeter::step`] accounts for.
+///
+/// A larger gap between consecutive glove stamps (a hiccup that the caller
+/// did not treat as stale) is treated as this long, so one late sample cannot
+/// open the filter or the slew limit wide: at most `max_speed * MAX_STEP_DT_S`
+/// of motion per step.
+pub const MAX_STEP_DT_S: f32 = 0.1;
+
+/// One glove sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GloveInput {
+    /// Monotonic stamp of the glove sample, nanoseconds.
+    pub t_ns: u64,
+    /// Raw positions, glove order (little, ring, middle, index, thumb,
+    /// thumb_rotation). Any `u16` is accepted; values are clamped.
+    pub raw: [u16; GLOVE_CHANNELS],
+}
+
+/// Joint targets for the Revo2 hand.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointTargets {
+    /// Revo2 order, normalised (0 = open / thumb out, 1 = closed / thumb in),
+    /// always finite and within each joint's `[min, max]`.
+    pub position: [f32; REVO2_JOINTS],
+    /// The configured slew limit (normalised/s), for the driver's speed field.
+    pub max_speed: f32,
+    /// True when this is a held command because the input is stale.
+    pub held: bool,
+    /// How many joints were clamped to their limits this step (slew limiting
+    /// not counted).
+    pub clamped: u8,
+    /// How many joints were slew limited this step.
+    pub slew_limited: u8,
+}
+
+/// Turns glove samples into Revo2 joint targets: calibration → curve → One
+/// Euro filter → deadband → limits → slew limit, per joint.
+#[derive(Debug, Clone)]
+pub struct Retargeter {
+    config: RetargetConfig,
+    calibration: Calibration,
+    filters: [OneEuro; REVO2_JOINTS],
+    /// Last filtered value accepted through the deadband, per joint.
+    anchor: [f32; REVO2_JOINTS],
+    /// Stamp of the previous step; `None` before the first step / after reset.
+    last_t_ns: Option<u64>,
+    /// Last output (kept across [`Retargeter::reset`] so `hold` keeps working).
+    last: Option<JointTargets>,
+}
+
+impl Retargeter {
+    /// Validates both the configuration and the calibration.
+    pub fn new(config: RetargetConfig, calibration: Calibration) -> Result<Self, ConfigError> {
+        config.validate()?;
+        calibration.validate()?;
+        Ok(Retargeter {
+            config,
+            calibration,
+            filters: [OneEuro::default(); REVO2_JOINTS],
+            anchor: [0.0; REVO2_JOINTS],
+            last_t_ns: None,
+            last: None,
+        })
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &RetargetConfig {
+        &self.config
+    }
+
+    /// The calibration in use.
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// Processes one glove sample.
+    ///
+    /// `dt` is the time since the previous sample's stamp, capped at
+    /// [`MAX_STEP_DT_S`]; a stamp that is not later than the previous one
+    /// counts as no time elapsed (the filter and the output do not move), and
+    /// becomes the reference for the next step. The first step after
+    /// construction or [`reset`](Self::reset) initialises the filter to the
+    /// input and jumps straight to it (no deadband, no slew limit).
+    ///
+    /// Deadband: a filtered value is accepted only when it differs from the
+    /// last accepted value by at least `deadband`; otherwise the last accepted
+    /// value stays the target. In steady state the last accepted value is the
+    /// previous output; while the slew limit is still catching up, measuring
+    /// against it lets the move finish instead of stopping one deadband short.
+    pub fn step(&mut self, input: &GloveInput) -> JointTargets {
+        let dt = match self.last_t_ns {
+            Some(prev) if input.t_ns > prev => {
+                let secs = (input.t_ns - prev) as f64 * 1e-9;
+                secs.min(f64::from(MAX_STEP_DT_S)) as f32
+            }
+            _ => 0.0,
+        };
+        let fresh = self.last_t_ns.is_none();
+        self.last_t_ns = Some(input.t_ns);
+        let previous = if fresh {
+            None
+        } else {
+            self.last.map(|t| t.position)
+        };
+
+        let normalised = self.calibration.normalise(&input.raw);
+        let max_step = self.config.max_speed * dt;
+        let mut position = [0.0_f32; REVO2_JOINTS];
+        let mut clamped = 0_u8;
+        let mut slew_limited = 0_u8;
+
+        for (j, out) in position.iter_mut().enumerate() {
+            let jc = &self.config.joints[j];
+            let shaped = jc.curve.apply(normalised[j]);
+            let filtered = self.filters[j].filter(shaped, dt, &self.config.filter);
+
+            let Some(prev) = previous.map(|p| p[j]) else {
+                // Fresh start: jump to the (clamped) value.
+                self.anchor[j] = filtered;
+                let (v, c) = clamp_count(filtered, jc.min, jc.max);
+                clamped += u8::from(c);
+                *out = v;
+                continue;
+            };
+
+            // Deadband: ignore changes smaller than the deadband relative to
+            // the last accepted value (equal to the previous output unless
+            // the slew limit is still catching up with it).
+            if (filtered - self.anchor[j]).abs() >= self.config.deadband {
+                self.anchor[j] = filtered;
+            }
+            let (target, c) = clamp_count(self.anchor[j], jc.min, jc.max);
+            clamped += u8::from(c);
+
+            // Slew limit relative to the previous output.
+            let delta = target - prev;
+            let v = if delta.abs() > max_step {
+                slew_limited += 1;
+                prev + max_step.copysign(delta)
+            } else {
+                target
+            };
+            // prev and target are both within limits, so v is too; guard rounding / NaN.
+            *out = if v.is_finite() {
+                v.clamp(jc.min, jc.max)
+            } else {
+                prev
+            };
+        }
+
+        let targets = JointTargets {
+            position,
+            max_speed: self.config.max_speed,
+            held: false,
+            clamped,
+            slew_limited,
+        };
+        self.last = Some(targets);
+        targets
+    }
+
+    /// Input is stale: repeat the last output with `held = true` (never
+    /// drift); `None` before the first step. `clamped` and `slew_limited` are
+    /// 0 in a held command. Still available after [`reset`](Self::reset).
+    pub fn hold(&self) -> Option<JointTargets> {
+        self.last.map(|t| JointTargets {
+            held: true,
+            clamped: 0,
+            slew_limited: 0,
+            ..t
+        })
+    }
+
+    /// Forgets the filter state and the previous stamp (e.g. after a long
+    /// stale period): the next step starts fresh, like the first one (it
+    /// jumps to the new value; the driver's speed field, `max_speed`, still
+    /// bounds the physical motion). [`hold`](Self::hold) keeps returning the
+    /// last output until then.
+    pub fn reset(&mut self) {
+        self.filters = [OneEuro::default(); REVO2_JOINTS];
+        self.last_t_ns = None;
+    }
+}
+
+/// Clamps `v` to `[min, max]` and says whether it had to (NaN -> `min`, counted).
+fn clamp_count(v: f32, min: f32, max: f32) -> (f32, bool) {
+    if v.is_nan() || v < min {
+        (min, true)
+    } else if v > max {
+        (max, true)
+    } else {
+        (v, false)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use crate::config::{Curve, OneEuroParams};
+
+    const MS: u64 = 1_000_000;
+
+    fn input(t_ns: u64, raw: [u16; 6]) -> GloveInput {
+        GloveInput { t_ns, raw }
+    }
+
+    fn default_rt() -> Retargeter {
+        Retargeter::new(RetargetConfig::default(), Calibration::default()).unwrap()
+    }
+
+    #[test]
+    fn first_step_jumps_with_default_calibration() {
+        let mut rt = default_rt();
+        let t = rt.step(&input(5, [1000; 6]));
+        assert_eq!(t.position, [0.0; 6]);
+        assert!(!t.held);
+        assert_eq!(t.max_speed, 3.0);
+        let mut rt = default_rt();
+        let t = rt.step(&input(5, [0; 6]));
+        assert_eq!(t.position, [1.0; 6]);
+        assert_eq!(t.slew_limited, 0);
+    }
+
+    #[test]
+    fn joint_order_and_thumb_rotation_sign() {
+        let mut rt = default_rt();
+        // glove: little, ring, middle, index, thumb, thumb_rotation
+        let t = rt.step(&input(0, [900, 800, 700, 600, 500, 100]));
+        // Revo2: thumb_flex, thumb_abduct, index, middle, ring, pinky
+        let expect = [0.5, 0.9, 0.4, 0.3, 0.2, 0.1];
+        for (a, b) in t.position.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-6, "{:?}", t.position);
+        }
+        // thumb rotated to the outermost position -> abduct 0 (thumb out)
+        let mut rt = default_rt();
+        let t = rt.step(&input(0, [0, 0, 0, 0, 0, 1000]));
+        assert_eq!(t.position[1], 0.0);
+    }
+
+    #[test]
+    fn curves_apply_per_joint() {
+        let mut cfg = RetargetConfig::default();
+        cfg.joints[2].curve = Curve::Gamma { gamma: 2.0 };
+        cfg.joints[3].curve = Curve::Piecewise {
+            points: vec![[0.0, 0.0], [0.5, 0.3], [1.0, 1.0]],
+        };
+        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let t = rt.step(&input(0, [500; 6]));
+        assert!((t.position[2] - 0.25).abs() < 1e-6);
+        assert!((t.position[3] - 0.3).abs() < 1e-6);
+        assert!((t.position[4] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn limits_clamp_and_count() {
+        let mut cfg = RetargetConfig::default();
+        cfg.joints[5].min = 0.2;
+        cfg.joints[4].max = 0.7;
+        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let t = rt.step(&input(0, [1000, 0, 500, 500, 500, 500]));
+        assert_eq!(t.position[5], 0.2);
+        assert_eq!(t.position[4], 0.7);
+        assert_eq!(t.clamped, 2);
+    }
+
+    #[test]
+    fn deadband_holds_small_changes() {
+        // Nearly transparent filter so the deadband is what we observe.
+        let cfg = RetargetConfig {
+            deadband: 0.05,
+            filter: OneEuroParams {
+                min_cutoff_hz: 1.0e4,
+                ..OneEuroParams::default()
+            },
+            ..RetargetConfig::default()
+        };
+        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let t0 = rt.step(&input(0, [500; 6]));
+        let mut t = 0;
+        for _ in 0..100 {
+            t += MS;
+            // 0.03 change: inside the deadband
+            let out = rt.step(&input(t, [470; 6]));
+            assert_eq!(out.position, t0.position);
+        }
+        // 0.1 change: outside the deadband, output moves to it
+        for _ in 0..100 {
+            t += MS;
+            rt.step(&input(t, [400; 6]));
+        }
+        let out = rt.step(&input(t + MS, [400; 6]));
+        for p in out.position {
+            // accepted once it crossed the deadband: within one deadband of 0.6
+            assert!((0.55..=0.6 + 1e-6).contains(&p), "{:?}", out.position);
+        }
+    }
+
+    #[test]
+    fn slew_limit_bounds_speed() {
+        // Nearly transparent filter: let the slew limit dominate.
+        let cfg = RetargetConfig {
+            max_speed: 2.0,
+            filter: OneEuroParams {
+                min_cutoff_hz: 1.0e4,
+                ..OneEuroParams::default()
+            },
+            ..RetargetConfig::default()
+        };
+        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let mut prev = rt.step(&input(0, [1000; 6])).position;
+        assert_eq!(prev, [0.0; 6]);
+        let mut t = 0;
+        let mut reached_at = None;
+        let mut saw_limit = false;
+        for _ in 0..2000 {
+            t += MS;
+            let out = rt.step(&input(t, [0; 6]));
+            saw_limit |= out.slew_limited == 6;
+            for (a, b) in out.position.iter().zip(prev) {
+                assert!(a - b <= 2.0 * 0.001 + 1e-6, "moved {} in 1 ms", a - b);
+            }
+            prev = out.position;
+            if reached_at.is_none() && out.position.iter().all(|&p| p >= 1.0 - 0.005) {
+                reached_at = Some(t);
+            }
+        }
+        assert!(saw_limit);
+        let reached_at = reached_at.expect("reaches closed");
+        // open -> closed takes at least 1 / max_speed seconds
+        assert!(
+            reached_at as f64 * 1e-9 >= (1.0 - 0.005) / 2.0,
+            "{reached_at}"
+        );
+        assert!(reached_at as f64 * 1e-9 <= 0.6, "{reached_at}");
+    }
+
+    #[test]
+    fn large_gap_is_capped() {
+        let mut cfg = RetargetConfig::default();
+        cfg.filter.min_cutoff_hz = 1.0e4;
+        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        rt.step(&input(0, [1000; 6]));
+        let out = rt.step(&input(10_000 * MS, [0; 6]));
+        for p in out.position {
+            assert!((p - 3.0 * MAX_STEP_DT_S).abs() < 1e-4, "{p}");
+        }
+    }
+
+    #[test]
+    fn non_monotonic_stamps_do_not_move_or_nan() {
+        let mut rt = default_rt();
+        let a = rt.step(&input(100 * MS, [800; 6]));
+        let b = rt.step(&input(50 * MS, [0; 6]));
+        assert_eq!(a.position, b.position);
+        let c = rt.step(&input(50 * MS, [0; 6]));
+        assert_eq!(a.position, c.position);
+        // time moves on from the new reference
+        let d = rt.step(&input(60 * MS, [0; 6]));
+        assert!(d.position.iter().all(|p| p.is_finite()));
+        assert!(d.position[0] > a.position[0]);
+    }
+
+    #[test]
+    fn hold_before_and_after_first_step() {
+        let mut rt = default_rt();
+        assert_eq!(rt.hold(), None);
+        let t = rt.step(&input(0, [300; 6]));
+        let h = rt.hold().unwrap();
+        assert!(h.held);
+        assert_eq!(h.position, t.position);
+        assert_eq!(h.max_speed, t.max_speed);
+        // hold never drifts
+        assert_eq!(rt.hold(), Some(h));
+        // hold does not disturb the state: the next step continues from it
+        let n = rt.step(&input(MS, [300; 6]));
+        assert!(!n.held);
+        assert_eq!(n.position, t.position);
+    }
+
+    #[test]
+    fn reset_starts_fresh_but_hold_survives() {
+        let mut rt = default_rt();
+        let t = rt.step(&input(0, [1000; 6]));
+        rt.reset();
+        assert_eq!(rt.hold().unwrap().position, t.position);
+        let n = rt.step(&input(0, [0; 6]));
+        assert_eq!(n.position, [1.0; 6]);
+        assert_eq!(n.slew_limited, 0);
+    }
+
+    #[test]
+    fn new_validates_both() {
+        let cfg = RetargetConfig {
+            max_speed: -1.0,
+            ..RetargetConfig::default()
+        };
+        let err = Retargeter::new(cfg, Calibration::default()).unwrap_err();
+        assert!(
+            err.to_string().starts_with("retarget config: max_speed: "),
+            "{err}"
+        );
+        let mut cal = Calibration::default();
+        cal.fingers[0].closed = 990;
+        let err = Retargeter::new(RetargetConfig::default(), cal).unwrap_err();
+        assert!(
+            err.to_string().starts_with("calibration: [little]: "),
+            "{err}"
+        );
+    }
+}
