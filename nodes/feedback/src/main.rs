@@ -274,9 +274,10 @@ fn run(runtime: &NodeRuntime, config: &NodeConfig, mut law: ForceFeedback) -> an
         },
     )?;
     // Leave the glove unloaded.
-    let mut zero = GloveForceCommand::default();
-    zero.flags = force_flags::STALE;
-    forces.publish(&zero)?;
+    forces.publish(&GloveForceCommand {
+        flags: force_flags::STALE,
+        ..Default::default()
+    })?;
     tracing::info!(?stop, "stopped; published zero force");
     Ok(())
 }
