@@ -211,7 +211,7 @@ fn run(runtime: &NodeRuntime, config: &NodeConfig, mut law: ForceFeedback) -> an
             let (inputs, origin) = inputs(now, config, &tactile, &state, &command, estop_engaged);
             let out = law.step(&inputs);
             if out.stale && !was_stale {
-                tracing::warn!("inputs stale: ramping glove forces to zero");
+                tracing::warn!("no fresh tactile/hand input: glove forces ramp to zero");
                 health.count_timeout();
             } else if !out.stale && was_stale {
                 tracing::info!("inputs fresh again");

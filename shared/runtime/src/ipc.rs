@@ -207,6 +207,21 @@ impl NodeRuntime {
         Ok(Subscriber::new(subscriber, listener))
     }
 
+    /// Publishers and subscribers of `M`'s topic, `None` when the topic does not exist (yet).
+    /// Does not create anything.
+    pub fn topic_ports<M: Message>(&self) -> Option<(usize, usize)> {
+        use iceoryx2::prelude::PortFactory;
+        let service = service_name::<M>().ok()?;
+        let pubsub = self
+            .node
+            .service_builder(&service)
+            .publish_subscribe::<M>()
+            .open()
+            .ok()?;
+        let dynamic = pubsub.dynamic_config();
+        Some((dynamic.number_of_publishers(), dynamic.number_of_subscribers()))
+    }
+
     fn pubsub<M: Message>(
         &self,
         service: &ServiceName,

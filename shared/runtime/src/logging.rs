@@ -1,5 +1,7 @@
 //! Logging setup shared by every executable.
 
+use std::io::IsTerminal;
+
 use tracing_subscriber::EnvFilter;
 
 /// Sends `tracing` events to stderr, filtered by `TELEOP_LOG` (default `info`), e.g.
@@ -11,6 +13,7 @@ pub fn init_logging() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .with_target(false)
+        .with_ansi(std::io::stderr().is_terminal())
         .try_init();
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
 }

@@ -1,0 +1,249 @@
+//! `teleop nodes | topics | echo | stats | estop`: look into and steer a running pipeline.
+
+use std::cell::RefCell;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::{Node, NodeState, NodeView};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::CallbackProgression;
+use teleop_msgs::{visit_topic, EStop, Message, TopicVisitor};
+use teleop_runtime::{
+    now_ns, EventLoop, Flow, Input, IpcSettings, NodeRuntime, Service, StopReason, Subscriber, Wake,
+};
+
+/// Name of the short-lived iceoryx2 node the inspection commands create.
+const CLI_NODE: &str = "teleop-cli";
+
+pub fn nodes(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
+    let config = ipc.config()?;
+    let mut rows = Vec::new();
+    Node::<Service>::list(&config, |state| {
+        let (status, details) = match &state {
+            NodeState::Alive(v) => ("alive", v.details().clone()),
+            NodeState::Dead(v) => ("dead", v.details().clone()),
+            NodeState::Inaccessible(_) => ("inaccessible", None),
+            NodeState::Undefined(_) => ("undefined", None),
+        };
+        let (name, pid, exe) = details.map_or_else(
+            || ("?".to_string(), "?".to_string(), "?".to_string()),
+            |d| {
+                (
+                    d.name().as_str().to_string(),
+                    d.process_id().value().to_string(),
+                    d.executable().to_string(),
+                )
+            },
+        );
+        rows.push((name, status, pid, exe));
+        CallbackProgression::Continue
+    })
+    .map_err(|e| anyhow::anyhow!("cannot list iceoryx2 nodes: {e:?}"))?;
+    rows.sort();
+    println!("{:<20} {:<8} {:>8}  EXECUTABLE", "NODE", "STATE", "PID");
+    for (name, status, pid, exe) in &rows {
+        println!("{name:<20} {status:<8} {pid:>8}  {exe}");
+    }
+    if rows.is_empty() {
+        println!("(no nodes: is a pipeline running with these IPC settings?)");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn topics(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
+    struct Ports<'a>(&'a NodeRuntime);
+    impl TopicVisitor for Ports<'_> {
+        type Output = Option<(usize, usize)>;
+        fn visit<M: Message>(self) -> Self::Output {
+            self.0.topic_ports::<M>()
+        }
+    }
+    println!(
+        "{:<22} {:<36} {:>6} {:>5} {:>5}",
+        "TOPIC", "PAYLOAD", "BYTES", "PUBS", "SUBS"
+    );
+    for topic in teleop_msgs::topics() {
+        let ports = visit_topic(topic.name, Ports(&runtime)).flatten();
+        let (pubs, subs) = ports.map_or(("-".into(), "-".into()), |(p, s)| {
+            (p.to_string(), s.to_string())
+        });
+        println!(
+            "{:<22} {:<36} {:>6} {:>5} {:>5}",
+            topic.name, topic.schema_name, topic.size, pubs, subs
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn unknown_topic(topic: &str) -> anyhow::Error {
+    let names: Vec<_> = teleop_msgs::topics().iter().map(|t| t.name).collect();
+    anyhow::anyhow!("unknown topic {topic:?}; topics are: {}", names.join(", "))
+}
+
+pub fn echo(ipc: &IpcSettings, topic: &str, count: Option<u64>) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
+    struct Echo<'a> {
+        runtime: &'a NodeRuntime,
+        count: Option<u64>,
+    }
+    impl TopicVisitor for Echo<'_> {
+        type Output = anyhow::Result<()>;
+        fn visit<M: Message>(self) -> anyhow::Result<()> {
+            let sub = self.runtime.subscriber::<M>()?;
+            let printed = core::cell::Cell::new(0u64);
+            let limit = self.count.unwrap_or(u64::MAX);
+            let print = |m: &M| {
+                if printed.get() < limit {
+                    println!("{m:?}");
+                    printed.set(printed.get() + 1);
+                }
+            };
+            // The newest sample published before we subscribed, if any.
+            sub.drain(print);
+            if printed.get() >= limit {
+                return Ok(());
+            }
+            EventLoop::new(Duration::from_secs(1)).run(&[Input::new(sub.listener())], |_| {
+                sub.drain(print);
+                if printed.get() >= limit {
+                    Flow::Break(())
+                } else {
+                    Flow::Continue(())
+                }
+            })?;
+            Ok(())
+        }
+    }
+    visit_topic(topic, Echo { runtime: &runtime, count }).ok_or_else(|| unknown_topic(topic))??;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// What `stats` keeps per topic.
+trait Probe {
+    fn listener(&self) -> &Listener<Service>;
+    fn drain(&self);
+    fn report(&self, window: Duration) -> String;
+}
+
+struct TopicProbe<M: Message> {
+    sub: Subscriber<M>,
+    /// (stamp - origin, receive - stamp) in ns per sample.
+    samples: RefCell<Vec<(u64, u64)>>,
+    dropped_before: u64,
+}
+
+impl<M: Message> Probe for TopicProbe<M> {
+    fn listener(&self) -> &Listener<Service> {
+        self.sub.listener()
+    }
+    fn drain(&self) {
+        let mut samples = self.samples.borrow_mut();
+        self.sub.drain(|m| {
+            let h = m.header();
+            let now = now_ns();
+            samples.push((
+                h.stamp_ns.saturating_sub(h.origin_ns),
+                now.saturating_sub(h.stamp_ns),
+            ));
+        });
+    }
+    fn report(&self, window: Duration) -> String {
+        let samples = self.samples.borrow();
+        let n = samples.len() as u64;
+        let rate = n as f64 / window.as_secs_f64();
+        let pct = |mut v: Vec<u64>| -> String {
+            if v.is_empty() {
+                return format!("{:>8} {:>8} {:>8}", "-", "-", "-");
+            }
+            v.sort_unstable();
+            let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1e6;
+            format!("{:>8.3} {:>8.3} {:>8.3}", at(0.5), at(0.99), at(1.0))
+        };
+        format!(
+            "{:<22} {:>8.1} {:>7} {:>6}  {}  {}",
+            M::TOPIC,
+            rate,
+            n,
+            self.sub.dropped().saturating_sub(self.dropped_before),
+            pct(samples.iter().map(|s| s.0).collect()),
+            pct(samples.iter().map(|s| s.1).collect()),
+        )
+    }
+}
+
+pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
+    struct Make<'a>(&'a NodeRuntime);
+    impl TopicVisitor for Make<'_> {
+        type Output = anyhow::Result<Box<dyn Probe>>;
+        fn visit<M: Message>(self) -> Self::Output {
+            let sub = self.0.subscriber::<M>()?;
+            // Skip the history sample: it may be old.
+            sub.drain(|_| {});
+            let dropped_before = sub.dropped();
+            Ok(Box::new(TopicProbe {
+                sub,
+                samples: RefCell::new(Vec::with_capacity(4096)),
+                dropped_before,
+            }))
+        }
+    }
+    let mut probes = Vec::new();
+    for t in teleop_msgs::topics() {
+        probes.push(visit_topic(t.name, Make(&runtime)).ok_or_else(|| unknown_topic(t.name))??);
+    }
+    let inputs: Vec<Input> = probes.iter().map(|p| Input::new(p.listener())).collect();
+    let start = Instant::now();
+    let stop = EventLoop::new(Duration::from_millis(50)).run(&inputs, |wake| {
+        if let Wake::Input(i) = wake {
+            probes[i].drain();
+        }
+        if start.elapsed() >= window {
+            Flow::Break(())
+        } else {
+            Flow::Continue(())
+        }
+    })?;
+    let measured = start.elapsed();
+    println!(
+        "over {:.1} s; latency = stamp - origin (time since the device sample), transport = receive - stamp; ms p50/p99/max",
+        measured.as_secs_f64()
+    );
+    println!(
+        "{:<22} {:>8} {:>7} {:>6}  {:>8} {:>8} {:>8}  {:>8} {:>8} {:>8}",
+        "TOPIC", "RATE_HZ", "SAMPLES", "DROPS", "LAT_P50", "LAT_P99", "LAT_MAX", "TR_P50", "TR_P99", "TR_MAX"
+    );
+    for p in &probes {
+        println!("{}", p.report(measured));
+    }
+    if stop != StopReason::Requested {
+        println!("(interrupted)");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn estop(ipc: &IpcSettings, engage: bool) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
+    let mut publisher = runtime.publisher::<EStop>()?;
+    let msg = EStop {
+        engaged: u8::from(engage),
+        ..Default::default()
+    };
+    // Repeat for a moment so that every subscriber, including one that is just starting, has it
+    // before this process (and with it the publisher's history) goes away. The force-feedback
+    // node latches the state until the opposite command.
+    for _ in 0..10 {
+        publisher.publish(&msg)?;
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    println!(
+        "e-stop {}",
+        if engage {
+            "ENGAGED: glove forces held at zero until `teleop estop --release`"
+        } else {
+            "released"
+        }
+    );
+    Ok(ExitCode::SUCCESS)
+}

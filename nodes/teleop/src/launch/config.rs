@@ -1,0 +1,264 @@
+//! `launch.toml`: the topology. Parsed and checked completely before anything starts; every
+//! error names the file, the line and the field.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// When a process that ended is started again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Restart {
+    /// Never.
+    Never,
+    /// When it exits with a failure status or is killed by a signal.
+    OnFailure,
+    /// Whenever it ends while the session runs.
+    Always,
+}
+
+/// Session-wide settings (`[session]`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Session {
+    /// How long a process may take to stop after SIGINT before it is killed.
+    pub stop_timeout_ms: u64,
+    /// How long a running process may take to show its iceoryx2 node before a warning.
+    pub liveness_grace_ms: u64,
+}
+
+impl Default for Session {
+    fn default() -> Self {
+        Self {
+            stop_timeout_ms: 3000,
+            liveness_grace_ms: 5000,
+        }
+    }
+}
+
+/// One `[[process]]` entry as written.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawProcess {
+    name: Spanned<String>,
+    program: Spanned<String>,
+    #[serde(default)]
+    args: Vec<String>,
+    #[serde(default = "default_restart")]
+    restart: Restart,
+    #[serde(default = "default_max_restarts")]
+    max_restarts: u32,
+    #[serde(default = "default_restart_delay_ms")]
+    restart_delay_ms: u64,
+    #[serde(default = "default_true")]
+    required: bool,
+    node: Option<String>,
+    #[serde(default)]
+    env: BTreeMap<String, String>,
+}
+
+fn default_restart() -> Restart {
+    Restart::OnFailure
+}
+fn default_max_restarts() -> u32 {
+    5
+}
+fn default_restart_delay_ms() -> u64 {
+    500
+}
+fn default_true() -> bool {
+    true
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLaunch {
+    #[serde(default)]
+    session: Session,
+    #[serde(default)]
+    process: Vec<RawProcess>,
+}
+
+/// A process to run, checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Process {
+    /// Unique name, used to tag its logs.
+    pub name: String,
+    /// The executable: a path (relative to the launch file), or a bare name looked up next to
+    /// `teleop` and then in `PATH`.
+    pub program: String,
+    /// Arguments (relative paths are relative to the launch file's folder, the working directory).
+    pub args: Vec<String>,
+    /// Restart policy.
+    pub restart: Restart,
+    /// Most restarts before giving up.
+    pub max_restarts: u32,
+    /// Pause before a restart.
+    pub restart_delay_ms: u64,
+    /// When it fails for good, the whole session stops with a failure.
+    pub required: bool,
+    /// The iceoryx2 node name it creates (None: it creates none).
+    pub node: Option<String>,
+    /// Extra environment.
+    pub env: BTreeMap<String, String>,
+}
+
+/// A checked launch file.
+#[derive(Debug, Clone)]
+pub struct Launch {
+    /// The file it came from.
+    pub path: PathBuf,
+    /// Session settings.
+    pub session: Session,
+    /// Processes in start order (they stop in reverse order).
+    pub processes: Vec<Process>,
+}
+
+/// Reads and checks a launch file.
+pub fn load(path: &Path) -> anyhow::Result<Launch> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot read launch file: {e}", path.display()))?;
+    parse(&text, path)
+}
+
+/// Parses and checks launch file text (`path` is used for messages and relative paths).
+pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
+    let origin = path.display();
+    let raw: RawLaunch =
+        toml::from_str(text).map_err(|e| anyhow::anyhow!("{origin}: {}", e.to_string().trim_end()))?;
+    let at = |span: core::ops::Range<usize>| line_of(text, span.start);
+    if raw.process.is_empty() {
+        anyhow::bail!("{origin}: no [[process]] entries: nothing to launch");
+    }
+    let mut processes: Vec<Process> = Vec::new();
+    for p in raw.process {
+        let name = p.name.get_ref().trim().to_string();
+        let valid_name = !name.is_empty()
+            && name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+        if !valid_name {
+            anyhow::bail!(
+                "{origin}:{}: process.name {:?}: use letters, digits, '-' or '_'",
+                at(p.name.span()),
+                p.name.get_ref()
+            );
+        }
+        if processes.iter().any(|q| q.name == name) {
+            anyhow::bail!(
+                "{origin}:{}: process.name {name:?} is used twice",
+                at(p.name.span())
+            );
+        }
+        if p.program.get_ref().trim().is_empty() {
+            anyhow::bail!(
+                "{origin}:{}: process.program of {name:?} is empty",
+                at(p.program.span())
+            );
+        }
+        processes.push(Process {
+            node: match p.node {
+                Some(n) if n.is_empty() => None,
+                Some(n) => Some(n),
+                None => Some(name.clone()),
+            },
+            name,
+            program: p.program.into_inner(),
+            args: p.args,
+            restart: p.restart,
+            max_restarts: p.max_restarts,
+            restart_delay_ms: p.restart_delay_ms,
+            required: p.required,
+            env: p.env,
+        });
+    }
+    Ok(Launch {
+        path: path.to_path_buf(),
+        session: raw.session,
+        processes,
+    })
+}
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+impl Launch {
+    /// The folder relative paths are resolved against (and the processes' working directory).
+    pub fn base_dir(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+
+    /// Where `process`'s executable is: a path relative to the launch file, the file of that
+    /// name next to the running `teleop`, or the bare name for a `PATH` lookup.
+    pub fn resolve_program(&self, process: &Process) -> PathBuf {
+        if process.program.contains('/') {
+            return self.base_dir().join(&process.program);
+        }
+        if let Some(dir) = std::env::current_exe().ok().and_then(|e| e.parent().map(PathBuf::from)) {
+            let beside = dir.join(&process.program);
+            if beside.is_file() {
+                return beside;
+            }
+        }
+        PathBuf::from(&process.program)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(text: &str) -> anyhow::Result<Launch> {
+        parse(text, Path::new("dir/launch.toml"))
+    }
+
+    #[test]
+    fn defaults_and_order() {
+        let l = parse_str(
+            "[[process]]\nname = \"a\"\nprogram = \"teleop-a\"\n\n[[process]]\nname = \"b\"\nprogram = \"./bin/b\"\nrestart = \"never\"\nrequired = false\nnode = \"\"\n",
+        )
+        .unwrap();
+        assert_eq!(l.processes.len(), 2);
+        let a = &l.processes[0];
+        assert_eq!((a.restart, a.max_restarts, a.required), (Restart::OnFailure, 5, true));
+        assert_eq!(a.node.as_deref(), Some("a"));
+        let b = &l.processes[1];
+        assert_eq!((b.restart, b.required, b.node.clone()), (Restart::Never, false, None));
+        assert_eq!(l.resolve_program(b), PathBuf::from("dir/./bin/b"));
+        assert_eq!(l.session.stop_timeout_ms, 3000);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_field() {
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nrestart = \"sometimes\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("dir/launch.toml: "), "{e}");
+        assert!(e.contains("line 4") && e.contains("sometimes"), "{e}");
+
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nargz = []\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("unknown field `argz`") && e.contains("line 4"), "{e}");
+
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\n\n[[process]]\nname = \"a\"\nprogram = \"y\"\n")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "dir/launch.toml:6: process.name \"a\" is used twice");
+
+        let e = parse_str("[[process]]\nname = \"a b\"\nprogram = \"x\"\n").unwrap_err().to_string();
+        assert!(e.starts_with("dir/launch.toml:2: process.name"), "{e}");
+
+        let e = parse_str("[[process]]\nname = \"a\"\n").unwrap_err().to_string();
+        assert!(e.contains("missing field `program`"), "{e}");
+
+        let e = parse_str("[session]\n").unwrap_err().to_string();
+        assert!(e.contains("no [[process]]"), "{e}");
+    }
+}

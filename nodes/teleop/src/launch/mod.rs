@@ -1,0 +1,4 @@
+//! `teleop launch`: the topology file and the supervisor that runs it.
+
+pub mod config;
+pub mod supervisor;

@@ -1,0 +1,343 @@
+//! The process supervisor behind `teleop launch`: starts every process of the launch file, tags
+//! and forwards their output, restarts them per policy, watches their iceoryx2 nodes, and stops
+//! them in reverse start order.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicI32, Ordering};
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::{Node, NodeState, NodeView};
+use iceoryx2::prelude::CallbackProgression;
+use teleop_runtime::{IpcSettings, Service};
+
+use super::config::{Launch, Process, Restart};
+
+/// How the session ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Outcome {
+    /// Stopped by SIGINT/SIGTERM or at the end of `--duration`; nothing required failed.
+    Stopped(&'static str),
+    /// A required process failed and was not (or no longer) restarted.
+    Failed(String),
+}
+
+static SIGNAL: AtomicI32 = AtomicI32::new(0);
+
+extern "C" fn on_signal(signal: libc::c_int) {
+    SIGNAL.store(signal, Ordering::SeqCst);
+}
+
+fn install_signal_handlers() {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        // SAFETY: the handler only stores into an atomic, which is async-signal-safe.
+        unsafe {
+            libc::signal(signal, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+        }
+    }
+}
+
+struct Slot<'a> {
+    process: &'a Process,
+    child: Option<Child>,
+    started: Instant,
+    restarts: u32,
+    restart_at: Option<Instant>,
+    node_seen: bool,
+    warned_no_node: bool,
+}
+
+/// Runs the session until a signal, the end of `duration`, or a failed required process.
+pub fn run(launch: &Launch, ipc: &IpcSettings, duration: Option<Duration>) -> anyhow::Result<Outcome> {
+    install_signal_handlers();
+    let config = ipc.config()?;
+    clean_dead_nodes(&config);
+    let started = Instant::now();
+    let mut slots: Vec<Slot> = Vec::with_capacity(launch.processes.len());
+    for process in &launch.processes {
+        let child = spawn(launch, process, ipc)?;
+        slots.push(Slot {
+            process,
+            child: Some(child),
+            started: Instant::now(),
+            restarts: 0,
+            restart_at: None,
+            node_seen: false,
+            warned_no_node: false,
+        });
+    }
+    tracing::info!(
+        file = %launch.path.display(),
+        processes = slots.len(),
+        "session running; Ctrl-C stops it"
+    );
+
+    let grace = Duration::from_millis(launch.session.liveness_grace_ms);
+    let mut last_liveness = Instant::now();
+    let outcome = loop {
+        std::thread::sleep(Duration::from_millis(50));
+        match SIGNAL.load(Ordering::SeqCst) {
+            0 => {}
+            libc::SIGTERM => break Outcome::Stopped("SIGTERM"),
+            _ => break Outcome::Stopped("Ctrl-C"),
+        }
+        if duration.is_some_and(|d| started.elapsed() >= d) {
+            break Outcome::Stopped("--duration elapsed");
+        }
+        if let Some(failure) = reap(&mut slots) {
+            break Outcome::Failed(failure);
+        }
+        let mut restart_failure = None;
+        for slot in slots.iter_mut() {
+            if slot.restart_at.is_some_and(|t| Instant::now() >= t) {
+                slot.restart_at = None;
+                clean_dead_nodes(&config);
+                match spawn(launch, slot.process, ipc) {
+                    Ok(child) => {
+                        slot.child = Some(child);
+                        slot.started = Instant::now();
+                        slot.node_seen = false;
+                        slot.warned_no_node = false;
+                    }
+                    Err(e) if slot.process.required => {
+                        restart_failure = Some(format!("{e:#}"));
+                    }
+                    Err(e) => tracing::error!(process = %slot.process.name, "restart failed: {e:#}"),
+                }
+            }
+        }
+        if let Some(failure) = restart_failure {
+            break Outcome::Failed(failure);
+        }
+        if last_liveness.elapsed() >= Duration::from_secs(1) {
+            last_liveness = Instant::now();
+            check_liveness(&config, &mut slots, grace);
+        }
+    };
+    match &outcome {
+        Outcome::Stopped(why) => tracing::info!("stopping ({why})"),
+        Outcome::Failed(why) => tracing::error!("stopping: {why}"),
+    }
+    let timeout = Duration::from_millis(launch.session.stop_timeout_ms);
+    for slot in slots.iter_mut().rev() {
+        if let Some(child) = slot.child.take() {
+            stop(&slot.process.name, child, timeout);
+        }
+    }
+    clean_dead_nodes(&config);
+    Ok(outcome)
+}
+
+/// Notices processes that ended; schedules restarts; returns why the session must stop if a
+/// required process failed for good.
+fn reap(slots: &mut [Slot]) -> Option<String> {
+    for slot in slots.iter_mut() {
+        let Some(child) = slot.child.as_mut() else {
+            continue;
+        };
+        let status = match child.try_wait() {
+            Ok(Some(status)) => status,
+            Ok(None) => continue,
+            Err(e) => {
+                tracing::error!(process = %slot.process.name, "cannot query process: {e}");
+                continue;
+            }
+        };
+        let pid = child.id();
+        slot.child = None;
+        let failed = !status.success();
+        let p = slot.process;
+        let what = describe(status);
+        if failed {
+            tracing::error!(process = %p.name, pid, "exited: {what}");
+        } else {
+            tracing::info!(process = %p.name, pid, "exited: {what}");
+        }
+        let wants_restart = match p.restart {
+            Restart::Never => false,
+            Restart::OnFailure => failed,
+            Restart::Always => true,
+        };
+        if wants_restart && slot.restarts < p.max_restarts {
+            slot.restarts += 1;
+            slot.restart_at = Some(Instant::now() + Duration::from_millis(p.restart_delay_ms));
+            tracing::warn!(
+                process = %p.name,
+                "restarting in {} ms (restart {}/{})",
+                p.restart_delay_ms,
+                slot.restarts,
+                p.max_restarts
+            );
+        } else if failed && p.required {
+            let why = if wants_restart {
+                format!("required process {} failed ({what}) after {} restarts", p.name, slot.restarts)
+            } else {
+                format!("required process {} failed ({what})", p.name)
+            };
+            return Some(why);
+        }
+    }
+    None
+}
+
+fn describe(status: ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(code), _) => format!("exit status {code}"),
+        (None, Some(signal)) => format!("killed by signal {signal}"),
+        _ => status.to_string(),
+    }
+}
+
+fn spawn(launch: &Launch, process: &Process, ipc: &IpcSettings) -> anyhow::Result<Child> {
+    let program = launch.resolve_program(process);
+    let mut command = Command::new(&program);
+    command
+        .args(&process.args)
+        .current_dir(launch.base_dir())
+        .envs(ipc.to_env())
+        .envs(&process.env)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        // Own process group: a terminal's Ctrl-C reaches only `teleop launch`, which then stops
+        // the processes in order.
+        .process_group(0);
+    // SAFETY: prctl is async-signal-safe; it makes the child get SIGTERM if `teleop launch`
+    // dies, so no process keeps driving hardware unsupervised.
+    unsafe {
+        command.pre_exec(|| {
+            libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM);
+            Ok(())
+        });
+    }
+    let mut child = command.spawn().map_err(|e| {
+        anyhow::anyhow!(
+            "{}: process {:?}: cannot start {}: {e}",
+            launch.path.display(),
+            process.name,
+            program.display()
+        )
+    })?;
+    tracing::info!(process = %process.name, pid = child.id(), program = %program.display(), "started");
+    if let Some(out) = child.stdout.take() {
+        forward(&process.name, out)?;
+    }
+    if let Some(err) = child.stderr.take() {
+        forward(&process.name, err)?;
+    }
+    Ok(child)
+}
+
+/// Copies a child's output line by line to our stderr, tagged with the process name.
+fn forward(name: &str, stream: impl Read + Send + 'static) -> anyhow::Result<()> {
+    let tag = name.to_string();
+    std::thread::Builder::new()
+        .name(format!("log-{name}"))
+        .spawn(move || {
+            for line in BufReader::new(stream).lines() {
+                let Ok(line) = line else { break };
+                let mut err = std::io::stderr().lock();
+                let _ = writeln!(err, "{tag:>12} | {line}");
+            }
+        })?;
+    Ok(())
+}
+
+/// SIGINT, then SIGKILL if it has not stopped within `timeout`.
+fn stop(name: &str, mut child: Child, timeout: Duration) {
+    let pid = child.id() as libc::pid_t;
+    // SAFETY: plain kill(2) on our own child's pid, which has not been reaped yet.
+    unsafe {
+        libc::kill(pid, libc::SIGINT);
+    }
+    let deadline = Instant::now() + timeout;
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) => {
+                tracing::info!(process = %name, "stopped: {}", describe(status));
+                return;
+            }
+            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(20)),
+            _ => break,
+        }
+    }
+    tracing::warn!(process = %name, "did not stop within {} ms: killing it", timeout.as_millis());
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// Marks processes whose iceoryx2 node is alive, warns about ones that never showed it, and
+/// cleans up nodes of processes that died.
+fn check_liveness(config: &iceoryx2::config::Config, slots: &mut [Slot], grace: Duration) {
+    let mut alive: Vec<(String, u32)> = Vec::new();
+    let mut dead = false;
+    let listed = Node::<Service>::list(config, |state| {
+        match &state {
+            NodeState::Alive(view) => {
+                if let Some(details) = view.details() {
+                    alive.push((
+                        details.name().as_str().to_string(),
+                        details.process_id().value() as u32,
+                    ));
+                }
+            }
+            NodeState::Dead(_) => dead = true,
+            _ => {}
+        }
+        CallbackProgression::Continue
+    });
+    if let Err(e) = listed {
+        tracing::warn!("cannot list iceoryx2 nodes: {e:?}");
+        return;
+    }
+    if dead {
+        clean_dead_nodes(config);
+    }
+    for slot in slots.iter_mut() {
+        let (Some(child), Some(node)) = (&slot.child, &slot.process.node) else {
+            continue;
+        };
+        let pid = child.id();
+        if alive.iter().any(|(n, p)| n == node && *p == pid) {
+            if !slot.node_seen {
+                tracing::debug!(process = %slot.process.name, node = %node, "iceoryx2 node alive");
+            }
+            slot.node_seen = true;
+        } else if slot.node_seen {
+            tracing::warn!(process = %slot.process.name, node = %node, "iceoryx2 node disappeared while the process runs");
+            slot.node_seen = false;
+        } else if !slot.warned_no_node && slot.started.elapsed() > grace {
+            tracing::warn!(
+                process = %slot.process.name,
+                node = %node,
+                "running for {} s but its iceoryx2 node has not appeared (wrong IPC settings or hung?)",
+                slot.started.elapsed().as_secs()
+            );
+            slot.warned_no_node = true;
+        }
+    }
+}
+
+/// Removes the iceoryx2 resources of nodes whose process died (e.g. killed with SIGKILL), so
+/// their restarted successors start clean.
+pub fn clean_dead_nodes(config: &iceoryx2::config::Config) {
+    let mut dead = Vec::new();
+    let _ = Node::<Service>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    for view in dead {
+        let name = view
+            .details()
+            .as_ref()
+            .map(|d| d.name().as_str().to_string())
+            .unwrap_or_default();
+        match view.try_remove_stale_resources() {
+            Ok(_) => tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node"),
+            Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
+        }
+    }
+}
