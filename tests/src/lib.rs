@@ -1,1 +1,184 @@
-//! e2e
+//! Harness for end-to-end tests: runs the real executables (`teleop launch` and the nodes it
+//! starts) as separate processes, each session in its own temporary folder and iceoryx2
+//! root/prefix so that tests can run in parallel without seeing each other.
+//!
+//! The executables must be built first (`cargo build --workspace --bins`, which the README's
+//! test command does); [`bin`] says so when one is missing.
+//!
+//! Must not depend on: node internals. Tests talk to the pipeline only through its topics and
+//! its command line, as a user would.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+pub use teleop_runtime::IpcSettings;
+
+/// Path of a workspace executable in the same target folder as the running test.
+pub fn bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> -> target/<profile>/<name>
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test executable lives in target/<profile>/deps");
+    let path = dir.join(name);
+    assert!(
+        path.is_file(),
+        "{} is not built: run `cargo build --workspace --bins` first (the README's test command does)",
+        path.display()
+    );
+    path
+}
+
+/// A temporary folder with its own iceoryx2 settings.
+pub struct Sandbox {
+    /// The folder (removed on drop).
+    pub dir: tempfile::TempDir,
+    /// IPC settings no other test uses.
+    pub ipc: IpcSettings,
+}
+
+impl Sandbox {
+    /// A fresh sandbox.
+    pub fn new() -> Self {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let ipc = IpcSettings::isolated(&dir.path().join("iceoryx2"));
+        Self { dir, ipc }
+    }
+
+    /// Writes `text` to `name` inside the sandbox and returns its path.
+    pub fn write(&self, name: &str, text: &str) -> PathBuf {
+        let path = self.dir.path().join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).expect("create dir");
+        }
+        std::fs::write(&path, text).expect("write file");
+        path
+    }
+
+    /// A `teleop` command with this sandbox's IPC settings.
+    pub fn teleop(&self) -> Command {
+        let mut cmd = Command::new(bin("teleop"));
+        cmd.envs(self.ipc.to_env()).current_dir(self.dir.path());
+        cmd
+    }
+
+    /// Runs `teleop args...` to completion.
+    pub fn run_teleop(&self, args: &[&str]) -> Output {
+        self.teleop()
+            .args(args)
+            .stdin(Stdio::null())
+            .output()
+            .expect("run teleop")
+    }
+
+    /// Starts `teleop launch FILE` in the background; its output goes to `launch.log` in the
+    /// sandbox (printed when the session is dropped during a failing test).
+    pub fn launch(&self, file: &Path) -> Session {
+        let log_path = self.dir.path().join("launch.log");
+        let log = File::create(&log_path).expect("log file");
+        let child = self
+            .teleop()
+            .arg("launch")
+            .arg(file)
+            .env("TELEOP_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(log.try_clone().expect("log"))
+            .stderr(log)
+            .spawn()
+            .expect("start teleop launch");
+        Session {
+            child: Some(child),
+            log_path,
+        }
+    }
+
+    /// Removes this sandbox's iceoryx2 files from /dev/shm (iceoryx2 leaves its per-prefix
+    /// management segment behind).
+    fn remove_shm(&self) {
+        let Some(prefix) = &self.ipc.prefix else {
+            return;
+        };
+        if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+            for e in entries.flatten() {
+                if e.file_name().to_string_lossy().starts_with(prefix.as_str()) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+    }
+}
+
+impl Default for Sandbox {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        self.remove_shm();
+    }
+}
+
+/// A running `teleop launch`.
+pub struct Session {
+    child: Option<Child>,
+    log_path: PathBuf,
+}
+
+impl Session {
+    /// The session's combined output so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log_path).unwrap_or_default()
+    }
+
+    /// Sends SIGINT (as Ctrl-C would) and waits for the exit status.
+    pub fn stop(&mut self) -> std::process::ExitStatus {
+        let mut child = self.child.take().expect("session still running");
+        // SAFETY: kill(2) on our own, not yet reaped child.
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+        }
+        child.wait().expect("wait for teleop launch")
+    }
+
+    /// Waits (up to `timeout`) for the launcher to exit on its own.
+    pub fn wait_exit(&mut self, timeout: Duration) -> Option<std::process::ExitStatus> {
+        let child = self.child.as_mut()?;
+        let start = Instant::now();
+        while start.elapsed() < timeout {
+            if let Ok(Some(status)) = child.try_wait() {
+                self.child = None;
+                return Some(status);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        None
+    }
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        if self.child.is_some() {
+            self.stop();
+        }
+        if std::thread::panicking() {
+            eprintln!("---- teleop launch output ----\n{}", self.log());
+        }
+    }
+}
+
+/// Polls `f` every 5 ms until it returns `Some`, or panics with `what` after `timeout`.
+pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let start = Instant::now();
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(start.elapsed() < timeout, "timed out after {timeout:?} waiting for {what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
