@@ -94,21 +94,6 @@ impl Sandbox {
             log_path,
         }
     }
-
-    /// Removes this sandbox's iceoryx2 files from /dev/shm (iceoryx2 leaves its per-prefix
-    /// management segment behind).
-    fn remove_shm(&self) {
-        let Some(prefix) = &self.ipc.prefix else {
-            return;
-        };
-        if let Ok(entries) = std::fs::read_dir("/dev/shm") {
-            for e in entries.flatten() {
-                if e.file_name().to_string_lossy().starts_with(prefix.as_str()) {
-                    let _ = std::fs::remove_file(e.path());
-                }
-            }
-        }
-    }
 }
 
 impl Default for Sandbox {
@@ -119,7 +104,7 @@ impl Default for Sandbox {
 
 impl Drop for Sandbox {
     fn drop(&mut self) {
-        self.remove_shm();
+        self.ipc.remove_shared_memory();
     }
 }
 
@@ -178,7 +163,10 @@ pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<
         if let Some(v) = f() {
             return v;
         }
-        assert!(start.elapsed() < timeout, "timed out after {timeout:?} waiting for {what}");
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {what}"
+        );
         std::thread::sleep(Duration::from_millis(5));
     }
 }

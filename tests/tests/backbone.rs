@@ -131,7 +131,10 @@ fn targets(cmd: &HandCommand) -> Vec<f32> {
 fn assert_close(actual: &[f32], expected: &[f32], tol: f32) {
     assert_eq!(actual.len(), expected.len());
     for (i, (a, e)) in actual.iter().zip(expected).enumerate() {
-        assert!((a - e).abs() <= tol, "joint {i}: {a} vs {e} (all: {actual:?})");
+        assert!(
+            (a - e).abs() <= tol,
+            "joint {i}: {a} vs {e} (all: {actual:?})"
+        );
     }
 }
 
@@ -153,7 +156,11 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     });
     let (cmds, _) = rig.pump(Duration::from_millis(1000), Some(raw), None);
     let last = *cmds.last().expect("hand commands while the glove is live");
-    assert!(cmds.len() > 100, "one command per glove sample, got {}", cmds.len());
+    assert!(
+        cmds.len() > 100,
+        "one command per glove sample, got {}",
+        cmds.len()
+    );
     assert_eq!(last.hand_model, hand_model::REVO2);
     assert_eq!(last.units, units::NORMALISED);
     // Revo2 order: thumb flex, thumb abduct, index, middle, ring, pinky; index clamped to 0.6.
@@ -164,7 +171,10 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
 
     // The glove goes quiet: the hand holds the last targets, flagged, and never drifts.
     let (held, _) = rig.pump(Duration::from_millis(400), None, None);
-    let held: Vec<_> = held.iter().filter(|c| c.flags & command_flags::HELD != 0).collect();
+    let held: Vec<_> = held
+        .iter()
+        .filter(|c| c.flags & command_flags::HELD != 0)
+        .collect();
     assert!(!held.is_empty(), "held commands after the glove timeout");
     for c in &held {
         assert_eq!(targets(c), targets(&last), "held command drifted");
@@ -177,7 +187,11 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     let f = forces.last().expect("force commands while tactile is live");
     // Glove order: little, ring, middle, index, thumb.
     assert_eq!(f.force[..3], [0, 0, 0]);
-    assert!((i32::from(f.force[3]) - 500).abs() <= 5, "index force {:?}", f.force);
+    assert!(
+        (i32::from(f.force[3]) - 500).abs() <= 5,
+        "index force {:?}",
+        f.force
+    );
     assert_eq!(f.force[4], 800, "thumb saturates at max_force");
     assert_ne!(f.flags & force_flags::CLAMPED, 0);
     assert_eq!(f.source[3], contact_source::TACTILE);
@@ -185,7 +199,11 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
 
     // E-stop through the CLI: every force zero at once, while contact persists.
     let out = sandbox.run_teleop(&["estop"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (_, forces) = rig.pump(Duration::from_millis(300), Some(raw), Some(tactile));
     let f = forces.last().unwrap();
     assert_eq!(f.force, [0; 5]);
@@ -194,7 +212,11 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     let out = sandbox.run_teleop(&["estop", "--release"]);
     assert!(out.status.success());
     let (_, forces) = rig.pump(Duration::from_millis(500), Some(raw), Some(tactile));
-    assert_eq!(forces.last().unwrap().force[4], 800, "forces return after release");
+    assert_eq!(
+        forces.last().unwrap().force[4],
+        800,
+        "forces return after release"
+    );
 
     // Tactile and hand state go stale: the force ramps down (not a jump) to zero.
     let (_, forces) = rig.pump(Duration::from_millis(800), Some(raw), None);
@@ -210,7 +232,9 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     let nodes = String::from_utf8(sandbox.run_teleop(&["nodes"]).stdout).unwrap();
     for name in ["retarget", "feedback"] {
         assert!(
-            nodes.lines().any(|l| l.starts_with(name) && l.contains("alive")),
+            nodes
+                .lines()
+                .any(|l| l.starts_with(name) && l.contains("alive")),
             "{name} not alive in:\n{nodes}"
         );
     }
@@ -222,10 +246,16 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     let status = session.stop();
     assert!(status.success(), "clean stop on Ctrl-C: {status:?}");
     let log = session.log();
-    assert!(log.contains("retarget |") && log.contains("feedback |"), "tagged logs");
+    assert!(
+        log.contains("retarget |") && log.contains("feedback |"),
+        "tagged logs"
+    );
     let stop_retarget = log.find("stopped: exit status 0 process=retarget").unwrap();
     let stop_feedback = log.find("stopped: exit status 0 process=feedback").unwrap();
-    assert!(stop_retarget < stop_feedback, "stopped in reverse start order");
+    assert!(
+        stop_retarget < stop_feedback,
+        "stopped in reverse start order"
+    );
 }
 
 #[test]
@@ -239,7 +269,10 @@ fn a_killed_process_is_restarted_and_the_pipeline_resumes() {
     let mut rig = Rig::new(&node);
     let raw = [500; 6];
     wait_for(Duration::from_secs(20), "the first hand command", || {
-        rig.pump(Duration::from_millis(20), Some(raw), None).0.last().copied()
+        rig.pump(Duration::from_millis(20), Some(raw), None)
+            .0
+            .last()
+            .copied()
     });
     let pid_of = |name: &str| -> Option<u32> {
         let out = String::from_utf8(sandbox.run_teleop(&["nodes"]).stdout).unwrap();
@@ -247,7 +280,9 @@ fn a_killed_process_is_restarted_and_the_pipeline_resumes() {
             .find(|l| l.starts_with(name) && l.contains("alive"))
             .and_then(|l| l.split_whitespace().nth(2)?.parse().ok())
     };
-    let old = wait_for(Duration::from_secs(5), "retarget's pid", || pid_of("retarget"));
+    let old = wait_for(Duration::from_secs(5), "retarget's pid", || {
+        pid_of("retarget")
+    });
     // SAFETY: plain kill(2) of the retargeting process.
     unsafe {
         libc::kill(old as libc::pid_t, libc::SIGKILL);
@@ -256,10 +291,16 @@ fn a_killed_process_is_restarted_and_the_pipeline_resumes() {
         pid_of("retarget").filter(|&p| p != old)
     });
     assert_ne!(new, old);
-    wait_for(Duration::from_secs(10), "hand commands from the new process", || {
-        let (cmds, _) = rig.pump(Duration::from_millis(20), Some(raw), None);
-        cmds.iter().find(|c| c.header.source_id == teleop_msgs::source_id("retarget")).copied()
-    });
+    wait_for(
+        Duration::from_secs(10),
+        "hand commands from the new process",
+        || {
+            let (cmds, _) = rig.pump(Duration::from_millis(20), Some(raw), None);
+            cmds.iter()
+                .find(|c| c.header.source_id == teleop_msgs::source_id("retarget"))
+                .copied()
+        },
+    );
 }
 
 #[test]
@@ -283,7 +324,10 @@ restart_delay_ms = 50
         .expect("launcher exits by itself");
     assert!(!status.success());
     let log = session.log();
-    assert!(log.contains("missing.toml: cannot read"), "the node names the file:\n{log}");
+    assert!(
+        log.contains("missing.toml: cannot read"),
+        "the node names the file:\n{log}"
+    );
     assert!(log.contains("restart 1/1"), "{log}");
     assert!(log.contains("required process broken failed"), "{log}");
 }
@@ -298,6 +342,9 @@ fn a_malformed_launch_file_is_refused_before_anything_starts() {
     let out = sandbox.run_teleop(&["launch", launch.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("launch.toml") && err.contains("line 4") && err.contains("restart"), "{err}");
+    assert!(
+        err.contains("launch.toml") && err.contains("line 4") && err.contains("restart"),
+        "{err}"
+    );
     assert!(!err.contains("started"), "nothing may start: {err}");
 }

@@ -133,7 +133,12 @@ fn inputs(
 
 fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
     let mut input = TactileInput::default();
-    for (i, tip) in msg.active_fingertips().iter().enumerate().take(input.valid.len()) {
+    for (i, tip) in msg
+        .active_fingertips()
+        .iter()
+        .enumerate()
+        .take(input.valid.len())
+    {
         input.normal_n[i] = tip.normal_n;
         input.valid[i] = tip.is_valid();
     }
@@ -145,13 +150,23 @@ fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
 fn hand_from_msgs(state: &HandState, command: Option<&HandCommand>) -> HandInput {
     let mut input = HandInput::default();
     let normalised = state.units == units::NORMALISED;
-    for (i, joint) in state.active_joints().iter().enumerate().take(input.measured.len()) {
+    for (i, joint) in state
+        .active_joints()
+        .iter()
+        .enumerate()
+        .take(input.measured.len())
+    {
         input.measured[i] = if normalised { joint.position } else { 0.0 };
         input.commanded[i] = input.measured[i];
         input.current_ma[i] = joint.current_ma;
     }
     if let Some(cmd) = command.filter(|c| normalised && c.units == units::NORMALISED) {
-        for (i, joint) in cmd.active_joints().iter().enumerate().take(input.commanded.len()) {
+        for (i, joint) in cmd
+            .active_joints()
+            .iter()
+            .enumerate()
+            .take(input.commanded.len())
+        {
             input.commanded[i] = joint.target;
         }
     }
@@ -200,7 +215,11 @@ fn run(runtime: &NodeRuntime, config: &NodeConfig, mut law: ForceFeedback) -> an
                 true
             }
             Wake::Timeout(i) => {
-                let which = if i == TACTILE { "hand/tactile" } else { "hand/state" };
+                let which = if i == TACTILE {
+                    "hand/tactile"
+                } else {
+                    "hand/state"
+                };
                 tracing::debug!(input = which, "input deadline missed");
                 true
             }
@@ -292,7 +311,10 @@ mod tests {
     fn contact_source_codes_match_the_contract() {
         assert_eq!(ContactSource::None as u8, contact_source::NONE);
         assert_eq!(ContactSource::Tactile as u8, contact_source::TACTILE);
-        assert_eq!(ContactSource::PositionError as u8, contact_source::POSITION_ERROR);
+        assert_eq!(
+            ContactSource::PositionError as u8,
+            contact_source::POSITION_ERROR
+        );
         assert_eq!(ContactSource::Current as u8, contact_source::CURRENT);
         assert_eq!(ContactSource::Ramping as u8, contact_source::RAMPING);
         assert_eq!(ContactSource::EStop as u8, contact_source::ESTOP);
@@ -327,7 +349,10 @@ mod tests {
         };
         cmd.joints[2].target = 0.9;
         let h = hand_from_msgs(&state, Some(&cmd));
-        assert_eq!((h.measured[2], h.commanded[2], h.current_ma[2]), (0.4, 0.9, 350.0));
+        assert_eq!(
+            (h.measured[2], h.commanded[2], h.current_ma[2]),
+            (0.4, 0.9, 350.0)
+        );
         let h = hand_from_msgs(&state, None);
         assert_eq!(h.commanded[2], 0.4, "no command: no position error");
     }

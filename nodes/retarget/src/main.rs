@@ -136,7 +136,11 @@ fn hand_command(targets: &JointTargets, origin_ns: u64) -> HandCommand {
     cmd
 }
 
-fn run(runtime: &NodeRuntime, config: &NodeConfig, mut retargeter: Retargeter) -> anyhow::Result<()> {
+fn run(
+    runtime: &NodeRuntime,
+    config: &NodeConfig,
+    mut retargeter: Retargeter,
+) -> anyhow::Result<()> {
     let glove = runtime.subscriber::<GloveState>()?;
     let mut commands = runtime.publisher::<HandCommand>()?;
     let mut health = Health::new(runtime)?;
@@ -145,7 +149,10 @@ fn run(runtime: &NodeRuntime, config: &NodeConfig, mut retargeter: Retargeter) -
     let mut stale = true;
     let mut last_origin = 0;
     let mut last_health = Instant::now();
-    tracing::info!(timeout_ms = config.glove_timeout_ms, "retargeting glove/state -> hand/command");
+    tracing::info!(
+        timeout_ms = config.glove_timeout_ms,
+        "retargeting glove/state -> hand/command"
+    );
 
     let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
         match wake {
@@ -256,7 +263,10 @@ mod tests {
         let err = teleop_runtime::parse_toml::<NodeConfig>("glove_timeout = 5\n", "r.toml")
             .unwrap_err()
             .to_string();
-        assert!(err.starts_with("r.toml: ") && err.contains("glove_timeout"), "{err}");
+        assert!(
+            err.starts_with("r.toml: ") && err.contains("glove_timeout"),
+            "{err}"
+        );
         let cfg: NodeConfig =
             teleop_runtime::parse_toml("[retarget]\nmax_speed = 2.0\n", "r.toml").unwrap();
         assert_eq!(cfg.retarget.max_speed, 2.0);

@@ -11,10 +11,22 @@ use teleop_retarget::Calibration;
 use teleop_runtime::{IpcSettings, NodeRuntime, Subscriber};
 
 const POSES: [(&str, &str); 4] = [
-    ("open hand", "Open your hand fully, fingers straight, thumb out, and hold still."),
-    ("fist", "Make a fist: all fingers and the thumb fully bent, and hold still."),
-    ("thumb in", "Fingers straight; rotate the thumb as far in across the palm as you can."),
-    ("thumb out", "Fingers straight; rotate the thumb as far out, away from the palm, as you can."),
+    (
+        "open hand",
+        "Open your hand fully, fingers straight, thumb out, and hold still.",
+    ),
+    (
+        "fist",
+        "Make a fist: all fingers and the thumb fully bent, and hold still.",
+    ),
+    (
+        "thumb in",
+        "Fingers straight; rotate the thumb as far in across the palm as you can.",
+    ),
+    (
+        "thumb out",
+        "Fingers straight; rotate the thumb as far out, away from the palm, as you can.",
+    ),
 ];
 
 pub fn run(

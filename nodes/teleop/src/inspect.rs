@@ -115,7 +115,14 @@ pub fn echo(ipc: &IpcSettings, topic: &str, count: Option<u64>) -> anyhow::Resul
             Ok(())
         }
     }
-    visit_topic(topic, Echo { runtime: &runtime, count }).ok_or_else(|| unknown_topic(topic))??;
+    visit_topic(
+        topic,
+        Echo {
+            runtime: &runtime,
+            count,
+        },
+    )
+    .ok_or_else(|| unknown_topic(topic))??;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -212,7 +219,16 @@ pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
     );
     println!(
         "{:<22} {:>8} {:>7} {:>6}  {:>8} {:>8} {:>8}  {:>8} {:>8} {:>8}",
-        "TOPIC", "RATE_HZ", "SAMPLES", "DROPS", "LAT_P50", "LAT_P99", "LAT_MAX", "TR_P50", "TR_P99", "TR_MAX"
+        "TOPIC",
+        "RATE_HZ",
+        "SAMPLES",
+        "DROPS",
+        "LAT_P50",
+        "LAT_P99",
+        "LAT_MAX",
+        "TR_P50",
+        "TR_P99",
+        "TR_MAX"
     );
     for p in &probes {
         println!("{}", p.report(measured));

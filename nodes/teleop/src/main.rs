@@ -17,7 +17,10 @@ use clap::{Parser, Subcommand};
 use teleop_runtime::{init_logging, IpcSettings, ENV_IPC_PREFIX, ENV_IPC_ROOT};
 
 #[derive(Parser)]
-#[command(version, about = "Teleoperation of dexterous robot hands with force feedback")]
+#[command(
+    version,
+    about = "Teleoperation of dexterous robot hands with force feedback"
+)]
 struct Cli {
     /// iceoryx2 root path of the pipeline to talk to.
     #[arg(long, global = true, env = ENV_IPC_ROOT)]

@@ -7,9 +7,23 @@ use crate::message::{define_struct, message, nested, topics};
 /// Glove finger order used by every glove field: little, ring, middle, index, thumb.
 pub const GLOVE_FINGERS: [&str; 5] = ["little", "ring", "middle", "index", "thumb"];
 /// Glove position channels: the five fingers, then the thumb's lateral rotation.
-pub const GLOVE_CHANNELS: [&str; 6] = ["little", "ring", "middle", "index", "thumb", "thumb_rotation"];
+pub const GLOVE_CHANNELS: [&str; 6] = [
+    "little",
+    "ring",
+    "middle",
+    "index",
+    "thumb",
+    "thumb_rotation",
+];
 /// Revo2 joint order (the device's `finger_index_t`).
-pub const REVO2_JOINTS: [&str; 6] = ["thumb_flex", "thumb_abduct", "index", "middle", "ring", "pinky"];
+pub const REVO2_JOINTS: [&str; 6] = [
+    "thumb_flex",
+    "thumb_abduct",
+    "index",
+    "middle",
+    "ring",
+    "pinky",
+];
 /// Revo2 fingertip order of the tactile arrays.
 pub const REVO2_FINGERTIPS: [&str; 5] = ["thumb", "index", "middle", "ring", "pinky"];
 /// Most joints a [`HandCommand`] or [`HandState`] can carry (Shadow Hand has 24 with the wrist).

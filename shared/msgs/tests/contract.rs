@@ -39,7 +39,9 @@ fn parse_fields(body: &str) -> Vec<(String, String)> {
             let name = parts.next().unwrap().to_string();
             assert!(parts.next().is_none(), "extra tokens in {l:?}");
             let re_ok = name.chars().next().unwrap().is_ascii_lowercase()
-                && name.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+                && name
+                    .chars()
+                    .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
                 && !name.contains("__")
                 && !name.ends_with('_');
             assert!(re_ok, "field name {name:?} is not a valid ROS 2 field name");
@@ -75,7 +77,9 @@ fn lay_out(
         leaves.push((path.to_string(), *offset, size));
         *offset += size;
     } else {
-        let fields = nested.get(ty).unwrap_or_else(|| panic!("no MSG: section for {ty}"));
+        let fields = nested
+            .get(ty)
+            .unwrap_or_else(|| panic!("no MSG: section for {ty}"));
         for (fty, fname) in fields {
             lay_out(fty, &format!("{path}.{fname}"), nested, offset, leaves);
         }
@@ -93,7 +97,11 @@ fn repr_c_layout(fields: &[Field], base: usize, path: &str, out: &mut Vec<(Strin
     .into_iter()
     .collect();
     for f in fields {
-        let name = if path.is_empty() { f.name.to_string() } else { format!("{path}.{}", f.name) };
+        let name = if path.is_empty() {
+            f.name.to_string()
+        } else {
+            format!("{path}.{}", f.name)
+        };
         let (elem, count) = match f.ros_type.strip_suffix(']').and_then(|t| t.split_once('[')) {
             Some((e, c)) => (e, Some(c.parse::<usize>().unwrap())),
             None => (f.ros_type, None),
@@ -101,7 +109,11 @@ fn repr_c_layout(fields: &[Field], base: usize, path: &str, out: &mut Vec<(Strin
         let n = count.unwrap_or(1);
         let stride = f.size / n;
         for i in 0..n {
-            let p = if count.is_some() { format!("{name}[{i}]") } else { name.clone() };
+            let p = if count.is_some() {
+                format!("{name}[{i}]")
+            } else {
+                name.clone()
+            };
             let at = base + f.offset + i * stride;
             match primitive_size(elem) {
                 Some(size) => {
@@ -122,7 +134,12 @@ impl TopicVisitor for CheckLayout {
         let (cdr, cdr_size) = cdr_layout(&schema);
         let mut rust = Vec::new();
         repr_c_layout(M::FIELDS, 0, "", &mut rust);
-        assert_eq!(cdr, rust, "{}: CDR layout differs from repr(C)", M::SCHEMA_NAME);
+        assert_eq!(
+            cdr,
+            rust,
+            "{}: CDR layout differs from repr(C)",
+            M::SCHEMA_NAME
+        );
         assert_eq!(cdr_size, size_of::<M>(), "{}: CDR size", M::SCHEMA_NAME);
         assert_eq!(align_of::<M>(), 8);
         // iceoryx2 matches services by this name.
@@ -141,7 +158,10 @@ fn every_schema_matches_the_struct_layout_as_cdr() {
 fn schema_text_follows_ros2msg_conventions() {
     let schema = HandCommand::schema();
     assert!(schema.starts_with("teleop_msgs/SampleHeader header\n"));
-    assert!(schema.contains(&format!("{}\nMSG: teleop_msgs/JointCommand\n", "=".repeat(80))));
+    assert!(schema.contains(&format!(
+        "{}\nMSG: teleop_msgs/JointCommand\n",
+        "=".repeat(80)
+    )));
     assert!(schema.contains("teleop_msgs/JointCommand[24] joints\n"));
     for topic in topics() {
         let type_name = topic.schema_name.rsplit('/').next().unwrap();
@@ -175,7 +195,10 @@ fn decode_refuses_wrong_sizes() {
     let bytes = vec![0u8; size_of::<GloveState>() + 1];
     assert_eq!(
         GloveState::from_bytes(&bytes),
-        Err(DecodeError::WrongSize { expected: 88, got: 89 })
+        Err(DecodeError::WrongSize {
+            expected: 88,
+            got: 89
+        })
     );
     assert!(GloveState::from_bytes(&[]).is_err());
 }

@@ -63,6 +63,10 @@ mod tests {
         let err = parse_toml::<Sample>("rate_hz = 1\nrate = 2\n", "node.toml").unwrap_err();
         assert!(err.to_string().contains("unknown field `rate`"), "{err}");
         let err = load_toml::<Sample>(Path::new("/nonexistent/x.toml")).unwrap_err();
-        assert!(err.to_string().starts_with("/nonexistent/x.toml: cannot read"), "{err}");
+        assert!(
+            err.to_string()
+                .starts_with("/nonexistent/x.toml: cannot read"),
+            "{err}"
+        );
     }
 }

@@ -87,6 +87,26 @@ impl IpcSettings {
         }
     }
 
+    /// Removes the files iceoryx2 leaves in `/dev/shm` for this prefix (its per-prefix
+    /// management segment outlives every node). Only for [`isolated`](Self::isolated) settings,
+    /// once nothing uses them any more.
+    pub fn remove_shared_memory(&self) {
+        let Some(prefix) = &self.prefix else {
+            return;
+        };
+        if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+            for entry in entries.flatten() {
+                if entry
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with(prefix.as_str())
+                {
+                    let _ = std::fs::remove_file(entry.path());
+                }
+            }
+        }
+    }
+
     /// The environment variables that carry these settings to a child process.
     pub fn to_env(&self) -> Vec<(&'static str, String)> {
         let mut env = Vec::new();
@@ -219,14 +239,19 @@ impl NodeRuntime {
             .open()
             .ok()?;
         let dynamic = pubsub.dynamic_config();
-        Some((dynamic.number_of_publishers(), dynamic.number_of_subscribers()))
+        Some((
+            dynamic.number_of_publishers(),
+            dynamic.number_of_subscribers(),
+        ))
     }
 
     fn pubsub<M: Message>(
         &self,
         service: &ServiceName,
-    ) -> Result<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>, RuntimeError>
-    {
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>,
+        RuntimeError,
+    > {
         self.node
             .service_builder(service)
             .publish_subscribe::<M>()

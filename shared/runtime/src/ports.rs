@@ -149,7 +149,9 @@ impl<M: Message> Subscriber<M> {
 
     /// Time since the newest sample was received, `None` if nothing was received yet.
     pub fn age(&self, now: Instant) -> Option<Duration> {
-        self.received_at.get().map(|t| now.saturating_duration_since(t))
+        self.received_at
+            .get()
+            .map(|t| now.saturating_duration_since(t))
     }
 
     /// True when a sample was received within `timeout` of `now`.
@@ -186,7 +188,8 @@ impl<M: Message> Subscriber<M> {
             let (_, last) = table[i];
             // A publisher that restarted begins at 1 again: not a loss.
             if last != 0 && header.seq > last + 1 {
-                self.dropped.set(self.dropped.get() + (header.seq - last - 1));
+                self.dropped
+                    .set(self.dropped.get() + (header.seq - last - 1));
             }
             table[i] = (header.source_id, header.seq);
         }

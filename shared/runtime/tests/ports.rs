@@ -8,15 +8,37 @@ use std::time::{Duration, Instant};
 use teleop_msgs::{GloveState, HandCommand, Message};
 use teleop_runtime::*;
 
-fn settings() -> (tempfile::TempDir, IpcSettings) {
+/// A temp dir and isolated settings; the shared memory of the prefix goes with it.
+struct Isolated {
+    _dir: tempfile::TempDir,
+    settings: IpcSettings,
+}
+
+impl Drop for Isolated {
+    fn drop(&mut self) {
+        self.settings.remove_shared_memory();
+    }
+}
+
+impl core::ops::Deref for Isolated {
+    type Target = IpcSettings;
+    fn deref(&self) -> &IpcSettings {
+        &self.settings
+    }
+}
+
+fn settings() -> Isolated {
     let dir = tempfile::tempdir().unwrap();
     let settings = IpcSettings::isolated(dir.path());
-    (dir, settings)
+    Isolated {
+        _dir: dir,
+        settings,
+    }
 }
 
 #[test]
 fn publish_stamps_and_subscriber_receives_in_order() {
-    let (_dir, ipc) = settings();
+    let ipc = settings();
     let a = NodeRuntime::new("pub-node", &ipc).unwrap();
     let b = NodeRuntime::new("sub-node", &ipc).unwrap();
     let mut publisher = a.publisher::<GloveState>().unwrap();
@@ -27,12 +49,21 @@ fn publish_stamps_and_subscriber_receives_in_order() {
         s.raw_position[0] = i;
         let header = publisher.publish(&s).unwrap();
         assert_eq!(header.seq, u64::from(i) + 1);
-        assert_eq!(header.origin_ns, header.stamp_ns, "a fresh sample is its own origin");
+        assert_eq!(
+            header.origin_ns, header.stamp_ns,
+            "a fresh sample is its own origin"
+        );
         assert_eq!(header.source_id, teleop_msgs::source_id("pub-node"));
     }
     let mut seen = Vec::new();
-    assert_eq!(subscriber.drain(|s| seen.push((s.header.seq, s.raw_position[0]))), 5);
-    assert_eq!(seen, (1..=5).map(|i| (i, (i - 1) as u16)).collect::<Vec<_>>());
+    assert_eq!(
+        subscriber.drain(|s| seen.push((s.header.seq, s.raw_position[0]))),
+        5
+    );
+    assert_eq!(
+        seen,
+        (1..=5).map(|i| (i, (i - 1) as u16)).collect::<Vec<_>>()
+    );
     let latest = subscriber.latest().unwrap();
     assert!(latest.header.stamp_ns >= before);
     assert_eq!(subscriber.dropped(), 0);
@@ -41,7 +72,7 @@ fn publish_stamps_and_subscriber_receives_in_order() {
 
 #[test]
 fn origin_is_kept_when_set() {
-    let (_dir, ipc) = settings();
+    let ipc = settings();
     let n = NodeRuntime::new("origin", &ipc).unwrap();
     let mut p = n.publisher::<HandCommand>().unwrap();
     let s = n.subscriber::<HandCommand>().unwrap();
@@ -53,8 +84,8 @@ fn origin_is_kept_when_set() {
 
 #[test]
 fn settings_isolate_pipelines() {
-    let (_d1, one) = settings();
-    let (_d2, two) = settings();
+    let one = settings();
+    let two = settings();
     let a = NodeRuntime::new("a", &one).unwrap();
     let b = NodeRuntime::new("b", &two).unwrap();
     let mut p = a.publisher::<GloveState>().unwrap();
@@ -65,7 +96,7 @@ fn settings_isolate_pipelines() {
 
 #[test]
 fn gaps_in_sequence_numbers_count_as_drops() {
-    let (_dir, ipc) = settings();
+    let ipc = settings();
     let n = NodeRuntime::new("gaps", &ipc).unwrap();
     let mut p = n.publisher::<GloveState>().unwrap();
     let s = n.subscriber::<GloveState>().unwrap();
@@ -80,7 +111,7 @@ fn gaps_in_sequence_numbers_count_as_drops() {
 
 #[test]
 fn event_loop_wakes_on_input_and_reports_missed_deadlines() {
-    let (_dir, ipc) = settings();
+    let ipc = settings();
     let n = NodeRuntime::new("loop", &ipc).unwrap();
     let s = n.subscriber::<GloveState>().unwrap();
     let publisher_thread = {
@@ -100,7 +131,10 @@ fn event_loop_wakes_on_input_and_reports_missed_deadlines() {
     let mut timeouts_after_data = 0;
     let stop = EventLoop::new(Duration::from_millis(50))
         .run(
-            &[Input::with_deadline(s.listener(), Duration::from_millis(100))],
+            &[Input::with_deadline(
+                s.listener(),
+                Duration::from_millis(100),
+            )],
             |wake| {
                 match wake {
                     Wake::Input(0) => received += s.drain(|_| {}),
@@ -123,7 +157,7 @@ fn event_loop_wakes_on_input_and_reports_missed_deadlines() {
 
 #[test]
 fn health_reports_counters_and_input_ages() {
-    let (_dir, ipc) = settings();
+    let ipc = settings();
     let n = NodeRuntime::new("healthy", &ipc).unwrap();
     let reader = n.subscriber::<teleop_msgs::NodeHealth>().unwrap();
     let mut health = Health::new(&n).unwrap();
@@ -151,5 +185,8 @@ fn bad_settings_are_refused_with_the_setting_named() {
         prefix: Some("bad/prefix".into()),
     };
     let err = NodeRuntime::new("x", &bad).err().unwrap().to_string();
-    assert!(err.contains("prefix") && err.contains("bad/prefix"), "{err}");
+    assert!(
+        err.contains("prefix") && err.contains("bad/prefix"),
+        "{err}"
+    );
 }

@@ -126,8 +126,8 @@ pub fn load(path: &Path) -> anyhow::Result<Launch> {
 /// Parses and checks launch file text (`path` is used for messages and relative paths).
 pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
     let origin = path.display();
-    let raw: RawLaunch =
-        toml::from_str(text).map_err(|e| anyhow::anyhow!("{origin}: {}", e.to_string().trim_end()))?;
+    let raw: RawLaunch = toml::from_str(text)
+        .map_err(|e| anyhow::anyhow!("{origin}: {}", e.to_string().trim_end()))?;
     let at = |span: core::ops::Range<usize>| line_of(text, span.start);
     if raw.process.is_empty() {
         anyhow::bail!("{origin}: no [[process]] entries: nothing to launch");
@@ -200,7 +200,10 @@ impl Launch {
         if process.program.contains('/') {
             return self.base_dir().join(&process.program);
         }
-        if let Some(dir) = std::env::current_exe().ok().and_then(|e| e.parent().map(PathBuf::from)) {
+        if let Some(dir) = std::env::current_exe()
+            .ok()
+            .and_then(|e| e.parent().map(PathBuf::from))
+        {
             let beside = dir.join(&process.program);
             if beside.is_file() {
                 return beside;
@@ -226,10 +229,16 @@ mod tests {
         .unwrap();
         assert_eq!(l.processes.len(), 2);
         let a = &l.processes[0];
-        assert_eq!((a.restart, a.max_restarts, a.required), (Restart::OnFailure, 5, true));
+        assert_eq!(
+            (a.restart, a.max_restarts, a.required),
+            (Restart::OnFailure, 5, true)
+        );
         assert_eq!(a.node.as_deref(), Some("a"));
         let b = &l.processes[1];
-        assert_eq!((b.restart, b.required, b.node.clone()), (Restart::Never, false, None));
+        assert_eq!(
+            (b.restart, b.required, b.node.clone()),
+            (Restart::Never, false, None)
+        );
         assert_eq!(l.resolve_program(b), PathBuf::from("dir/./bin/b"));
         assert_eq!(l.session.stop_timeout_ms, 3000);
     }
@@ -245,17 +254,24 @@ mod tests {
         let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nargz = []\n")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("unknown field `argz`") && e.contains("line 4"), "{e}");
+        assert!(
+            e.contains("unknown field `argz`") && e.contains("line 4"),
+            "{e}"
+        );
 
         let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\n\n[[process]]\nname = \"a\"\nprogram = \"y\"\n")
             .unwrap_err()
             .to_string();
         assert_eq!(e, "dir/launch.toml:6: process.name \"a\" is used twice");
 
-        let e = parse_str("[[process]]\nname = \"a b\"\nprogram = \"x\"\n").unwrap_err().to_string();
+        let e = parse_str("[[process]]\nname = \"a b\"\nprogram = \"x\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("dir/launch.toml:2: process.name"), "{e}");
 
-        let e = parse_str("[[process]]\nname = \"a\"\n").unwrap_err().to_string();
+        let e = parse_str("[[process]]\nname = \"a\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing field `program`"), "{e}");
 
         let e = parse_str("[session]\n").unwrap_err().to_string();

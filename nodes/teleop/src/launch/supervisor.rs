@@ -33,7 +33,10 @@ fn install_signal_handlers() {
     for signal in [libc::SIGINT, libc::SIGTERM] {
         // SAFETY: the handler only stores into an atomic, which is async-signal-safe.
         unsafe {
-            libc::signal(signal, on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t);
+            libc::signal(
+                signal,
+                on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
+            );
         }
     }
 }
@@ -49,7 +52,11 @@ struct Slot<'a> {
 }
 
 /// Runs the session until a signal, the end of `duration`, or a failed required process.
-pub fn run(launch: &Launch, ipc: &IpcSettings, duration: Option<Duration>) -> anyhow::Result<Outcome> {
+pub fn run(
+    launch: &Launch,
+    ipc: &IpcSettings,
+    duration: Option<Duration>,
+) -> anyhow::Result<Outcome> {
     install_signal_handlers();
     let config = ipc.config()?;
     clean_dead_nodes(&config);
@@ -103,7 +110,9 @@ pub fn run(launch: &Launch, ipc: &IpcSettings, duration: Option<Duration>) -> an
                     Err(e) if slot.process.required => {
                         restart_failure = Some(format!("{e:#}"));
                     }
-                    Err(e) => tracing::error!(process = %slot.process.name, "restart failed: {e:#}"),
+                    Err(e) => {
+                        tracing::error!(process = %slot.process.name, "restart failed: {e:#}")
+                    }
                 }
             }
         }
@@ -171,7 +180,10 @@ fn reap(slots: &mut [Slot]) -> Option<String> {
             );
         } else if failed && p.required {
             let why = if wants_restart {
-                format!("required process {} failed ({what}) after {} restarts", p.name, slot.restarts)
+                format!(
+                    "required process {} failed ({what}) after {} restarts",
+                    p.name, slot.restarts
+                )
             } else {
                 format!("required process {} failed ({what})", p.name)
             };
@@ -336,7 +348,9 @@ pub fn clean_dead_nodes(config: &iceoryx2::config::Config) {
             .map(|d| d.name().as_str().to_string())
             .unwrap_or_default();
         match view.try_remove_stale_resources() {
-            Ok(_) => tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node"),
+            Ok(_) => {
+                tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node")
+            }
             Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
         }
     }
