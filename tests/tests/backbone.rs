@@ -348,3 +348,134 @@ fn a_malformed_launch_file_is_refused_before_anything_starts() {
     );
     assert!(!err.contains("started"), "nothing may start: {err}");
 }
+
+#[test]
+fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() {
+    use std::io::{BufRead, BufReader, Write};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+
+    let sandbox = Sandbox::new();
+    sandbox.write("retarget.toml", RETARGET_TOML);
+    let launch = sandbox.write(
+        "launch.toml",
+        "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--config\", \"retarget.toml\"]\n",
+    );
+    let _session = sandbox.launch(&launch);
+
+    // The operator's poses as the glove reports them (glove order, thumb rotation last).
+    const POSES: [[u16; 6]; 4] = [
+        [950, 940, 960, 930, 900, 800], // open hand
+        [60, 70, 50, 80, 150, 800],     // fist
+        [950, 940, 960, 930, 900, 120], // thumb in
+        [950, 940, 960, 930, 900, 880], // thumb out
+    ];
+    let pose = Arc::new(AtomicUsize::new(0));
+    let stop = Arc::new(AtomicUsize::new(0));
+    let glove_thread = {
+        let (pose, stop, ipc) = (pose.clone(), stop.clone(), sandbox.ipc.clone());
+        std::thread::spawn(move || {
+            let node = NodeRuntime::new("e2e-glove", &ipc).unwrap();
+            let mut glove: Publisher<GloveState> = node.publisher().unwrap();
+            while stop.load(Ordering::SeqCst) == 0 {
+                let raw = POSES[pose.load(Ordering::SeqCst)];
+                glove
+                    .publish(&GloveState {
+                        raw_position: raw,
+                        link_up: 1,
+                        ..Default::default()
+                    })
+                    .unwrap();
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        })
+    };
+
+    let stats = sandbox.run_teleop(&["stats", "--seconds", "1"]);
+    let stats = String::from_utf8(stats.stdout).unwrap();
+    let rate = |topic: &str| -> f64 {
+        let line = stats.lines().find(|l| l.starts_with(topic)).unwrap();
+        line.split_whitespace().nth(1).unwrap().parse().unwrap()
+    };
+    assert!(rate("glove/state") > 100.0, "{stats}");
+    assert!(
+        rate("hand/command") > 100.0,
+        "retarget answers every glove sample:\n{stats}"
+    );
+
+    let mut calibrate = sandbox
+        .teleop()
+        .args(["calibrate", "--out", "operator.toml", "--capture", "0.3"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = calibrate.stdin.take().unwrap();
+    let stdout = BufReader::new(calibrate.stdout.take().unwrap());
+    let mut transcript = String::new();
+    for line in stdout.lines() {
+        let line = line.unwrap();
+        transcript.push_str(&line);
+        transcript.push('\n');
+        // "Pose k/4 (name): prompt" then "  Press Enter ..." on the next line once the
+        // operator should be in pose k.
+        if let Some(k) = line.strip_prefix("Pose ").and_then(|r| r.split('/').next()) {
+            pose.store(k.parse::<usize>().unwrap() - 1, Ordering::SeqCst);
+            std::thread::sleep(Duration::from_millis(100));
+            stdin.write_all(b"\n").unwrap();
+        }
+    }
+    let status = calibrate.wait().unwrap();
+    stop.store(1, Ordering::SeqCst);
+    glove_thread.join().unwrap();
+    assert!(status.success(), "{transcript}");
+    let profile = std::fs::read_to_string(sandbox.dir.path().join("operator.toml")).unwrap();
+    let table: std::collections::BTreeMap<String, std::collections::BTreeMap<String, i64>> =
+        toml_lite(&profile);
+    assert_eq!(table["little"]["open"], 950);
+    assert_eq!(table["little"]["closed"], 60);
+    assert_eq!(table["thumb"]["closed"], 150);
+    assert_eq!(table["thumb_rotation"]["inner"], 120);
+    assert_eq!(table["thumb_rotation"]["outer"], 880);
+    // The retargeting node accepts the profile.
+    let mut node = std::process::Command::new(teleop_e2e::bin("teleop-retarget"))
+        .args(["--calibration", "operator.toml", "--name", "retarget-check"])
+        .envs(sandbox.ipc.to_env())
+        .current_dir(sandbox.dir.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let first = BufReader::new(node.stderr.take().unwrap())
+        .lines()
+        .next()
+        .unwrap()
+        .unwrap();
+    // SAFETY: kill(2) of our own child.
+    unsafe {
+        libc::kill(node.id() as libc::pid_t, libc::SIGINT);
+    }
+    node.wait().unwrap();
+    assert!(first.contains("calibration profile loaded"), "{first}");
+}
+
+/// Reads `[section]` + `key = integer` lines (all a calibration profile has).
+fn toml_lite(
+    text: &str,
+) -> std::collections::BTreeMap<String, std::collections::BTreeMap<String, i64>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut section = String::new();
+    for line in text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+    {
+        if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+            section = name.to_string();
+        } else if let Some((k, v)) = line.split_once('=') {
+            out.entry(section.clone())
+                .or_insert_with(std::collections::BTreeMap::new)
+                .insert(k.trim().to_string(), v.trim().parse().unwrap());
+        }
+    }
+    out
+}
