@@ -45,9 +45,14 @@ impl Health {
         self.report.clamps += n;
     }
 
-    /// Counts errors.
+    /// Counts an error.
     pub fn count_error(&mut self) {
-        self.report.errors += 1;
+        self.count_errors(1);
+    }
+
+    /// Counts `n` errors.
+    pub fn count_errors(&mut self, n: u64) {
+        self.report.errors += n;
     }
 
     /// Sets the total of samples lost on inputs.

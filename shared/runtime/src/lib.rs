@@ -6,7 +6,8 @@
 //! - [`NodeRuntime`]: the iceoryx2 node, typed [`Publisher`]s and [`Subscriber`]s for the topics of
 //!   `teleop-msgs`, each paired with an event service so that receivers sleep until data arrives;
 //! - [`EventLoop`]: a WaitSet over the inputs with per-input deadlines (input watchdogs) and a
-//!   periodic tick; returns on SIGINT/SIGTERM so the node can stop cleanly;
+//!   periodic tick; returns on SIGINT/SIGTERM so the node can stop cleanly ([`stop_signal`]
+//!   does the same for loops that block on something else, such as a serial port);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`init_logging`]: `tracing`.
@@ -22,6 +23,7 @@ mod health;
 mod ipc;
 mod logging;
 mod ports;
+mod signals;
 
 pub use clock::now_ns;
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
@@ -30,6 +32,7 @@ pub use health::Health;
 pub use ipc::{IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT};
 pub use logging::init_logging;
 pub use ports::{Publisher, Subscriber};
+pub use signals::{install_stop_handlers, stop_signal};
 
 /// iceoryx2 service type used everywhere (inter-process, shared memory).
 pub type Service = iceoryx2::service::ipc::Service;

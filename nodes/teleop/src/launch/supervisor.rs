@@ -5,7 +5,6 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicI32, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::{Node, NodeState, NodeView};
@@ -21,24 +20,6 @@ pub enum Outcome {
     Stopped(&'static str),
     /// A required process failed and was not (or no longer) restarted.
     Failed(String),
-}
-
-static SIGNAL: AtomicI32 = AtomicI32::new(0);
-
-extern "C" fn on_signal(signal: libc::c_int) {
-    SIGNAL.store(signal, Ordering::SeqCst);
-}
-
-fn install_signal_handlers() {
-    for signal in [libc::SIGINT, libc::SIGTERM] {
-        // SAFETY: the handler only stores into an atomic, which is async-signal-safe.
-        unsafe {
-            libc::signal(
-                signal,
-                on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t,
-            );
-        }
-    }
 }
 
 struct Slot<'a> {
@@ -57,7 +38,7 @@ pub fn run(
     ipc: &IpcSettings,
     duration: Option<Duration>,
 ) -> anyhow::Result<Outcome> {
-    install_signal_handlers();
+    teleop_runtime::install_stop_handlers();
     let config = ipc.config()?;
     clean_dead_nodes(&config);
     let started = Instant::now();
@@ -84,10 +65,10 @@ pub fn run(
     let mut last_liveness = Instant::now();
     let outcome = loop {
         std::thread::sleep(Duration::from_millis(50));
-        match SIGNAL.load(Ordering::SeqCst) {
-            0 => {}
-            libc::SIGTERM => break Outcome::Stopped("SIGTERM"),
-            _ => break Outcome::Stopped("Ctrl-C"),
+        match teleop_runtime::stop_signal() {
+            None => {}
+            Some(libc::SIGTERM) => break Outcome::Stopped("SIGTERM"),
+            Some(_) => break Outcome::Stopped("Ctrl-C"),
         }
         if duration.is_some_and(|d| started.elapsed() >= d) {
             break Outcome::Stopped("--duration elapsed");

@@ -1,0 +1,258 @@
+//! The serial link to one glove: request/answer exchanges over `serialport` with timeouts,
+//! resynchronisation and counters. Used by the glove node and by `teleop glove`.
+
+use std::io::{Read, Write};
+use std::time::{Duration, Instant};
+
+use serialport::{SerialPort, TTYPort};
+use teleop_glove_protocol::{
+    decode_values, encode_request, read_request, write_request, DecodeError, Register, Request,
+    Response, ResponseDecoder, Values, MAX_FRAME,
+};
+
+/// Why an exchange failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The port could not be opened or configured.
+    #[error("{port}: cannot open: {detail}")]
+    Open {
+        /// The port path.
+        port: String,
+        /// What the OS said.
+        detail: String,
+    },
+    /// Reading or writing the port failed: it is gone or broken; reopen it.
+    #[error("{port}: I/O error: {source}")]
+    Io {
+        /// The port path.
+        port: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// No matching answer within the timeout.
+    #[error("no answer within {0:?}")]
+    Timeout(Duration),
+    /// The request could not be encoded (a value out of range).
+    #[error("invalid request: {0}")]
+    Encode(#[from] teleop_glove_protocol::EncodeError),
+    /// The device refused a register write.
+    #[error("the glove refused the write to {0}")]
+    Refused(&'static str),
+    /// An answer of another kind than asked for.
+    #[error("the glove answered with {0:?}")]
+    Mismatch(teleop_glove_protocol::Command),
+    /// The answer's register bytes do not fit the register.
+    #[error("bad register answer: {0}")]
+    Register(#[from] teleop_glove_protocol::RegisterError),
+}
+
+/// Counters of what went wrong on the line (never reset while the link object lives).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Completed exchanges.
+    pub exchanges: u64,
+    /// Exchanges without an answer in time.
+    pub timeouts: u64,
+    /// Frames with a bad checksum or an impossible length.
+    pub bad_frames: u64,
+    /// Runs of bytes that were not part of any frame.
+    pub garbage: u64,
+    /// Well-formed frames from another device id.
+    pub other_id: u64,
+    /// Answers that did not match the request (late answers to an earlier request).
+    pub unexpected: u64,
+}
+
+impl LinkStats {
+    /// All problems together.
+    pub fn errors(&self) -> u64 {
+        self.timeouts + self.bad_frames + self.garbage + self.other_id + self.unexpected
+    }
+}
+
+/// An open serial link to the glove with device id `id`.
+pub struct GloveLink {
+    port: TTYPort,
+    path: String,
+    id: u8,
+    timeout: Duration,
+    decoder: ResponseDecoder,
+    stats: LinkStats,
+}
+
+impl GloveLink {
+    /// Opens `path` (USB serial, Bluetooth SPP such as /dev/rfcomm0, or a pseudo-terminal) at
+    /// `baud`, 8N1, exclusively.
+    pub fn open(path: &str, baud: u32, id: u8, timeout: Duration) -> Result<Self, LinkError> {
+        let port = serialport::new(path, baud)
+            .data_bits(serialport::DataBits::Eight)
+            .parity(serialport::Parity::None)
+            .stop_bits(serialport::StopBits::One)
+            .flow_control(serialport::FlowControl::None)
+            .timeout(timeout)
+            .open_native()
+            .map_err(|e| LinkError::Open {
+                port: path.to_string(),
+                detail: e.to_string(),
+            })?;
+        let _ = port.clear(serialport::ClearBuffer::All);
+        Ok(Self {
+            port,
+            path: path.to_string(),
+            id,
+            timeout,
+            decoder: ResponseDecoder::new(Some(id)),
+            stats: LinkStats::default(),
+        })
+    }
+
+    /// The port path.
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// The device id requests go to.
+    pub fn id(&self) -> u8 {
+        self.id
+    }
+
+    /// Talks to another device id from now on.
+    pub fn set_id(&mut self, id: u8) {
+        self.id = id;
+        self.decoder.set_expected_id(Some(id));
+    }
+
+    /// Changes the port's line speed (after the glove changed its own).
+    pub fn set_baud(&mut self, baud: u32) -> Result<(), LinkError> {
+        self.port.set_baud_rate(baud).map_err(|e| LinkError::Open {
+            port: self.path.clone(),
+            detail: e.to_string(),
+        })
+    }
+
+    /// Counters so far.
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// Sends `request` and waits for its answer. Returns the answer and the CLOCK_MONOTONIC
+    /// time its last byte was read. Frames that do not answer this request are counted and
+    /// skipped; a timeout is counted and returned.
+    pub fn exchange(&mut self, request: &Request) -> Result<(Response, u64), LinkError> {
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode_request(self.id, request, &mut frame)?;
+        // Whatever is still buffered belongs to an earlier exchange.
+        self.drain_stale();
+        self.port.write_all(&frame[..n]).map_err(|e| self.io(e))?;
+        let deadline = Instant::now() + self.timeout;
+        let mut buf = [0u8; 256];
+        let (mut start, mut end) = (0, 0);
+        loop {
+            let fed = if start < end {
+                let t = self.decoder.push(&buf[start..end]);
+                start += t;
+                t
+            } else {
+                0
+            };
+            let mut decoded = false;
+            while let Some(item) = self.decoder.next() {
+                decoded = true;
+                match item {
+                    Ok(f) if answers(request, &f.body) => {
+                        self.stats.exchanges += 1;
+                        return Ok((f.body, teleop_runtime::now_ns()));
+                    }
+                    Ok(_) => self.stats.unexpected += 1,
+                    Err(e) => self.count(e),
+                }
+            }
+            if start < end {
+                if fed == 0 && !decoded {
+                    // Cannot happen with a total decoder; never spin on it.
+                    self.decoder.clear();
+                }
+                continue;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                self.stats.timeouts += 1;
+                self.decoder.clear();
+                return Err(LinkError::Timeout(self.timeout));
+            }
+            let _ = self.port.set_timeout(left);
+            match self.port.read(&mut buf) {
+                Ok(0) => {
+                    return Err(self.io(std::io::Error::new(
+                        std::io::ErrorKind::UnexpectedEof,
+                        "port closed",
+                    )))
+                }
+                Ok(n) => (start, end) = (0, n),
+                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(self.io(e)),
+            }
+        }
+    }
+
+    /// Reads a register group and decodes its values.
+    pub fn read_register(&mut self, register: &Register) -> Result<Values, LinkError> {
+        match self.exchange(&read_request(register))?.0 {
+            Response::ReadRegister { data, .. } => Ok(decode_values(register, data.as_slice())?),
+            other => Err(LinkError::Mismatch(other.command())),
+        }
+    }
+
+    /// Writes a register group; a refusal is an error.
+    pub fn write_register(&mut self, register: &Register, values: &[i32]) -> Result<(), LinkError> {
+        match self.exchange(&write_request(register, values)?)?.0 {
+            Response::WriteRegister { status, .. }
+                if status == teleop_glove_protocol::WRITE_ACCEPTED =>
+            {
+                Ok(())
+            }
+            _ => Err(LinkError::Refused(register.name)),
+        }
+    }
+
+    fn drain_stale(&mut self) {
+        if self.port.bytes_to_read().unwrap_or(0) > 0 {
+            let _ = self.port.clear(serialport::ClearBuffer::Input);
+        }
+        self.decoder.clear();
+    }
+
+    fn count(&mut self, e: DecodeError) {
+        match e {
+            DecodeError::Garbage { .. } => self.stats.garbage += 1,
+            DecodeError::OtherId { .. } => self.stats.other_id += 1,
+            DecodeError::BadChecksum { .. }
+            | DecodeError::BadLength { .. }
+            | DecodeError::UnknownCommand { .. } => self.stats.bad_frames += 1,
+        }
+        tracing::debug!(port = %self.path, "line error: {e}");
+    }
+
+    fn io(&self, source: std::io::Error) -> LinkError {
+        LinkError::Io {
+            port: self.path.clone(),
+            source,
+        }
+    }
+}
+
+/// True when `answer` is the answer to `request` (same command, same register address).
+fn answers(request: &Request, answer: &Response) -> bool {
+    match (request, answer) {
+        (Request::ForceControl { .. }, Response::ForceControl { .. })
+        | (Request::PositionControl { .. }, Response::PositionControl { .. }) => true,
+        (Request::ReadRegister { address, len }, Response::ReadRegister { address: a, data }) => {
+            address == a && usize::from(*len) == data.len()
+        }
+        (Request::WriteRegister { address, .. }, Response::WriteRegister { address: a, .. }) => {
+            address == a
+        }
+        _ => false,
+    }
+}

@@ -1,0 +1,458 @@
+//! The simulated operator's hand inside the glove: scripted finger motion, the five actuators
+//! pushing on the fingers, and the measured forces, currents, temperatures and error bits that
+//! follow from the load.
+//!
+//! Units are the glove's: positions 0 (bent) .. 1000 (open), forces -1000..1000 (a positive
+//! command pushes the hand open; a positive measured force means the finger pushes towards a
+//! fist), currents in mA, temperatures in degrees Celsius. Pure: time comes in as seconds.
+
+use std::path::Path;
+
+/// Channels: little, ring, middle, index, thumb, thumb rotation.
+pub const CHANNELS: usize = 6;
+/// Actuated fingers: little, ring, middle, index, thumb.
+pub const FINGERS: usize = 5;
+
+/// What the operator does.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Script {
+    /// Hold these raw positions.
+    Hold([f32; CHANNELS]),
+    /// Open and close the whole hand with this period in seconds.
+    OpenClose {
+        /// Seconds per open-close cycle.
+        period_s: f32,
+    },
+    /// Thumb and index pinch together and release, other fingers relaxed open.
+    Pinch {
+        /// Seconds per pinch cycle.
+        period_s: f32,
+    },
+    /// Reach for an object with an open hand, close around it and squeeze, hold, release.
+    Grasp {
+        /// Seconds per grasp cycle.
+        period_s: f32,
+    },
+    /// Linear interpolation through `(t_s, positions)` points, looped.
+    Trajectory(Vec<(f32, [f32; CHANNELS])>),
+}
+
+/// Positions of an open, relaxed hand.
+const OPEN: [f32; CHANNELS] = [950.0, 950.0, 950.0, 950.0, 900.0, 700.0];
+/// Positions of a fist.
+const FIST: [f32; CHANNELS] = [80.0, 80.0, 80.0, 80.0, 150.0, 300.0];
+
+impl Script {
+    /// Parses a script name (`hold`, `open-close`, `pinch`, `grasp`) or loads a trajectory CSV
+    /// file (`t_s,little,ring,middle,index,thumb,thumb_rotation` per line; `#` comments).
+    pub fn parse(spec: &str) -> Result<Self, String> {
+        Ok(match spec {
+            "hold" => Script::Hold(OPEN),
+            "open-close" => Script::OpenClose { period_s: 4.0 },
+            "pinch" => Script::Pinch { period_s: 3.0 },
+            "grasp" => Script::Grasp { period_s: 6.0 },
+            path => Script::Trajectory(load_trajectory(Path::new(path))?),
+        })
+    }
+
+    /// The operator's intended raw positions at time `t` seconds.
+    pub fn at(&self, t: f32) -> [f32; CHANNELS] {
+        let blend = |a: &[f32; CHANNELS], b: &[f32; CHANNELS], s: f32| -> [f32; CHANNELS] {
+            let s = s.clamp(0.0, 1.0);
+            core::array::from_fn(|i| a[i] + (b[i] - a[i]) * s)
+        };
+        // Smooth 0..1..0 over a period.
+        let wave = |period: f32| (1.0 - (core::f32::consts::TAU * t / period.max(0.1)).cos()) / 2.0;
+        match self {
+            Script::Hold(p) => *p,
+            Script::OpenClose { period_s } => blend(&OPEN, &FIST, wave(*period_s)),
+            Script::Pinch { period_s } => {
+                let mut pinch = OPEN;
+                pinch[3] = 420.0; // index bends
+                pinch[4] = 380.0; // thumb bends
+                pinch[5] = 250.0; // and rotates in to meet it
+                blend(&OPEN, &pinch, wave(*period_s))
+            }
+            Script::Grasp { period_s } => {
+                // 0-20 % reach (open), 20-45 % close around the object, 45-80 % squeeze and
+                // hold, 80-100 % release.
+                let phase = (t / period_s.max(0.1)).rem_euclid(1.0);
+                let mut around = FIST;
+                for p in around.iter_mut().take(FINGERS) {
+                    *p = (*p + 2.0 * 950.0) / 3.0; // an object about a third of a fist
+                }
+                let mut squeeze = around;
+                for p in squeeze.iter_mut().take(FINGERS) {
+                    *p -= 150.0;
+                }
+                match phase {
+                    p if p < 0.2 => OPEN,
+                    p if p < 0.45 => blend(&OPEN, &around, (p - 0.2) / 0.25),
+                    p if p < 0.55 => blend(&around, &squeeze, (p - 0.45) / 0.1),
+                    p if p < 0.8 => squeeze,
+                    p => blend(&squeeze, &OPEN, (p - 0.8) / 0.2),
+                }
+            }
+            Script::Trajectory(points) => trajectory_at(points, t),
+        }
+    }
+}
+
+fn trajectory_at(points: &[(f32, [f32; CHANNELS])], t: f32) -> [f32; CHANNELS] {
+    let (Some(first), Some(last)) = (points.first(), points.last()) else {
+        return OPEN;
+    };
+    let span = last.0 - first.0;
+    let t = if span > 0.0 {
+        first.0 + (t - first.0).rem_euclid(span)
+    } else {
+        first.0
+    };
+    for w in points.windows(2) {
+        let (a, b) = (&w[0], &w[1]);
+        if t >= a.0 && t <= b.0 {
+            let s = if b.0 > a.0 {
+                (t - a.0) / (b.0 - a.0)
+            } else {
+                0.0
+            };
+            return core::array::from_fn(|i| a.1[i] + (b.1[i] - a.1[i]) * s);
+        }
+    }
+    last.1
+}
+
+fn load_trajectory(path: &Path) -> Result<Vec<(f32, [f32; CHANNELS])>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: not a script name (hold, open-close, pinch, grasp) and not a readable trajectory file: {e}", path.display()))?;
+    let mut points = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<f32> = line
+            .split(',')
+            .map(|f| f.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|e| format!("{}:{}: {e}", path.display(), n + 1))?;
+        if fields.len() != CHANNELS + 1 || fields.iter().any(|v| !v.is_finite()) {
+            return Err(format!(
+                "{}:{}: expected t_s and 6 finite positions, got {line:?}",
+                path.display(),
+                n + 1
+            ));
+        }
+        if points.last().is_some_and(|(t, _)| fields[0] < *t) {
+            return Err(format!("{}:{}: time goes backwards", path.display(), n + 1));
+        }
+        points.push((
+            fields[0],
+            core::array::from_fn(|i| fields[i + 1].clamp(0.0, 1000.0)),
+        ));
+    }
+    if points.is_empty() {
+        return Err(format!("{}: no trajectory points", path.display()));
+    }
+    Ok(points)
+}
+
+/// What an actuator is told to do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// Apply this force (-1000..1000; positive opens the hand).
+    Force(f32),
+    /// Move the finger to this position (0..1000).
+    Position(f32),
+}
+
+/// Physical constants of the model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandModel {
+    /// Finger displacement per unit of actuator force against the operator's intent
+    /// (raw position units per glove force unit).
+    pub compliance: f32,
+    /// Time constant of the finger following its equilibrium, seconds.
+    pub tau_s: f32,
+    /// Fastest finger motion, raw units per second.
+    pub max_speed: f32,
+    /// Idle current in mA.
+    pub idle_ma: f32,
+    /// Current per unit of force, mA.
+    pub ma_per_force: f32,
+    /// Temperature of the room, degrees Celsius.
+    pub ambient_c: f32,
+    /// Temperature rise per mA at steady state.
+    pub c_per_ma: f32,
+    /// Thermal time constant, seconds.
+    pub thermal_tau_s: f32,
+    /// A force of at least this magnitude for `overload_s` sets the locked-rotor and
+    /// over-current bits.
+    pub overload_force: f32,
+    /// See `overload_force`.
+    pub overload_s: f32,
+    /// Above this temperature the over-temperature bit is set; it clears 10 degrees below.
+    pub over_temperature_c: f32,
+}
+
+impl Default for HandModel {
+    fn default() -> Self {
+        Self {
+            compliance: 0.3,
+            tau_s: 0.05,
+            max_speed: 4000.0,
+            idle_ma: 40.0,
+            ma_per_force: 0.8,
+            ambient_c: 30.0,
+            c_per_ma: 0.06,
+            thermal_tau_s: 20.0,
+            overload_force: 900.0,
+            overload_s: 2.0,
+            over_temperature_c: 75.0,
+        }
+    }
+}
+
+/// Error bits as the device reports them (see the protocol crate's `ErrorBits`).
+const LOCKED_ROTOR: u8 = 1;
+const OVER_TEMPERATURE: u8 = 2;
+const OVER_CURRENT: u8 = 4;
+
+/// The operator's hand and the glove's actuators.
+#[derive(Debug, Clone)]
+pub struct Hand {
+    model: HandModel,
+    script: Script,
+    /// Actual raw positions.
+    position: [f32; CHANNELS],
+    drive: [Drive; FINGERS],
+    temperature: [f32; FINGERS],
+    overload_for: [f32; FINGERS],
+    errors: [u8; FINGERS],
+    t: f32,
+}
+
+impl Hand {
+    /// A hand following `script`, actuators applying no force.
+    pub fn new(script: Script, model: HandModel) -> Self {
+        let position = script.at(0.0);
+        Self {
+            model,
+            script,
+            position,
+            drive: [Drive::Force(0.0); FINGERS],
+            temperature: [model.ambient_c; FINGERS],
+            overload_for: [0.0; FINGERS],
+            errors: [0; FINGERS],
+            t: 0.0,
+        }
+    }
+
+    /// Sets what one actuator does (finger 0..5, glove order).
+    pub fn set_drive(&mut self, finger: usize, drive: Drive) {
+        if let Some(d) = self.drive.get_mut(finger) {
+            *d = drive;
+        }
+    }
+
+    /// The actuators' current drives.
+    pub fn drives(&self) -> [Drive; FINGERS] {
+        self.drive
+    }
+
+    /// Advances the model to time `t` seconds.
+    pub fn advance_to(&mut self, t: f32) {
+        let mut dt = t - self.t;
+        // Also false for NaN.
+        if dt.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return;
+        }
+        self.t = t;
+        // Integrate in steps of at most 1 ms so that long gaps stay stable.
+        while dt > 0.0 {
+            let h = dt.min(0.001);
+            dt -= h;
+            self.step(h);
+        }
+    }
+
+    fn step(&mut self, h: f32) {
+        let m = self.model;
+        let intent = self.script.at(self.t);
+        for (ch, pos) in self.position.iter_mut().enumerate() {
+            let target = match self.drive.get(ch) {
+                // The operator resists: the finger settles where the actuator's push balances
+                // the operator's stiffness.
+                Some(Drive::Force(f)) if self.errors[ch] & LOCKED_ROTOR == 0 => {
+                    intent[ch] + m.compliance * f
+                }
+                Some(Drive::Position(p)) if self.errors[ch] & LOCKED_ROTOR == 0 => *p,
+                _ => intent[ch],
+            }
+            .clamp(0.0, 1000.0);
+            let step =
+                ((target - *pos) * (h / m.tau_s).min(1.0)).clamp(-m.max_speed * h, m.max_speed * h);
+            *pos = (*pos + step).clamp(0.0, 1000.0);
+        }
+        for f in 0..FINGERS {
+            let load = self.load(f, &intent).abs();
+            let current = self.current(load);
+            let steady = m.ambient_c + m.c_per_ma * current;
+            self.temperature[f] += (steady - self.temperature[f]) * (h / m.thermal_tau_s).min(1.0);
+            if load >= m.overload_force {
+                self.overload_for[f] += h;
+            } else {
+                self.overload_for[f] = 0.0;
+            }
+            if self.overload_for[f] >= m.overload_s {
+                self.errors[f] |= LOCKED_ROTOR | OVER_CURRENT;
+            }
+            if self.temperature[f] >= m.over_temperature_c {
+                self.errors[f] |= OVER_TEMPERATURE;
+            } else if self.temperature[f] < m.over_temperature_c - 10.0 {
+                self.errors[f] &= !OVER_TEMPERATURE;
+            }
+        }
+    }
+
+    /// Force between finger and actuator, glove units (positive: the finger pushes towards a
+    /// fist, i.e. the actuator is pushing it open against the operator).
+    fn load(&self, finger: usize, intent: &[f32; CHANNELS]) -> f32 {
+        ((self.position[finger] - intent[finger]) / self.model.compliance).clamp(-1000.0, 1000.0)
+    }
+
+    fn current(&self, load: f32) -> f32 {
+        (self.model.idle_ma + self.model.ma_per_force * load).clamp(0.0, 1000.0)
+    }
+
+    /// Actual raw positions (little, ring, middle, index, thumb, thumb rotation).
+    pub fn positions(&self) -> [u16; CHANNELS] {
+        self.position.map(|p| p.round().clamp(0.0, 1000.0) as u16)
+    }
+
+    /// Measured finger forces (glove units).
+    pub fn forces(&self) -> [i16; FINGERS] {
+        let intent = self.script.at(self.t);
+        core::array::from_fn(|f| self.load(f, &intent).round() as i16)
+    }
+
+    /// Actuator currents in mA.
+    pub fn currents(&self) -> [u16; FINGERS] {
+        let intent = self.script.at(self.t);
+        core::array::from_fn(|f| self.current(self.load(f, &intent).abs()).round() as u16)
+    }
+
+    /// Actuator temperatures in degrees Celsius.
+    pub fn temperatures(&self) -> [u8; FINGERS] {
+        self.temperature.map(|t| t.round().clamp(0.0, 255.0) as u8)
+    }
+
+    /// Actuator error bits.
+    pub fn errors(&self) -> [u8; FINGERS] {
+        self.errors
+    }
+
+    /// Clears the clearable errors (all but over-temperature, which clears itself when cool).
+    pub fn clear_errors(&mut self) {
+        for (e, o) in self.errors.iter_mut().zip(self.overload_for.iter_mut()) {
+            *e &= OVER_TEMPERATURE;
+            *o = 0.0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn still(p: f32) -> Hand {
+        Hand::new(Script::Hold([p; CHANNELS]), HandModel::default())
+    }
+
+    #[test]
+    fn free_hand_follows_the_script() {
+        let mut h = Hand::new(Script::OpenClose { period_s: 4.0 }, HandModel::default());
+        h.advance_to(2.0); // half a period: closed
+        assert!(h.positions()[0] < 200, "{:?}", h.positions());
+        h.advance_to(4.0);
+        assert!(h.positions()[0] > 850, "{:?}", h.positions());
+        assert_eq!(h.forces(), [0; 5]);
+    }
+
+    #[test]
+    fn opening_force_pushes_the_finger_open_and_is_felt() {
+        let mut h = still(300.0);
+        h.set_drive(3, Drive::Force(500.0));
+        h.advance_to(1.0);
+        let p = h.positions();
+        assert!(
+            (p[3] as f32 - 450.0).abs() < 5.0,
+            "index pushed open by 0.3 * 500: {p:?}"
+        );
+        assert_eq!(p[0], 300, "other fingers untouched");
+        assert!((h.forces()[3] - 500).abs() <= 2, "{:?}", h.forces());
+        assert!(h.currents()[3] > h.currents()[0]);
+    }
+
+    #[test]
+    fn position_drive_moves_the_finger() {
+        let mut h = still(900.0);
+        h.set_drive(4, Drive::Position(100.0));
+        h.advance_to(1.0);
+        assert!(h.positions()[4] <= 101);
+        assert!(h.forces()[4] < -900, "the operator resists being closed");
+    }
+
+    #[test]
+    fn sustained_overload_sets_error_bits_that_can_be_cleared() {
+        let mut h = still(500.0);
+        h.set_drive(0, Drive::Force(1000.0));
+        h.advance_to(1.0);
+        assert_eq!(h.errors()[0], 0);
+        h.advance_to(3.5);
+        assert_eq!(h.errors()[0], LOCKED_ROTOR | OVER_CURRENT);
+        h.set_drive(0, Drive::Force(0.0));
+        h.clear_errors();
+        assert_eq!(h.errors()[0], 0);
+    }
+
+    #[test]
+    fn temperature_follows_the_load() {
+        let mut h = still(500.0);
+        h.set_drive(1, Drive::Force(800.0));
+        h.advance_to(60.0);
+        assert!(
+            h.temperatures()[1] > h.temperatures()[0] + 20,
+            "{:?}",
+            h.temperatures()
+        );
+    }
+
+    #[test]
+    fn grasp_reaches_squeezes_and_releases() {
+        let s = Script::Grasp { period_s: 10.0 };
+        assert!(s.at(1.0)[3] > 900.0);
+        assert!(s.at(6.0)[3] < s.at(4.0)[3]);
+        assert!(s.at(9.99)[3] > 850.0);
+    }
+
+    #[test]
+    fn trajectory_files_are_checked() {
+        let dir = std::env::temp_dir().join(format!("sim-glove-traj-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("good.csv");
+        std::fs::write(
+            &good,
+            "# t,l,r,m,i,t,rot\n0,1000,1000,1000,1000,1000,500\n1,0,0,0,0,0,500\n",
+        )
+        .unwrap();
+        let s = Script::parse(good.to_str().unwrap()).unwrap();
+        assert_eq!(s.at(0.5)[0], 500.0);
+        let bad = dir.join("bad.csv");
+        std::fs::write(&bad, "0,1,2\n").unwrap();
+        let e = Script::parse(bad.to_str().unwrap()).unwrap_err();
+        assert!(e.contains("bad.csv:1"), "{e}");
+        assert!(Script::parse("no-such-script").is_err());
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
