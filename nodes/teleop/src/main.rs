@@ -6,6 +6,7 @@
 //! device protocols or control logic (those live in `shared/`).
 
 mod calibrate;
+mod glove;
 mod inspect;
 mod launch;
 
@@ -70,6 +71,13 @@ enum Command {
         #[arg(long)]
         release: bool,
     },
+    /// Talk to the EH55BF1 glove directly (with the glove node stopped).
+    Glove {
+        #[command(flatten)]
+        target: glove::Target,
+        #[command(subcommand)]
+        command: glove::GloveCommand,
+    },
     /// Record an operator calibration profile from the live glove.
     Calibrate {
         /// Where to write the profile.
@@ -105,6 +113,7 @@ fn main() -> ExitCode {
         Command::Echo { topic, count } => inspect::echo(&ipc, &topic, count),
         Command::Stats { seconds } => inspect::stats(&ipc, secs(seconds)),
         Command::Estop { release } => inspect::estop(&ipc, !release),
+        Command::Glove { target, command } => glove::run(&target, &command),
         Command::Calibrate {
             out,
             yes,
