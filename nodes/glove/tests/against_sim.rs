@@ -359,3 +359,34 @@ fn a_bad_config_is_refused_with_the_field_named() {
         "{err}"
     );
 }
+
+#[test]
+fn sustained_overload_shows_up_as_actuator_errors() {
+    let mut rig = Rig::new();
+    let start = Instant::now();
+    let diag = loop {
+        rig.forces
+            .publish(&GloveForceCommand {
+                force: [0, 0, 0, 1000, 0],
+                ..Default::default()
+            })
+            .unwrap();
+        if let Some(d) = rig
+            .diagnostics
+            .poll_latest()
+            .filter(|d| d.error_bits[3] != 0)
+        {
+            break d;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no error bits");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    // Locked rotor + over-current on the index finger only.
+    assert_eq!(diag.error_bits, [0, 0, 0, 0b101, 0]);
+    let start = Instant::now();
+    while !rig.log().contains("actuator error") {
+        assert!(start.elapsed() < Duration::from_secs(2), "{}", rig.log());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(rig.log().contains("locked"), "{}", rig.log());
+}

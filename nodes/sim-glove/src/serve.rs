@@ -104,7 +104,22 @@ struct Shared {
     last_answer_ns: AtomicU64,
     device: Mutex<Option<DeviceView>>,
     log: Mutex<Vec<String>>,
+    record: AtomicBool,
+    answers: Mutex<Vec<AnswerTiming>>,
 }
+
+/// When one answer's data was sampled and when its last byte was on the line (CLOCK_MONOTONIC
+/// ns), recorded for benchmarks when enabled with [`SimGlove::record_answers`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AnswerTiming {
+    /// The device read its sensors (just before answering).
+    pub sampled_ns: u64,
+    /// The answer's last byte left the device.
+    pub sent_ns: u64,
+}
+
+/// Most answer timings kept.
+const MAX_RECORDED: usize = 1 << 20;
 
 /// What tests may look at in the device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -180,6 +195,16 @@ impl SimGlove {
     /// CLOCK_MONOTONIC of the last answer's last byte on the line.
     pub fn last_answer_ns(&self) -> u64 {
         self.shared.last_answer_ns.load(Ordering::Relaxed)
+    }
+
+    /// Starts (or stops) recording the timing of every answer.
+    pub fn record_answers(&self, on: bool) {
+        self.shared.record.store(on, Ordering::SeqCst);
+    }
+
+    /// Takes the answer timings recorded so far, in order.
+    pub fn take_answer_timings(&self) -> Vec<AnswerTiming> {
+        std::mem::take(&mut *lock(&self.shared.answers))
     }
 
     /// Takes the event log lines written since the last call (unplugs, baud changes, ...).
@@ -333,6 +358,7 @@ fn connection(
                 rx_line_free = rx_line_free.max(seen) + wire_time(frame_len, bps);
                 sleep_until(rx_line_free);
                 device.advance_to(start.elapsed().as_secs_f32());
+                let sampled_ns = teleop_runtime::now_ns();
                 let Some(answer) = device.handle(&frame) else {
                     continue;
                 };
@@ -368,9 +394,17 @@ fn connection(
                 if master.write_all(&out[..len]).is_err() {
                     continue;
                 }
-                shared
-                    .last_answer_ns
-                    .store(teleop_runtime::now_ns(), Ordering::Relaxed);
+                let sent_ns = teleop_runtime::now_ns();
+                shared.last_answer_ns.store(sent_ns, Ordering::Relaxed);
+                if shared.record.load(Ordering::Relaxed) {
+                    let mut answers = lock(&shared.answers);
+                    if answers.len() < MAX_RECORDED {
+                        answers.push(AnswerTiming {
+                            sampled_ns,
+                            sent_ns,
+                        });
+                    }
+                }
                 rx_line_free = Instant::now();
                 {
                     let mut s = lock(&shared.stats);

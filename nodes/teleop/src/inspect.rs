@@ -138,6 +138,7 @@ struct TopicProbe<M: Message> {
     /// (stamp - origin, receive - stamp) in ns per sample.
     samples: RefCell<Vec<(u64, u64)>>,
     dropped_before: u64,
+    since_ns: u64,
 }
 
 impl<M: Message> Probe for TopicProbe<M> {
@@ -148,6 +149,10 @@ impl<M: Message> Probe for TopicProbe<M> {
         let mut samples = self.samples.borrow_mut();
         self.sub.drain(|m| {
             let h = m.header();
+            if h.stamp_ns < self.since_ns {
+                // The history sample a new subscriber gets: older than the window.
+                return;
+            }
             let now = now_ns();
             samples.push((
                 h.stamp_ns.saturating_sub(h.origin_ns),
@@ -193,6 +198,7 @@ pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
                 sub,
                 samples: RefCell::new(Vec::with_capacity(4096)),
                 dropped_before,
+                since_ns: now_ns(),
             }))
         }
     }
