@@ -356,7 +356,7 @@ fn connection(
                 // The request's bytes take their wire time to arrive.
                 let frame_len = frame.body.encoded_len();
                 rx_line_free = rx_line_free.max(seen) + wire_time(frame_len, bps);
-                sleep_until(rx_line_free);
+                teleop_runtime::sleep_until(rx_line_free);
                 device.advance_to(start.elapsed().as_secs_f32());
                 let sampled_ns = teleop_runtime::now_ns();
                 let Some(answer) = device.handle(&frame) else {
@@ -390,7 +390,7 @@ fn connection(
                 len += n;
                 // Processing, then the answer's own wire time.
                 let done = Instant::now() + options.response_delay + wire_time(len, bps);
-                sleep_until(done);
+                teleop_runtime::sleep_until(done);
                 if master.write_all(&out[..len]).is_err() {
                     continue;
                 }
@@ -426,22 +426,6 @@ fn connection(
                     baud: device.baud(),
                 });
             }
-        }
-    }
-}
-
-/// Sleeps until `t`, finishing with a short spin for sub-100 us accuracy.
-fn sleep_until(t: Instant) {
-    loop {
-        let now = Instant::now();
-        if now >= t {
-            return;
-        }
-        let left = t - now;
-        if left > Duration::from_micros(300) {
-            std::thread::sleep(left - Duration::from_micros(200));
-        } else {
-            std::hint::spin_loop();
         }
     }
 }

@@ -15,6 +15,24 @@ pub fn now_ns() -> u64 {
         .saturating_add(ts.tv_nsec as u64)
 }
 
+/// Sleeps until `t` with sub-100 us accuracy: sleeps, then spins the last 200 us. For control
+/// loops with absolute deadlines and for device simulators' line timing.
+pub fn sleep_until(t: std::time::Instant) {
+    use std::time::{Duration, Instant};
+    loop {
+        let now = Instant::now();
+        if now >= t {
+            return;
+        }
+        let left = t - now;
+        if left > Duration::from_micros(300) {
+            std::thread::sleep(left - Duration::from_micros(200));
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

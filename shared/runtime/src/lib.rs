@@ -25,7 +25,7 @@ mod logging;
 mod ports;
 mod signals;
 
-pub use clock::now_ns;
+pub use clock::{now_ns, sleep_until};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use health::Health;

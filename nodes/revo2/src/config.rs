@@ -1,0 +1,194 @@
+//! The Revo2 node's configuration file.
+
+use std::path::PathBuf;
+
+/// Where the hand is on the bus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Transport {
+    /// The emulated Revo2 process on a local socket.
+    Sim(PathBuf),
+    /// A network interface through a raw socket (real hardware, or a veth pair); needs
+    /// CAP_NET_RAW.
+    Interface(String),
+}
+
+impl Transport {
+    /// Parses `sim:PATH` or `interface:NAME`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        match text.split_once(':') {
+            Some(("sim", path)) if !path.is_empty() => Ok(Self::Sim(PathBuf::from(path))),
+            Some(("interface", name)) if !name.is_empty() => Ok(Self::Interface(name.to_string())),
+            _ => Err(format!(
+                "transport = {text:?}: use \"interface:NAME\" (e.g. interface:eth0) or \"sim:SOCKET\""
+            )),
+        }
+    }
+}
+
+/// How tactile data is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TactileSource {
+    /// In the process data (TxPDO 0x1A01 assigned to SM3); falls back to SDO polling if the
+    /// device refuses that assignment.
+    Pdo,
+    /// Poll object 0x6010 by SDO at `tactile_poll_hz`.
+    Sdo,
+    /// No tactile data.
+    Off,
+}
+
+/// Values written to 0x8000 in PRE-OP (and read back). Absent values are left as they are.
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeviceSettings {
+    /// 0 = left hand, 1 = right hand.
+    pub hand_type: Option<u8>,
+    /// Back-of-hand light.
+    pub led_switch: Option<u8>,
+    /// Buzzer.
+    pub buzzer_switch: Option<u8>,
+    /// Vibration motor.
+    pub vibrator_switch: Option<u8>,
+    /// 0 = percentage units, 1 = physical units.
+    pub unit_mode: Option<u8>,
+    /// Calibrate automatically at power-on.
+    pub auto_calibration: Option<u8>,
+    /// Turbo mode.
+    pub turbo_mode: Option<u8>,
+    /// Protection currents per joint (thumb flex, thumb abduct, index, middle, ring, pinky), mA.
+    pub protection_current_ma: Option<[u16; 6]>,
+    /// Thumb abduction locking current, mA.
+    pub thumb_aux_lock_cur: Option<u16>,
+}
+
+/// The node's configuration file (`config/revo2.toml`).
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Revo2Config {
+    /// `interface:NAME` or `sim:SOCKET`.
+    pub transport: String,
+    /// Cycle rate in Hz.
+    pub cycle_hz: f64,
+    /// A hand command older than this is stale: the hand holds its position.
+    pub stale_command_ms: u64,
+    /// Cycles in a row without a valid exchange before the link counts as lost and the bus is
+    /// brought up again.
+    pub max_lost_cycles: u32,
+    /// Tactile data source.
+    pub tactile: TactileSource,
+    /// SDO polling rate of the tactile object when it is not in the process data.
+    pub tactile_poll_hz: f64,
+    /// Hand speed at 100 % speed, in joint travel per second (the document does not give it; used
+    /// to turn normalised speed limits into the device's per-mille speed).
+    pub full_speed_travel_per_s: f32,
+    /// Speed used when holding after a stale command, per mille of full speed.
+    pub hold_speed_per_mille: u16,
+    /// Joint limits, normalised (0 = open, 1 = closed), Revo2 order.
+    pub joint_min: [f32; 6],
+    /// See `joint_min`.
+    pub joint_max: [f32; 6],
+    /// Health report period.
+    pub health_period_ms: u64,
+    /// 0x8000 configuration applied in PRE-OP.
+    pub device: DeviceSettings,
+}
+
+impl Default for Revo2Config {
+    fn default() -> Self {
+        Self {
+            transport: "sim:/tmp/teleop-revo2.sock".into(),
+            cycle_hz: 1000.0,
+            stale_command_ms: 100,
+            max_lost_cycles: 50,
+            tactile: TactileSource::Pdo,
+            tactile_poll_hz: 50.0,
+            full_speed_travel_per_s: 2.0,
+            hold_speed_per_mille: 300,
+            joint_min: [0.0; 6],
+            joint_max: [1.0; 6],
+            health_period_ms: 500,
+            device: DeviceSettings::default(),
+        }
+    }
+}
+
+impl Revo2Config {
+    /// The parsed transport and every value checked; messages name the field.
+    pub fn validate(&self) -> Result<Transport, String> {
+        let transport = Transport::parse(&self.transport)?;
+        if !(self.cycle_hz >= 10.0 && self.cycle_hz <= 4000.0) {
+            return Err(format!("cycle_hz = {}: must be 10..=4000", self.cycle_hz));
+        }
+        if !(self.tactile_poll_hz > 0.0 && self.tactile_poll_hz <= 500.0) {
+            return Err(format!(
+                "tactile_poll_hz = {}: must be in (0, 500]",
+                self.tactile_poll_hz
+            ));
+        }
+        if !(self.full_speed_travel_per_s > 0.0 && self.full_speed_travel_per_s.is_finite()) {
+            return Err("full_speed_travel_per_s must be > 0".into());
+        }
+        if self.hold_speed_per_mille == 0 || self.hold_speed_per_mille > 1000 {
+            return Err("hold_speed_per_mille must be 1..=1000".into());
+        }
+        for j in 0..6 {
+            let (lo, hi) = (self.joint_min[j], self.joint_max[j]);
+            if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo >= hi {
+                return Err(format!(
+                    "joint_min[{j}] = {lo}, joint_max[{j}] = {hi}: need 0 <= min < max <= 1"
+                ));
+            }
+        }
+        let d = &self.device;
+        for (name, v, max) in [
+            ("hand_type", d.hand_type, 1),
+            ("unit_mode", d.unit_mode, 1),
+            ("led_switch", d.led_switch, 255),
+        ] {
+            if v.is_some_and(|v| v > max) {
+                return Err(format!(
+                    "device.{name} = {}: must be 0..={max}",
+                    v.unwrap_or(0)
+                ));
+            }
+        }
+        if self.max_lost_cycles == 0 {
+            return Err("max_lost_cycles must be > 0".into());
+        }
+        Ok(transport)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transports_and_validation() {
+        assert_eq!(
+            Transport::parse("interface:eth1"),
+            Ok(Transport::Interface("eth1".into()))
+        );
+        assert_eq!(
+            Transport::parse("sim:/tmp/x"),
+            Ok(Transport::Sim("/tmp/x".into()))
+        );
+        assert!(Transport::parse("eth0")
+            .unwrap_err()
+            .contains("interface:NAME"));
+        assert!(Revo2Config::default().validate().is_ok());
+        let bad = Revo2Config {
+            joint_max: [1.0, 1.0, 0.0, 1.0, 1.0, 1.0],
+            ..Default::default()
+        };
+        assert!(bad.validate().unwrap_err().contains("joint_max[2]"));
+        let cfg: Revo2Config =
+            teleop_runtime::parse_toml("[device]\nled_switch = 1\nunit_mode = 0\n", "r.toml")
+                .unwrap();
+        assert_eq!(cfg.device.led_switch, Some(1));
+        let err =
+            teleop_runtime::parse_toml::<Revo2Config>("[device]\nled = 1\n", "r.toml").unwrap_err();
+        assert!(err.to_string().contains("unknown field `led`"), "{err}");
+    }
+}

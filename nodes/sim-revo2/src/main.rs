@@ -1,0 +1,235 @@
+//! `teleop-sim-revo2`: the emulated Revo2 as a process. It serves EtherCAT frames either on a
+//! local socket (`--socket PATH`, the default simulated session, no privileges) or on a network
+//! interface with a raw socket (`--interface IF`, e.g. one end of a veth pair; needs
+//! CAP_NET_RAW), and takes commands at run time on a control socket:
+//! `drop P`, `wrong-wkc P`, `watchdog`, `link-down SECONDS`, `refuse CODE`, `object ball|none`,
+//! `stats`.
+
+use std::io::{BufRead, BufReader, Write};
+use std::os::unix::net::UnixListener;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use sim_revo2::hand::VirtualObject;
+use sim_revo2::{revo2_subdevice, Revo2};
+use teleop_ecat_link::{Accept, FrameLink, RawSocketLink, StreamServer, MAX_FRAME};
+use teleop_ecat_sim::SubDevice;
+
+#[derive(Parser)]
+#[command(version, about = "Emulated BrainCo Revo2 EtherCAT SubDevice")]
+struct Args {
+    /// Serve on this Unix socket (the Revo2 node connects with `transport = "sim:PATH"`).
+    #[arg(long, conflicts_with = "interface")]
+    socket: Option<PathBuf>,
+    /// Serve on this network interface with a raw socket (needs CAP_NET_RAW).
+    #[arg(long)]
+    interface: Option<String>,
+    /// Virtual object in the hand: `ball` or `none`.
+    #[arg(long, default_value = "ball")]
+    object: String,
+    /// Serial number in the identity object.
+    #[arg(long, default_value_t = 42)]
+    serial: u32,
+    /// Control socket (default: the socket path with `.ctl`, or /tmp/teleop-revo2-IF.ctl).
+    #[arg(long)]
+    control: Option<PathBuf>,
+}
+
+type Sim = Arc<Mutex<SubDevice<Revo2>>>;
+
+fn main() -> ExitCode {
+    teleop_runtime::init_logging();
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn object(name: &str) -> anyhow::Result<Option<VirtualObject>> {
+    match name {
+        "ball" => Ok(Some(VirtualObject::ball())),
+        "none" => Ok(None),
+        other => anyhow::bail!("unknown object {other:?}: use ball or none"),
+    }
+}
+
+fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, SubDevice<Revo2>> {
+    sim.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    teleop_runtime::install_stop_handlers();
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(
+        object(&args.object)?,
+        args.serial,
+    )));
+    let start = Instant::now();
+    let control = args
+        .control
+        .clone()
+        .unwrap_or_else(|| match (&args.socket, &args.interface) {
+            (Some(s), _) => s.with_extension("ctl"),
+            (None, Some(i)) => PathBuf::from(format!("/tmp/teleop-revo2-{i}.ctl")),
+            (None, None) => PathBuf::from("/tmp/teleop-revo2.ctl"),
+        });
+    spawn_control(&control, sim.clone(), start)?;
+    match (&args.socket, &args.interface) {
+        (Some(path), _) => {
+            let server = StreamServer::bind(path)?;
+            println!(
+                "revo2: socket {} (control: {})",
+                path.display(),
+                control.display()
+            );
+            std::io::stdout().flush()?;
+            while teleop_runtime::stop_signal().is_none() {
+                match server.accept()? {
+                    Some(mut conn) => {
+                        tracing::info!("master connected");
+                        serve(&mut conn, &sim, start);
+                        tracing::info!("master disconnected");
+                    }
+                    None => {
+                        tick(&sim, start);
+                        std::thread::sleep(Duration::from_millis(2));
+                    }
+                }
+            }
+        }
+        (None, Some(interface)) => {
+            let mut link = RawSocketLink::open(interface, Accept::FromMaster)?;
+            println!(
+                "revo2: interface {interface} (control: {})",
+                control.display()
+            );
+            std::io::stdout().flush()?;
+            serve(&mut link, &sim, start);
+        }
+        (None, None) => anyhow::bail!("give --socket PATH or --interface IF"),
+    }
+    let _ = std::fs::remove_file(&control);
+    tracing::info!("stopped");
+    Ok(())
+}
+
+fn tick(sim: &Sim, start: Instant) {
+    lock(sim).tick(start.elapsed());
+}
+
+/// Answers frames until the link fails or a stop signal arrives.
+fn serve(link: &mut dyn FrameLink, sim: &Sim, start: Instant) {
+    let mut buf = vec![0u8; MAX_FRAME];
+    let mut out = vec![0u8; MAX_FRAME];
+    while teleop_runtime::stop_signal().is_none() {
+        match link.recv(&mut buf, Duration::from_millis(1)) {
+            Ok(Some(n)) => {
+                let reply = lock(sim).process_frame_into(&buf[..n], &mut out, start.elapsed());
+                if let Some(len) = reply {
+                    if let Err(e) = link.send(&out[..len]) {
+                        tracing::warn!("send failed: {e}");
+                        return;
+                    }
+                }
+            }
+            Ok(None) => tick(sim, start),
+            Err(e) => {
+                tracing::debug!("link: {e}");
+                return;
+            }
+        }
+    }
+}
+
+fn spawn_control(path: &PathBuf, sim: Sim, start: Instant) -> anyhow::Result<()> {
+    let _ = std::fs::remove_file(path);
+    let listener = UnixListener::bind(path)
+        .map_err(|e| anyhow::anyhow!("{}: cannot create control socket: {e}", path.display()))?;
+    std::thread::Builder::new()
+        .name("control".into())
+        .spawn(move || {
+            for stream in listener.incoming().flatten() {
+                let Ok(mut reply) = stream.try_clone() else {
+                    continue;
+                };
+                for line in BufReader::new(stream).lines() {
+                    let Ok(line) = line else { break };
+                    let answer = command(&sim, line.trim(), start);
+                    let _ = writeln!(reply, "{answer}");
+                }
+            }
+        })?;
+    Ok(())
+}
+
+fn command(sim: &Sim, line: &str, start: Instant) -> String {
+    let (word, rest) = line.split_once(' ').unwrap_or((line, ""));
+    let rest = rest.trim();
+    let mut dev = lock(sim);
+    let prob = |s: &str| s.parse::<f32>().ok().filter(|p| (0.0..=1.0).contains(p));
+    match word {
+        "drop" => match prob(rest) {
+            Some(p) => {
+                dev.faults().drop_probability = p;
+                format!("ok drop {p}")
+            }
+            None => "error: drop PROBABILITY (0..1)".into(),
+        },
+        "wrong-wkc" => match prob(rest) {
+            Some(p) => {
+                dev.faults().wrong_wkc_probability = p;
+                format!("ok wrong-wkc {p}")
+            }
+            None => "error: wrong-wkc PROBABILITY (0..1)".into(),
+        },
+        "watchdog" => {
+            dev.trip_watchdog();
+            "ok watchdog tripped".into()
+        }
+        "link-down" => match rest.parse::<f64>() {
+            Ok(s) if (0.0..3600.0).contains(&s) => {
+                dev.faults().link_down = true;
+                drop(dev);
+                let sim = sim.clone();
+                let _ = std::thread::Builder::new()
+                    .name("link-up".into())
+                    .spawn(move || {
+                        std::thread::sleep(Duration::from_secs_f64(s));
+                        lock(&sim).faults().link_down = false;
+                        tracing::info!("link up again");
+                    });
+                tracing::warn!("link down for {s} s");
+                "ok".into()
+            }
+            _ => "error: link-down SECONDS".into(),
+        },
+        "refuse" => match u16::from_str_radix(rest.trim_start_matches("0x"), 16) {
+            Ok(code) => {
+                dev.faults().refuse_next_transition = Some(code);
+                format!("ok refusing the next transition with {code:#06x}")
+            }
+            Err(_) => "error: refuse CODE (hex, e.g. 0x0011)".into(),
+        },
+        "object" => match object(rest) {
+            Ok(o) => {
+                dev.app_mut().hand_mut().set_object(o);
+                "ok".into()
+            }
+            Err(e) => format!("error: {e}"),
+        },
+        "stats" => {
+            let (state, error, code) = dev.al_state();
+            format!(
+                "state {state} error {error} code {code:#06x} up {:.1}s {:?}",
+                start.elapsed().as_secs_f32(),
+                dev.stats()
+            )
+        }
+        _ => format!("error: unknown command {word:?}"),
+    }
+}
