@@ -190,7 +190,7 @@ fn glove_node_streams_states_near_line_rate_and_applies_force_commands() {
             })
             .unwrap();
         rig.states.drain(|s| {
-            if s.raw_position[3] > 700 {
+            if s.raw_position[3] > 630 {
                 pushed = Some(*s);
             }
         });

@@ -188,8 +188,10 @@ fn cycle(
                     let mut io = sd.io_raw_mut();
                     let _ = out.pack(io.outputs());
                 }
+                let t0 = Instant::now();
                 let response = block_on(group.tx_rx(md));
                 let origin = now_ns();
+                tracing::trace!(us = t0.elapsed().as_micros() as u64, "tx_rx");
                 let response = match response {
                     Ok(r) => {
                         lost_in_a_row = 0;

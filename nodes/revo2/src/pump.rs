@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::task::{Wake, Waker};
 use std::thread::{JoinHandle, Thread};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use ethercrab::{PduRx, PduTx};
 use teleop_ecat_link::{FrameLink, LinkError, MAX_FRAME};
@@ -28,14 +28,41 @@ pub struct PumpStatus {
     pub up: AtomicBool,
 }
 
-struct Unpark(Thread);
+/// Wakes the pump when ethercrab queues a frame: unparks it, and makes its eventfd readable so
+/// that a pump waiting for replies on the link's descriptor wakes too.
+struct Wakeup {
+    thread: Thread,
+    eventfd: libc::c_int,
+}
 
-impl Wake for Unpark {
+impl Wake for Wakeup {
     fn wake(self: Arc<Self>) {
-        self.0.unpark();
+        self.wake_by_ref();
     }
     fn wake_by_ref(self: &Arc<Self>) {
-        self.0.unpark();
+        let one = 1u64.to_ne_bytes();
+        // SAFETY: writing 8 bytes to our own eventfd.
+        unsafe {
+            libc::write(self.eventfd, one.as_ptr().cast(), 8);
+        }
+        self.thread.unpark();
+    }
+}
+
+impl Drop for Wakeup {
+    fn drop(&mut self) {
+        // SAFETY: we own the eventfd.
+        unsafe {
+            libc::close(self.eventfd);
+        }
+    }
+}
+
+fn clear(eventfd: libc::c_int) {
+    let mut buf = [0u8; 8];
+    // SAFETY: reading 8 bytes from our own non-blocking eventfd.
+    unsafe {
+        libc::read(eventfd, buf.as_mut_ptr().cast(), 8);
     }
 }
 
@@ -95,7 +122,13 @@ fn run(
     stop: &AtomicBool,
     status: &PumpStatus,
 ) -> (PduTx<'static>, PduRx<'static>) {
-    let waker = Waker::from(Arc::new(Unpark(std::thread::current())));
+    // SAFETY: plain eventfd creation; owned by `Wakeup`.
+    let eventfd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
+    let wakeup = Arc::new(Wakeup {
+        thread: std::thread::current(),
+        eventfd,
+    });
+    let waker = Waker::from(wakeup);
     let mut buf = vec![0u8; MAX_FRAME];
     let mut backoff = Duration::from_millis(20);
     let mut logged_down = false;
@@ -123,6 +156,7 @@ fn run(
             &mut rx,
             link.as_mut(),
             &waker,
+            eventfd,
             &mut buf,
             stop,
             status,
@@ -137,19 +171,17 @@ fn run(
 }
 
 /// Pumps until stop (Ok) or a link error.
+#[allow(clippy::too_many_arguments)]
 fn serve(
     tx: &mut PduTx<'static>,
     rx: &mut PduRx<'static>,
     link: &mut dyn FrameLink,
     waker: &Waker,
+    eventfd: libc::c_int,
     buf: &mut [u8],
     stop: &AtomicBool,
     status: &PumpStatus,
 ) -> Result<(), LinkError> {
-    // Replies are expected until this long after the last send (then they are lost frames,
-    // which ethercrab times out and retries on its own).
-    const EXPECT_REPLY_FOR: Duration = Duration::from_millis(5);
-    let mut last_send = Instant::now() - EXPECT_REPLY_FOR;
     while !stop.load(Ordering::SeqCst) && !tx.should_exit() {
         tx.replace_waker(waker);
         let mut link_error = None;
@@ -163,27 +195,30 @@ fn serve(
             });
             if result.is_ok() {
                 status.sent.fetch_add(1, Ordering::Relaxed);
-                last_send = Instant::now();
             }
             if let Some(e) = link_error.take() {
                 return Err(e);
             }
         }
-        let expecting = last_send.elapsed() < EXPECT_REPLY_FOR;
-        let wait = if expecting {
-            Duration::from_micros(500)
-        } else {
-            Duration::ZERO
-        };
-        match link.recv(buf, wait)? {
-            Some(n) => {
-                status.received.fetch_add(1, Ordering::Relaxed);
-                if let Err(e) = rx.receive_frame(&buf[..n]) {
-                    tracing::debug!("frame not taken by ethercrab: {e}");
+        // Hand over every reply that is already here.
+        while let Some(n) = link.recv(buf, Duration::ZERO)? {
+            status.received.fetch_add(1, Ordering::Relaxed);
+            if let Err(e) = rx.receive_frame(&buf[..n]) {
+                tracing::debug!("frame not taken by ethercrab: {e}");
+            }
+        }
+        // Sleep until a reply arrives or ethercrab queues a frame (lost frames are ethercrab's
+        // to time out and retry).
+        match link.fd() {
+            Some(fd) => {
+                let ready =
+                    teleop_ecat_link::wait_readable(&[fd, eventfd], Duration::from_millis(10))
+                        .map_err(|e| LinkError::Down(e.to_string()))?;
+                if ready & 2 != 0 {
+                    clear(eventfd);
                 }
             }
-            None if !expecting => std::thread::park_timeout(Duration::from_millis(2)),
-            None => {}
+            None => std::thread::park_timeout(Duration::from_millis(2)),
         }
     }
     Ok(())

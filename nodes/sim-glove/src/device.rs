@@ -320,7 +320,7 @@ mod tests {
             })
         );
         d.advance_to(1.0);
-        assert!(d.hand().positions()[3] > 580, "index pushed open");
+        assert!(d.hand().positions()[3] > 520, "index pushed open");
         assert_eq!(d.force_set()[3], 300);
     }
 

@@ -198,7 +198,7 @@ pub struct HandModel {
 impl Default for HandModel {
     fn default() -> Self {
         Self {
-            compliance: 0.3,
+            compliance: 0.1,
             tau_s: 0.05,
             max_speed: 4000.0,
             idle_ma: 40.0,
@@ -386,8 +386,8 @@ mod tests {
         h.advance_to(1.0);
         let p = h.positions();
         assert!(
-            (p[3] as f32 - 450.0).abs() < 5.0,
-            "index pushed open by 0.3 * 500: {p:?}"
+            (p[3] as f32 - 350.0).abs() < 5.0,
+            "index pushed open by 0.1 * 500: {p:?}"
         );
         assert_eq!(p[0], 300, "other fingers untouched");
         assert!((h.forces()[3] - 500).abs() <= 2, "{:?}", h.forces());

@@ -102,12 +102,12 @@ impl VirtualObject {
     pub fn ball() -> Self {
         Self {
             contact_at: [
-                Some(450.0),
+                Some(300.0),
                 None,
-                Some(500.0),
-                Some(520.0),
-                Some(540.0),
-                Some(560.0),
+                Some(330.0),
+                Some(350.0),
+                Some(370.0),
+                Some(390.0),
             ],
             n_per_unit: 0.3,
             tangential_share: 0.25,
@@ -388,15 +388,15 @@ mod tests {
     fn closing_on_the_object_stops_the_finger_and_produces_force() {
         let mut h = Hand::new(HandParams::default(), Some(VirtualObject::ball()));
         for j in 0..JOINTS {
-            h.command(j, mode::POSITION_SPEED, 1000.0, 1000.0);
+            h.command(j, mode::POSITION_SPEED, 700.0, 1000.0);
         }
         run(&mut h, 1.0);
         let p = h.positions();
         assert!(
-            p[2] > 500.0 && p[2] < 800.0,
+            p[2] > 330.0 && p[2] < 600.0,
             "index stopped at the object: {p:?}"
         );
-        assert!(p[1] > 990.0, "thumb abduction is free: {p:?}");
+        assert!(p[1] > 690.0, "thumb abduction is free: {p:?}");
         let touch = h.touches();
         assert!(touch[1].normal_n > 2.0, "index fingertip force {touch:?}");
         assert!(touch[1].tangential_n > 0.0 && touch[1].direction_deg == Some(180));
@@ -418,7 +418,7 @@ mod tests {
     fn proximity_rises_on_approach_and_the_sensor_counter_ticks() {
         let mut h = Hand::new(HandParams::default(), Some(VirtualObject::ball()));
         let c0 = h.sensor_counter();
-        h.command(2, mode::POSITION_SPEED, 420.0, 1000.0); // 80 short of contact
+        h.command(2, mode::POSITION_SPEED, 250.0, 1000.0); // 80 short of contact
         run(&mut h, 1.0);
         let t = h.touches()[1];
         assert!(t.proximity > 0 && t.proximity < PROXIMITY_MAX, "{t:?}");
@@ -439,5 +439,25 @@ mod tests {
         let p = h.positions()[3];
         run(&mut h, 1.0);
         assert!((h.positions()[3] - p).abs() < 25.0, "settles where it was");
+    }
+}
+
+#[cfg(test)]
+mod ramp_tests {
+    use super::*;
+
+    #[test]
+    fn a_slow_close_also_stops_at_the_object() {
+        let mut h = Hand::new(HandParams::default(), Some(VirtualObject::ball()));
+        let mut t = 0.0;
+        for i in 0..2000 {
+            t += 0.001;
+            let target = (i as f32 / 2000.0 * 490.0).min(490.0);
+            h.command(0, mode::POSITION_SPEED, target, 1000.0);
+            h.advance_to(t);
+        }
+        let p = h.positions()[0];
+        assert!(p < 360.0, "thumb went through the object: {p}");
+        assert!(h.touches()[0].normal_n > 1.0, "{:?}", h.touches()[0]);
     }
 }

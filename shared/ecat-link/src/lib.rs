@@ -48,9 +48,57 @@ pub enum LinkError {
 pub trait FrameLink: Send {
     /// Sends one Ethernet frame.
     fn send(&mut self, frame: &[u8]) -> Result<(), LinkError>;
-    /// Receives one Ethernet frame into `buf`, waiting at most `timeout`; `Ok(None)` when none
-    /// arrived in time.
+    /// Receives one Ethernet frame into `buf`, waiting at most `timeout` (zero: only what is
+    /// already there); `Ok(None)` when none arrived in time.
     fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> Result<Option<usize>, LinkError>;
+    /// The file descriptor that becomes readable when a frame arrives, for waiting on it
+    /// together with other events (`None` for links without one).
+    fn fd(&self) -> Option<std::os::fd::RawFd> {
+        None
+    }
+}
+
+/// Waits until one of `fds` is readable or `timeout` passes (microsecond precision, unlike
+/// socket receive timeouts, which the kernel rounds up to whole scheduler ticks). Returns a bit
+/// per descriptor that is readable (or has hung up).
+pub fn wait_readable(fds: &[std::os::fd::RawFd], timeout: Duration) -> std::io::Result<u64> {
+    let mut pfds: Vec<libc::pollfd> = fds
+        .iter()
+        .map(|&fd| libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        })
+        .collect();
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs().min(i64::MAX as u64) as libc::time_t,
+        tv_nsec: libc::c_long::from(timeout.subsec_nanos() as i32),
+    };
+    loop {
+        // SAFETY: pfds is a valid array of pfds.len() pollfds; ts is a valid timespec.
+        let rc = unsafe {
+            libc::ppoll(
+                pfds.as_mut_ptr(),
+                pfds.len() as libc::nfds_t,
+                &ts,
+                core::ptr::null(),
+            )
+        };
+        if rc < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e);
+        }
+        let mut ready = 0u64;
+        for (i, p) in pfds.iter().enumerate().take(64) {
+            if p.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0 {
+                ready |= 1 << i;
+            }
+        }
+        return Ok(ready);
+    }
 }
 
 /// A link to SubDevices emulated in this process: `process` gets each frame the master sends and

@@ -109,22 +109,9 @@ impl FrameLink for RawSocketLink {
         let deadline = std::time::Instant::now() + timeout;
         loop {
             let left = deadline.saturating_duration_since(std::time::Instant::now());
-            let mut pfd = libc::pollfd {
-                fd: self.fd,
-                events: libc::POLLIN,
-                revents: 0,
-            };
-            let ms = left.as_micros().div_ceil(1000).min(i32::MAX as u128) as i32;
-            // SAFETY: one valid pollfd.
-            let rc = unsafe { libc::poll(&mut pfd, 1, ms) };
-            if rc < 0 {
-                let e = std::io::Error::last_os_error();
-                if e.kind() == std::io::ErrorKind::Interrupted {
-                    continue;
-                }
-                return Err(LinkError::Down(format!("{}: {e}", self.interface)));
-            }
-            if rc == 0 {
+            let ready = crate::wait_readable(&[self.fd], left)
+                .map_err(|e| LinkError::Down(format!("{}: {e}", self.interface)))?;
+            if ready == 0 {
                 return Ok(None);
             }
             // SAFETY: buf is valid for buf.len() bytes.
@@ -150,5 +137,9 @@ impl FrameLink for RawSocketLink {
             }
             return Ok(Some(n));
         }
+    }
+
+    fn fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.fd)
     }
 }

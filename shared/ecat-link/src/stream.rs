@@ -1,6 +1,7 @@
 //! Frames over a Unix stream socket, each behind its length as a little-endian u16.
 
 use std::io::{ErrorKind, Read, Write};
+use std::os::fd::AsRawFd;
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -32,6 +33,10 @@ impl FrameLink for StreamLink {
 
     fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> Result<Option<usize>, LinkError> {
         read_frame(&mut self.stream, buf, timeout).map_err(|e| down(&self.path, e))
+    }
+
+    fn fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.stream.as_raw_fd())
     }
 }
 
@@ -110,6 +115,10 @@ impl FrameLink for ServerConnection {
     fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> Result<Option<usize>, LinkError> {
         read_frame(&mut self.stream, buf, timeout).map_err(|e| LinkError::Down(e.to_string()))
     }
+
+    fn fd(&self) -> Option<std::os::fd::RawFd> {
+        Some(self.stream.as_raw_fd())
+    }
 }
 
 fn write_frame(stream: &mut UnixStream, frame: &[u8]) -> std::io::Result<()> {
@@ -125,14 +134,17 @@ fn write_frame(stream: &mut UnixStream, frame: &[u8]) -> std::io::Result<()> {
     stream.write_all(&msg[..2 + frame.len()])
 }
 
-/// Reads one length-prefixed frame. A timeout before the first byte is `Ok(None)`; once a frame
-/// has started, the rest is read without a timeout (it is already on its way).
+/// Reads one length-prefixed frame. Nothing before `timeout` is `Ok(None)`; once a frame has
+/// started, the rest is read without a timeout (it is already on its way). Waits with `ppoll`:
+/// socket receive timeouts are rounded up to scheduler ticks (4 ms at 250 Hz).
 fn read_frame(
     stream: &mut UnixStream,
     buf: &mut [u8],
     timeout: Duration,
 ) -> std::io::Result<Option<usize>> {
-    stream.set_read_timeout(Some(timeout.max(Duration::from_micros(1))))?;
+    if crate::wait_readable(&[stream.as_raw_fd()], timeout)? == 0 {
+        return Ok(None);
+    }
     let mut len = [0u8; 2];
     match stream.read(&mut len[..1]) {
         Ok(0) => {
@@ -147,7 +159,6 @@ fn read_frame(
         }
         Err(e) => return Err(e),
     }
-    stream.set_read_timeout(None)?;
     stream.read_exact(&mut len[1..])?;
     let n = usize::from(u16::from_le_bytes(len));
     if n > MAX_FRAME {
