@@ -25,6 +25,8 @@ pub struct Versions {
     pub wrist_fw: String,
     /// 0x8000:14 wrist board serial number.
     pub wrist_sn: String,
+    /// 0x8010:0D..11 fingertip sensor firmware.
+    pub tactile_fw: String,
 }
 
 impl Default for Versions {
@@ -34,6 +36,7 @@ impl Default for Versions {
             control_sn: "RV2C24110000042".into(),
             wrist_fw: "0.9.7".into(),
             wrist_sn: "RV2W24110000042".into(),
+            tactile_fw: "1.0.3".into(),
         }
     }
 }
@@ -74,6 +77,14 @@ impl Revo2 {
             (0x14, &versions.wrist_sn),
         ] {
             values.insert((obj::CONFIG, sub), text.as_bytes().to_vec());
+        }
+        // Capacitive tactile sensors with their own firmware.
+        values.insert((obj::TACTILE_CONFIG, 0x06), vec![1]);
+        for sub in 0x0D..=0x11 {
+            values.insert(
+                (obj::TACTILE_CONFIG, sub),
+                versions.tactile_fw.as_bytes().to_vec(),
+            );
         }
         Self {
             hand,

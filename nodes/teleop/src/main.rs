@@ -9,6 +9,7 @@ mod calibrate;
 mod glove;
 mod inspect;
 mod launch;
+mod revo2;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -78,6 +79,13 @@ enum Command {
         #[command(subcommand)]
         command: glove::GloveCommand,
     },
+    /// Talk to the Revo2 directly over EtherCAT (with the Revo2 node stopped).
+    Revo2 {
+        #[command(flatten)]
+        target: revo2::Target,
+        #[command(subcommand)]
+        command: revo2::Revo2Command,
+    },
     /// Record an operator calibration profile from the live glove.
     Calibrate {
         /// Where to write the profile.
@@ -114,6 +122,7 @@ fn main() -> ExitCode {
         Command::Stats { seconds } => inspect::stats(&ipc, secs(seconds)),
         Command::Estop { release } => inspect::estop(&ipc, !release),
         Command::Glove { target, command } => glove::run(&target, &command),
+        Command::Revo2 { target, command } => revo2::run(&target, &command),
         Command::Calibrate {
             out,
             yes,
