@@ -281,3 +281,24 @@ fn link_loss_is_survived_without_a_restart() {
         "same process"
     );
 }
+
+#[test]
+fn tactile_polled_by_sdo_when_not_in_the_process_data() {
+    let mut rig = Rig::new("tactile = \"sdo\"\ntactile_poll_hz = 50.0\n");
+    assert_eq!(
+        lock(&rig.sim).app().tx_assignment(),
+        &[0x1A00],
+        "only joint data in the process data"
+    );
+    rig.command([1.0; 6], Duration::from_millis(1500));
+    let start = Instant::now();
+    let t = loop {
+        if let Some(t) = rig.tactile.poll_latest().filter(|t| t.fingertips[1].normal_n > 1.0) {
+            break t;
+        }
+        assert!(start.elapsed() < Duration::from_secs(3), "no polled tactile force\n{}", rig.log());
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(t.fingertip_count, 5);
+    assert!(lock(&rig.sim).stats().mailbox_requests > 50, "polled over the mailbox");
+}
