@@ -1,0 +1,338 @@
+//! The force-feedback process's logic without its plumbing: its configuration file and the
+//! [`FeedbackEngine`] that turns tactile, hand-state, hand-command and e-stop samples (each with
+//! its receive time) into glove force commands. The `teleop-feedback` executable feeds it from the
+//! live topics; `teleop reprocess` feeds it from a recording, so both run the same code.
+
+use std::path::Path;
+
+use teleop_feedback::{FeedbackConfig, ForceFeedback, HandInput, Inputs, Tactile, TactileInput};
+use teleop_msgs::{
+    force_flags, units, EStop, GloveForceCommand, HandCommand, HandState, Tactile as TactileMsg,
+};
+
+/// The node's configuration file.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NodeConfig {
+    /// Tactile data older than this is stale (forces ramp to zero).
+    pub tactile_timeout_ms: u64,
+    /// Hand state older than this is stale.
+    pub hand_timeout_ms: u64,
+    /// Longest time between two published force commands.
+    pub tick_ms: u64,
+    /// Health report period.
+    pub health_period_ms: u64,
+    /// The force-feedback law.
+    pub feedback: FeedbackConfig,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        Self {
+            tactile_timeout_ms: 100,
+            hand_timeout_ms: 100,
+            tick_ms: 10,
+            health_period_ms: 500,
+            feedback: FeedbackConfig::default(),
+        }
+    }
+}
+
+/// Loads and checks the configuration (defaults without a file); errors name the file.
+pub fn load(path: Option<&Path>) -> anyhow::Result<NodeConfig> {
+    let Some(path) = path else {
+        return Ok(NodeConfig::default());
+    };
+    let config: NodeConfig = teleop_runtime::load_toml(path)?;
+    config
+        .feedback
+        .validate()
+        .map_err(|e| e.with_origin(&path.display().to_string()))?;
+    Ok(config)
+}
+
+/// One input of the engine.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// A tactile sample.
+    Tactile(TactileMsg),
+    /// A hand state sample.
+    State(HandState),
+    /// A hand command sample (remembered for the position-error estimate).
+    Command(HandCommand),
+    /// An e-stop sample.
+    EStop(EStop),
+    /// The periodic tick (stale inputs ramp down even when nothing arrives).
+    Tick,
+}
+
+/// What one event did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Output {
+    /// The force command to publish, if the event stepped the law.
+    pub command: Option<GloveForceCommand>,
+    /// Inputs just went stale (log it, count a timeout).
+    pub became_stale: bool,
+    /// Inputs are fresh again.
+    pub became_fresh: bool,
+    /// The e-stop was just engaged (`Some(true)`) or released (`Some(false)`).
+    pub estop_changed: Option<bool>,
+    /// Fingers saturated at `max_force`.
+    pub clamped: u8,
+}
+
+/// Force feedback with its input state.
+pub struct FeedbackEngine {
+    config: NodeConfig,
+    law: ForceFeedback,
+    tactile: Option<(TactileMsg, u64)>,
+    state: Option<(HandState, u64)>,
+    command: Option<HandCommand>,
+    estop: bool,
+    stale: bool,
+}
+
+impl FeedbackEngine {
+    /// An engine with this configuration.
+    pub fn new(config: &NodeConfig) -> anyhow::Result<Self> {
+        Ok(Self {
+            config: config.clone(),
+            law: ForceFeedback::new(config.feedback.clone())?,
+            tactile: None,
+            state: None,
+            command: None,
+            estop: false,
+            stale: false,
+        })
+    }
+
+    /// True while the e-stop is engaged.
+    pub fn estop(&self) -> bool {
+        self.estop
+    }
+
+    /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
+    /// Steps the law on tactile samples, on hand state when the hand has no tactile data, on
+    /// e-stop changes and on ticks.
+    pub fn handle(&mut self, event: &Event, now_ns: u64) -> Output {
+        let mut out = Output::default();
+        let step = match *event {
+            Event::Tactile(t) => {
+                self.tactile = Some((t, now_ns));
+                true
+            }
+            Event::State(s) => {
+                self.state = Some((s, now_ns));
+                self.tactile.is_none()
+            }
+            Event::Command(c) => {
+                self.command = Some(c);
+                false
+            }
+            Event::EStop(e) => {
+                let engaged = e.engaged != 0;
+                if engaged != self.estop {
+                    out.estop_changed = Some(engaged);
+                    self.estop = engaged;
+                }
+                true
+            }
+            Event::Tick => true,
+        };
+        if step {
+            let (inputs, origin) = self.inputs(now_ns);
+            let law = self.law.step(&inputs);
+            out.became_stale = law.stale && !self.stale;
+            out.became_fresh = !law.stale && self.stale;
+            self.stale = law.stale;
+            out.clamped = law.clamped;
+            let mut msg = GloveForceCommand {
+                force: law.force,
+                ..Default::default()
+            };
+            msg.header.origin_ns = origin;
+            for (slot, source) in msg.source.iter_mut().zip(law.source) {
+                *slot = source as u8;
+            }
+            if law.stale {
+                msg.flags |= force_flags::STALE;
+            }
+            if self.estop {
+                msg.flags |= force_flags::ESTOP;
+            }
+            if law.clamped > 0 {
+                msg.flags |= force_flags::CLAMPED;
+            }
+            out.command = Some(msg);
+        }
+        out
+    }
+
+    /// The law's inputs at `now_ns`, and the origin stamp of the newest device sample used.
+    fn inputs(&self, now_ns: u64) -> (Inputs, u64) {
+        let fresh = |at: u64, timeout_ms: u64| now_ns.saturating_sub(at) <= timeout_ms * 1_000_000;
+        let mut origin = 0;
+        let tactile = match &self.tactile {
+            None => Tactile::Absent,
+            Some((_, at)) if !fresh(*at, self.config.tactile_timeout_ms) => Tactile::Stale,
+            Some((msg, _)) => {
+                origin = msg.header.origin_ns;
+                Tactile::Fresh(tactile_from_msg(msg))
+            }
+        };
+        let hand = match &self.state {
+            Some((msg, at)) if fresh(*at, self.config.hand_timeout_ms) && msg.link_up != 0 => {
+                if origin == 0 {
+                    origin = msg.header.origin_ns;
+                }
+                Some(hand_from_msgs(msg, self.command.as_ref()))
+            }
+            _ => None,
+        };
+        (
+            Inputs {
+                t_ns: now_ns,
+                tactile,
+                hand,
+                estop: self.estop,
+            },
+            origin,
+        )
+    }
+}
+
+/// The law's tactile input: normal force and validity per fingertip.
+pub fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
+    let mut input = TactileInput::default();
+    for (i, tip) in msg
+        .active_fingertips()
+        .iter()
+        .enumerate()
+        .take(input.valid.len())
+    {
+        input.normal_n[i] = tip.normal_n;
+        input.valid[i] = tip.is_valid();
+    }
+    input
+}
+
+/// Joint state plus the commanded positions; without a usable command the measured positions
+/// stand in (no position error).
+pub fn hand_from_msgs(state: &HandState, command: Option<&HandCommand>) -> HandInput {
+    let mut input = HandInput::default();
+    let normalised = state.units == units::NORMALISED;
+    for (i, joint) in state
+        .active_joints()
+        .iter()
+        .enumerate()
+        .take(input.measured.len())
+    {
+        input.measured[i] = if normalised { joint.position } else { 0.0 };
+        input.commanded[i] = input.measured[i];
+        input.current_ma[i] = joint.current_ma;
+    }
+    if let Some(cmd) = command.filter(|c| normalised && c.units == units::NORMALISED) {
+        for (i, joint) in cmd
+            .active_joints()
+            .iter()
+            .enumerate()
+            .take(input.commanded.len())
+        {
+            input.commanded[i] = joint.target;
+        }
+    }
+    input
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use teleop_feedback::ContactSource;
+    use teleop_msgs::contact_source;
+
+    #[test]
+    fn contact_source_codes_match_the_contract() {
+        assert_eq!(ContactSource::None as u8, contact_source::NONE);
+        assert_eq!(ContactSource::Tactile as u8, contact_source::TACTILE);
+        assert_eq!(
+            ContactSource::PositionError as u8,
+            contact_source::POSITION_ERROR
+        );
+        assert_eq!(ContactSource::Current as u8, contact_source::CURRENT);
+        assert_eq!(ContactSource::Ramping as u8, contact_source::RAMPING);
+        assert_eq!(ContactSource::EStop as u8, contact_source::ESTOP);
+    }
+
+    #[test]
+    fn tactile_validity_follows_status_bits_and_count() {
+        let mut msg = TactileMsg {
+            fingertip_count: 4,
+            ..Default::default()
+        };
+        msg.fingertips[0].normal_n = 2.0;
+        msg.fingertips[1].status = teleop_msgs::touch_status::INVALID;
+        let t = tactile_from_msg(&msg);
+        assert_eq!(t.valid, [true, false, true, true, false]);
+        assert_eq!(t.normal_n[0], 2.0);
+    }
+
+    #[test]
+    fn hand_input_uses_command_targets_when_units_match() {
+        let mut state = HandState {
+            joint_count: 6,
+            units: units::NORMALISED,
+            ..Default::default()
+        };
+        state.joints[2].position = 0.4;
+        state.joints[2].current_ma = 350.0;
+        let mut cmd = HandCommand {
+            joint_count: 6,
+            units: units::NORMALISED,
+            ..Default::default()
+        };
+        cmd.joints[2].target = 0.9;
+        let h = hand_from_msgs(&state, Some(&cmd));
+        assert_eq!(
+            (h.measured[2], h.commanded[2], h.current_ma[2]),
+            (0.4, 0.9, 350.0)
+        );
+        let h = hand_from_msgs(&state, None);
+        assert_eq!(h.commanded[2], 0.4, "no command: no position error");
+    }
+
+    #[test]
+    fn engine_steps_on_tactile_and_ticks_and_goes_stale_by_receive_time() {
+        let mut e = FeedbackEngine::new(&NodeConfig::default()).unwrap();
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 2.3;
+        let ms = 1_000_000;
+        assert!(e
+            .handle(&Event::Command(HandCommand::default()), 0)
+            .command
+            .is_none());
+        for i in 0..200 {
+            let out = e.handle(&Event::Tactile(t), i * ms);
+            assert!(out.command.is_some());
+        }
+        let out = e.handle(&Event::Tick, 200 * ms);
+        assert!(
+            out.command.unwrap().force[3] > 400,
+            "index force {:?}",
+            out.command
+        );
+        let out = e.handle(&Event::Tick, 400 * ms);
+        assert!(out.became_stale, "200 ms without tactile");
+        let engaged = e.handle(
+            &Event::EStop(EStop {
+                engaged: 1,
+                ..Default::default()
+            }),
+            401 * ms,
+        );
+        assert_eq!(engaged.estop_changed, Some(true));
+        assert_eq!(engaged.command.unwrap().force, [0; 5]);
+    }
+}
