@@ -12,7 +12,9 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use teleop_glove_protocol::{reg, ErrorBits, Register, Request, Response};
-use teleop_msgs::{GloveDiagnostics, GloveForceCommand, GloveState};
+use teleop_msgs::{
+    device_kind, fixed_text, DeviceInfo, GloveDiagnostics, GloveForceCommand, GloveState,
+};
 use teleop_runtime::{Health, NodeRuntime, Publisher, Subscriber};
 
 use crate::link::{GloveLink, LinkError, LinkStats};
@@ -104,6 +106,7 @@ const DIAGNOSTICS: [Register; 5] = [
 ];
 
 struct Ports {
+    device: Publisher<DeviceInfo>,
     state: Publisher<GloveState>,
     diagnostics: Publisher<GloveDiagnostics>,
     forces: Subscriber<GloveForceCommand>,
@@ -130,6 +133,7 @@ struct Loop<'a> {
 /// Runs until SIGINT/SIGTERM.
 pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
     let ports = Ports {
+        device: runtime.publisher()?,
         state: runtime.publisher()?,
         diagnostics: runtime.publisher()?,
         forces: runtime.subscriber()?,
@@ -161,6 +165,12 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
         match GloveLink::open(&port, config.baud, config.id, timeout) {
             Ok(mut link) => {
                 tracing::info!(%port, "port open");
+                l.ports.device.publish(&DeviceInfo {
+                    kind: device_kind::GLOVE,
+                    id: u32::from(config.id),
+                    model: fixed_text("EH55BF1"),
+                    ..Default::default()
+                })?;
                 l.reported = LinkStats::default();
                 backoff = Duration::from_millis(config.reopen_backoff_ms[0]);
                 let why = l.serve(&mut link, &mut last_health);

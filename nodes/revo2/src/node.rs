@@ -9,11 +9,11 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use futures_lite::future::block_on;
-use teleop_msgs::{HandCommand, HandState, Tactile};
+use teleop_msgs::{device_kind, fixed_text, DeviceInfo, HandCommand, HandState, Tactile};
 use teleop_revo2_protocol::{obj, Inputs, Outputs, TactileData};
 use teleop_runtime::{now_ns, Health, NodeRuntime, Publisher, Subscriber};
 
-use crate::bus::{bring_up, recover_op, Bus, DeviceInfo, OpGroup};
+use crate::bus::{bring_up, recover_op, Bus, DeviceInfo as FoundDevice, OpGroup};
 use crate::config::{Revo2Config, TactileSource};
 use crate::convert::{hand_state, hold_outputs, outputs_for, tactile};
 use crate::pump::Connect;
@@ -22,6 +22,7 @@ use crate::pump::Connect;
 pub const EXPECTED_WKC: u16 = 3;
 
 struct Ports {
+    device: Publisher<DeviceInfo>,
     commands: Subscriber<HandCommand>,
     state: Publisher<HandState>,
     tactile: Publisher<Tactile>,
@@ -40,6 +41,7 @@ struct Counters {
 pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports {
+        device: runtime.publisher()?,
         commands: runtime.subscriber()?,
         state: runtime.publisher()?,
         tactile: runtime.publisher()?,
@@ -49,6 +51,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
     let mut counters = Counters::default();
     let mut backoff = Duration::from_millis(100);
     while teleop_runtime::stop_signal().is_none() {
+        let bus = bus.current(); // a fresh bus once ethercrab's own task has ended (ethercrab:)
         match block_on(bring_up(&bus.md, config)) {
             Ok((group, info)) => {
                 tracing::info!(
@@ -57,6 +60,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
                     "Revo2 in OP"
                 );
                 backoff = Duration::from_millis(100);
+                ports.device.publish(&device_info(&info))?;
                 let outcome = cycle(&bus, &group, &info, config, &mut ports, &mut counters);
                 match outcome {
                     Ok(()) => {
@@ -85,6 +89,20 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
     Ok(())
 }
 
+/// The identity the device reported, for the recorder and `teleop echo device/info`.
+fn device_info(info: &FoundDevice) -> DeviceInfo {
+    DeviceInfo {
+        kind: device_kind::REVO2,
+        id: info.serial,
+        model: fixed_text(teleop_revo2_protocol::DEVICE_NAME),
+        firmware_a: fixed_text(&info.control_fw),
+        firmware_b: fixed_text(&info.wrist_fw),
+        serial_a: fixed_text(&info.control_sn),
+        serial_b: fixed_text(&info.wrist_sn),
+        ..Default::default()
+    }
+}
+
 fn sleep_interruptible(d: Duration) {
     let end = Instant::now() + d;
     while Instant::now() < end && teleop_runtime::stop_signal().is_none() {
@@ -109,7 +127,7 @@ fn publish_link_down(ports: &mut Ports, counters: &Counters) -> anyhow::Result<(
 fn cycle(
     bus: &Bus,
     group: &OpGroup,
-    info: &DeviceInfo,
+    info: &FoundDevice,
     config: &Revo2Config,
     ports: &mut Ports,
     counters: &mut Counters,
@@ -349,7 +367,7 @@ async fn read_tactile(bus: &Bus, group: &OpGroup) -> anyhow::Result<TactileData>
     Ok(TactileData::unpack(&raw)?)
 }
 
-fn leave_op(bus: &Bus, group: OpGroup, _info: &DeviceInfo, _config: &Revo2Config) {
+fn leave_op(bus: &Bus, group: OpGroup, _info: &FoundDevice, _config: &Revo2Config) {
     match block_on(async {
         let g = group.into_safe_op(&bus.md).await?;
         let g = g.into_pre_op(&bus.md).await?;

@@ -340,6 +340,56 @@ message! {
     }
 }
 
+/// Device kinds of [`DeviceInfo`].
+pub mod device_kind {
+    /// The EH55BF1 exoskeleton glove.
+    pub const GLOVE: u8 = 1;
+    /// The BrainCo Revo2 hand.
+    pub const REVO2: u8 = 2;
+}
+
+message! {
+    /// Identity of a device, published by its node when the device connects (history keeps the
+    /// last one for late subscribers such as the recorder).
+    DeviceInfo("teleop_msgs/msg/DeviceInfo", topic "device/info", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// See [`device_kind`].
+        kind: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 3] => "uint8[3]",
+        /// Device id (glove id) or serial number (EtherCAT identity).
+        id: u32 => "uint32",
+        /// Model name, UTF-8, zero padded.
+        model: [u8; 32] => "uint8[32]",
+        /// Firmware version (Revo2: control board), UTF-8, zero padded.
+        firmware_a: [u8; 32] => "uint8[32]",
+        /// Second firmware version (Revo2: wrist board), UTF-8, zero padded.
+        firmware_b: [u8; 32] => "uint8[32]",
+        /// Serial number (Revo2: control board), UTF-8, zero padded.
+        serial_a: [u8; 32] => "uint8[32]",
+        /// Second serial number (Revo2: wrist board), UTF-8, zero padded.
+        serial_b: [u8; 32] => "uint8[32]",
+    }
+}
+
+/// Text into a zero-padded fixed field (cut at a character boundary).
+pub fn fixed_text(text: &str) -> [u8; 32] {
+    let mut out = [0u8; 32];
+    let mut end = text.len().min(32);
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    out[..end].copy_from_slice(&text.as_bytes()[..end]);
+    out
+}
+
+/// A zero-padded fixed field as text (invalid UTF-8 replaced).
+pub fn text_of(field: &[u8]) -> String {
+    let end = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+    String::from_utf8_lossy(&field[..end]).into_owned()
+}
+
 topics!(
     GloveState,
     GloveDiagnostics,
@@ -349,23 +399,18 @@ topics!(
     Tactile,
     NodeHealth,
     EStop,
+    DeviceInfo,
 );
 
 impl NodeHealth {
     /// Stores `name` (truncated to 32 bytes at a character boundary).
     pub fn set_name(&mut self, name: &str) {
-        self.node_name = [0; 32];
-        let mut end = name.len().min(32);
-        while !name.is_char_boundary(end) {
-            end -= 1;
-        }
-        self.node_name[..end].copy_from_slice(&name.as_bytes()[..end]);
+        self.node_name = fixed_text(name);
     }
 
     /// The node name (invalid UTF-8 is replaced).
     pub fn name(&self) -> String {
-        let end = self.node_name.iter().position(|&b| b == 0).unwrap_or(32);
-        String::from_utf8_lossy(&self.node_name[..end]).into_owned()
+        text_of(&self.node_name)
     }
 }
 
