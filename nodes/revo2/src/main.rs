@@ -16,7 +16,7 @@ struct Args {
     /// Node configuration (TOML).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Transport (`interface:NAME` or `sim:SOCKET`); overrides the configuration.
+    /// Transport (`interface:NAME`, `ethercrab:NAME` or `sim:SOCKET`); overrides the configuration.
     #[arg(long)]
     transport: Option<String>,
     /// iceoryx2 node name.

@@ -293,12 +293,23 @@ fn tactile_polled_by_sdo_when_not_in_the_process_data() {
     rig.command([1.0; 6], Duration::from_millis(1500));
     let start = Instant::now();
     let t = loop {
-        if let Some(t) = rig.tactile.poll_latest().filter(|t| t.fingertips[1].normal_n > 1.0) {
+        if let Some(t) = rig
+            .tactile
+            .poll_latest()
+            .filter(|t| t.fingertips[1].normal_n > 1.0)
+        {
             break t;
         }
-        assert!(start.elapsed() < Duration::from_secs(3), "no polled tactile force\n{}", rig.log());
+        assert!(
+            start.elapsed() < Duration::from_secs(3),
+            "no polled tactile force\n{}",
+            rig.log()
+        );
         std::thread::sleep(Duration::from_millis(10));
     };
     assert_eq!(t.fingertip_count, 5);
-    assert!(lock(&rig.sim).stats().mailbox_requests > 50, "polled over the mailbox");
+    assert!(
+        lock(&rig.sim).stats().mailbox_requests > 50,
+        "polled over the mailbox"
+    );
 }

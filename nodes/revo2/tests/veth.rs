@@ -1,0 +1,594 @@
+//! The Revo2 node over a real link: a veth pair `ecm0`/`ecs0` inside a network namespace of its
+//! own per test, the emulator `teleop-sim-revo2 --interface ecs0` on a raw socket on one end and
+//! the node (a process, as in production) on the other, with
+//! - `transport = "ethercrab:ecm0"`: ethercrab's own raw-socket task, unmodified;
+//! - `transport = "interface:ecm0"`: the node's frame pump on a raw socket;
+//! - and an independent master, SOEM (through pysoem, `tests/soem_op.py`), bringing the emulator
+//!   to OP over the same kind of link.
+//!
+//! Privileged: each test is skipped, with the reason printed, unless it runs as root with `ip`
+//! (iproute2) and `unshare(CLONE_NEWNET)` works; the SOEM test also needs `python3` with pysoem
+//! (`pip install -r .ci/requirements.txt`). The emulator's binary must have been built (`cargo
+//! build --workspace --bins`). The test process subscribes to the node's topics directly: the
+//! iceoryx2 shared memory is not network-namespaced.
+#![allow(clippy::unwrap_used)]
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::net::UnixStream;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState};
+use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
+
+/// Prefix of the namespaces these tests create: `<prefix><pid>-<n>`.
+const NETNS_PREFIX: &str = "teleop-revo2-veth-";
+
+/// One test at a time: each runs a node at 1 kHz and an emulator, and the machine has 2 cores.
+fn serial() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Why these tests cannot run here, if they cannot.
+fn skip_reason() -> Option<String> {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        return Some("not running as root (needs CAP_NET_ADMIN to make network namespaces and veth pairs, CAP_NET_RAW for raw sockets)".into());
+    }
+    match Command::new("ip").arg("-V").output() {
+        Ok(o) if o.status.success() => {}
+        _ => return Some("`ip` (iproute2) is not available".into()),
+    }
+    // unshare(CLONE_NEWNET) in a thread of its own: namespaces are per thread, and this one ends.
+    let unshared = std::thread::spawn(|| {
+        // SAFETY: moves only this short-lived thread into a new network namespace.
+        if unsafe { libc::unshare(libc::CLONE_NEWNET) } == 0 {
+            Ok(())
+        } else {
+            Err(std::io::Error::last_os_error())
+        }
+    })
+    .join()
+    .unwrap();
+    if let Err(e) = unshared {
+        return Some(format!("unshare(CLONE_NEWNET) fails here: {e}"));
+    }
+    None
+}
+
+macro_rules! skip_unless_privileged {
+    () => {
+        if let Some(reason) = skip_reason() {
+            eprintln!("skipped: {reason}");
+            return;
+        }
+    };
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {cmd:?}: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}): {}{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Kills the child with SIGKILL if this test process dies first (it is a `ip netns exec`
+/// child that would otherwise keep running in the namespace).
+fn die_with_parent(cmd: &mut Command) -> &mut Command {
+    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        })
+    }
+}
+
+/// A network namespace with a veth pair `ecm0` (master side) / `ecs0` (SubDevice side), both
+/// up; deleted on drop.
+struct Netns {
+    name: String,
+}
+
+impl Netns {
+    fn new() -> Self {
+        remove_stale_namespaces();
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let name = format!(
+            "{NETNS_PREFIX}{}-{}",
+            std::process::id(),
+            NEXT.fetch_add(1, Ordering::Relaxed)
+        );
+        run(Command::new("ip").args(["netns", "add", &name]));
+        let ns = Self { name };
+        ns.ip(&[
+            "link", "add", "ecm0", "type", "veth", "peer", "name", "ecs0",
+        ]);
+        for dev in ["lo", "ecm0", "ecs0"] {
+            ns.ip(&["link", "set", dev, "up"]);
+        }
+        ns
+    }
+
+    /// `ip -n NS ARGS`.
+    fn ip(&self, args: &[&str]) {
+        run(Command::new("ip").args(["-n", &self.name]).args(args));
+    }
+
+    /// `program` to be run inside the namespace.
+    fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
+        let mut cmd = Command::new("ip");
+        cmd.args(["netns", "exec", &self.name]).arg(program);
+        cmd
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        let _ = Command::new("ip")
+            .args(["netns", "del", &self.name])
+            .status();
+    }
+}
+
+/// Deletes namespaces left by an earlier run of these tests that was killed before its drops ran.
+fn remove_stale_namespaces() {
+    let Ok(out) = Command::new("ip").args(["netns", "list"]).output() else {
+        return;
+    };
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let name = line.split_whitespace().next().unwrap_or("");
+        let Some(rest) = name.strip_prefix(NETNS_PREFIX) else {
+            continue;
+        };
+        let pid = rest.split('-').next().unwrap_or("");
+        if !pid.is_empty() && !Path::new("/proc").join(pid).exists() {
+            let _ = Command::new("ip").args(["netns", "del", name]).status();
+        }
+    }
+}
+
+/// `teleop-sim-revo2`, next to this test's target directory.
+fn sim_binary() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    // target/<profile>/deps/veth-HASH -> target/<profile>/teleop-sim-revo2
+    let path = exe
+        .parent()
+        .and_then(Path::parent)
+        .map(|dir| dir.join("teleop-sim-revo2"))
+        .unwrap();
+    assert!(
+        path.exists(),
+        "{} is missing: run `cargo build --workspace --bins` first (the emulator is a binary of \
+         the sim-revo2 crate; a dev-dependency builds only its library)",
+        path.display()
+    );
+    path
+}
+
+fn stop(child: &mut Child) {
+    // SAFETY: kill(2) of our own child.
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+    }
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < deadline {
+        if let Ok(Some(_)) = child.try_wait() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+}
+
+/// The emulator serving on `ecs0` in `ns`, its output in `dir/sim.log`.
+fn start_sim(ns: &Netns, dir: &Path) -> Child {
+    let log = std::fs::File::create(dir.join("sim.log")).unwrap();
+    let mut cmd = ns.command(sim_binary());
+    cmd.args(["--interface", "ecs0", "--object", "none", "--control"])
+        .arg(dir.join("sim.ctl"))
+        .env("TELEOP_LOG", "info")
+        .stdout(log.try_clone().unwrap())
+        .stderr(log);
+    let mut sim = die_with_parent(&mut cmd).spawn().unwrap();
+    let start = Instant::now();
+    loop {
+        let text = std::fs::read_to_string(dir.join("sim.log")).unwrap_or_default();
+        if text.contains("revo2: interface ecs0") {
+            return sim;
+        }
+        if let Ok(Some(status)) = sim.try_wait() {
+            panic!("the emulator exited ({status}):\n{text}");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "the emulator did not start:\n{text}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The node on `ecm0` with `transport`, the emulator on `ecs0`, and the test's ports.
+struct Rig {
+    commands: Publisher<HandCommand>,
+    states: Subscriber<HandState>,
+    _runtime: NodeRuntime,
+    node: Option<Child>,
+    sim: Option<Child>,
+    ipc: IpcSettings,
+    dir: tempfile::TempDir,
+    ns: Netns,
+}
+
+impl Rig {
+    fn new(transport: &str) -> Self {
+        teleop_runtime::init_logging();
+        let ns = Netns::new();
+        let dir = tempfile::tempdir().unwrap();
+        let ipc = IpcSettings::isolated(&dir.path().join("iox"));
+        let sim = start_sim(&ns, dir.path());
+        let config = dir.path().join("revo2.toml");
+        std::fs::write(
+            &config,
+            format!("transport = \"{transport}\"\nmax_lost_cycles = 30\n"),
+        )
+        .unwrap();
+        let log = std::fs::File::create(dir.path().join("node.log")).unwrap();
+        let mut cmd = ns.command(env!("CARGO_BIN_EXE_teleop-revo2"));
+        cmd.arg("--config")
+            .arg(&config)
+            .envs(ipc.to_env())
+            .env("TELEOP_LOG", "info")
+            .stdout(log.try_clone().unwrap())
+            .stderr(log);
+        let node = die_with_parent(&mut cmd).spawn().unwrap();
+        let runtime = NodeRuntime::new("revo2-veth-test", &ipc).unwrap();
+        let rig = Self {
+            commands: runtime.publisher().unwrap(),
+            states: runtime.subscriber().unwrap(),
+            _runtime: runtime,
+            node: Some(node),
+            sim: Some(sim),
+            ipc,
+            dir,
+            ns,
+        };
+        rig.wait_state(Duration::from_secs(30), "the hand in OP", |s| {
+            s.link_up == 1 && s.al_state == 8
+        });
+        rig
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("node.log")).unwrap_or_default()
+    }
+
+    fn sim_log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("sim.log")).unwrap_or_default()
+    }
+
+    fn wait_state(
+        &self,
+        timeout: Duration,
+        what: &str,
+        mut ok: impl FnMut(&HandState) -> bool,
+    ) -> HandState {
+        let start = Instant::now();
+        loop {
+            let mut found = None;
+            self.states.drain(|s| {
+                if found.is_none() && ok(s) {
+                    found = Some(*s);
+                }
+            });
+            if let Some(s) = found {
+                return s;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "timed out waiting for {what}\n---- node log ----\n{}\n---- emulator log ----\n{}",
+                self.log(),
+                self.sim_log()
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+
+    /// Publishes position targets every 10 ms until the hand state (link up) reports every
+    /// joint within `tolerance` of its target; returns that state.
+    fn follow(&mut self, targets: [f32; 6], tolerance: f32, timeout: Duration) -> HandState {
+        let start = Instant::now();
+        let mut last = None;
+        loop {
+            let mut c = HandCommand {
+                hand_model: hand_model::REVO2,
+                joint_count: 6,
+                control_mode: control_mode::POSITION,
+                units: units::NORMALISED,
+                ..Default::default()
+            };
+            for (j, t) in c.joints.iter_mut().zip(targets) {
+                j.target = t;
+                j.speed_limit = 2.0;
+            }
+            self.commands.publish(&c).unwrap();
+            std::thread::sleep(Duration::from_millis(10));
+            let mut reached = None;
+            self.states.drain(|s| {
+                if s.link_up == 1 {
+                    last = Some(positions(s));
+                    let close = positions(s)
+                        .iter()
+                        .zip(targets)
+                        .all(|(p, t)| (p - t).abs() <= tolerance);
+                    if close {
+                        reached = Some(*s);
+                    }
+                }
+            });
+            if let Some(s) = reached {
+                return s;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "the hand did not follow {targets:?} (last positions {last:?})\n---- node log ----\n{}",
+                self.log()
+            );
+        }
+    }
+
+    fn node_pid(&self) -> u32 {
+        self.node.as_ref().unwrap().id()
+    }
+
+    fn sim_running(&mut self) -> bool {
+        self.sim.as_mut().unwrap().try_wait().unwrap().is_none()
+    }
+
+    fn node_running(&mut self) -> bool {
+        self.node.as_mut().unwrap().try_wait().unwrap().is_none()
+    }
+
+    /// A command on the emulator's control socket; returns its answer.
+    fn sim_control(&self, line: &str) -> String {
+        let mut conn = UnixStream::connect(self.dir.path().join("sim.ctl")).unwrap();
+        writeln!(conn, "{line}").unwrap();
+        let mut answer = String::new();
+        BufReader::new(conn).read_line(&mut answer).unwrap();
+        answer
+    }
+
+    /// `ip link set ecm0 down`, wait for the node to report the link down, then `up`.
+    ///
+    /// The emulator is told to go quiet (drop frames) for 1.5 s first: `teleop-sim-revo2
+    /// --interface` exits for good when a reply cannot be sent, and a reply racing the
+    /// interface going down fails with ENOBUFS on the veth pair. The node still meets the
+    /// interface reset itself: ethercrab's task's next send fails with ENETDOWN, and so do the
+    /// pump's socket calls.
+    fn reset_master_interface(&mut self) {
+        let answer = self.sim_control("link-down 1.5");
+        assert!(answer.starts_with("ok"), "{answer}");
+        self.ns.ip(&["link", "set", "ecm0", "down"]);
+        self.wait_state(Duration::from_secs(10), "the link reported down", |s| {
+            s.link_up == 0
+        });
+        std::thread::sleep(Duration::from_millis(500));
+        self.ns.ip(&["link", "set", "ecm0", "up"]);
+    }
+}
+
+impl Drop for Rig {
+    fn drop(&mut self) {
+        if let Some(mut node) = self.node.take() {
+            stop(&mut node);
+        }
+        if let Some(mut sim) = self.sim.take() {
+            stop(&mut sim);
+        }
+        if std::thread::panicking() {
+            eprintln!(
+                "---- node log ----\n{}\n---- emulator log ----\n{}",
+                self.log(),
+                self.sim_log()
+            );
+        }
+        self.ipc.remove_shared_memory();
+    }
+}
+
+fn positions(s: &HandState) -> Vec<f32> {
+    s.active_joints().iter().map(|j| j.position).collect()
+}
+
+#[test]
+fn ethercrab_task_reaches_op_follows_commands_and_recovers_with_a_fresh_bus() {
+    skip_unless_privileged!();
+    let _serial = serial();
+    let mut rig = Rig::new("ethercrab:ecm0");
+    let log = rig.log();
+    assert!(
+        log.contains("ethercrab's raw-socket task running") && !log.contains("EtherCAT link open"),
+        "ethercrab's own task carries the frames, not the pump:\n{log}"
+    );
+    assert!(log.contains("Revo2 found") && log.contains("control_fw=1.4.2"));
+    rig.follow(
+        [0.2, 0.3, 0.1, 0.4, 0.5, 0.6],
+        0.02,
+        Duration::from_secs(10),
+    );
+
+    // Admin-down makes the task's next send fail (ENETDOWN): ethercrab's task ends for good and
+    // takes its PDU handles with it. The node reports the link down, and once the interface is
+    // up again opens a fresh bus (new storage, MainDevice and task) in the same process.
+    let pid = rig.node_pid();
+    rig.reset_master_interface();
+    rig.wait_state(Duration::from_secs(20), "the link up again", |s| {
+        s.link_up == 1
+    });
+    assert!(rig.node_running(), "same process");
+    assert_eq!(rig.node_pid(), pid);
+    assert!(rig.sim_running(), "the emulator is still serving");
+    let log = rig.log();
+    assert!(
+        log.contains("ethercrab's task ended") && log.contains("opened a fresh bus"),
+        "{log}"
+    );
+    rig.follow(
+        [0.6, 0.5, 0.7, 0.2, 0.3, 0.1],
+        0.02,
+        Duration::from_secs(10),
+    );
+}
+
+#[test]
+fn pump_on_interface_reaches_op_follows_commands_and_survives_an_interface_reset() {
+    skip_unless_privileged!();
+    let _serial = serial();
+    let mut rig = Rig::new("interface:ecm0");
+    let log = rig.log();
+    assert!(
+        log.contains("EtherCAT link open") && !log.contains("ethercrab's raw-socket task"),
+        "{log}"
+    );
+    rig.follow(
+        [0.2, 0.3, 0.1, 0.4, 0.5, 0.6],
+        0.02,
+        Duration::from_secs(10),
+    );
+
+    // The pump reopens its raw socket and the same bus is brought up again.
+    let pid = rig.node_pid();
+    rig.reset_master_interface();
+    rig.wait_state(Duration::from_secs(20), "the link up again", |s| {
+        s.link_up == 1
+    });
+    assert!(rig.node_running(), "same process");
+    assert_eq!(rig.node_pid(), pid);
+    assert!(rig.sim_running(), "the emulator is still serving");
+    let log = rig.log();
+    assert!(
+        log.contains("EtherCAT link lost") && !log.contains("opened a fresh bus"),
+        "{log}"
+    );
+    rig.follow(
+        [0.6, 0.5, 0.7, 0.2, 0.3, 0.1],
+        0.02,
+        Duration::from_secs(10),
+    );
+}
+
+/// Why the SOEM test cannot run, if it cannot.
+fn pysoem_missing() -> Option<String> {
+    match Command::new("python3")
+        .args(["-c", "import pysoem; print(pysoem.__version__)"])
+        .output()
+    {
+        Ok(o) if o.status.success() => None,
+        Ok(o) => Some(format!(
+            "pysoem is not importable by python3 ({}); pip install -r .ci/requirements.txt",
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        )),
+        Err(e) => Some(format!("no python3: {e}")),
+    }
+}
+
+#[test]
+fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
+    skip_unless_privileged!();
+    if let Some(reason) = pysoem_missing() {
+        eprintln!("skipped: {reason}");
+        return;
+    }
+    let _serial = serial();
+    let ns = Netns::new();
+    let dir = tempfile::tempdir().unwrap();
+    let mut sim = start_sim(&ns, dir.path());
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/soem_op.py");
+    let mut cmd = ns.command("python3");
+    cmd.args([script, "ecm0", "300"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut soem = die_with_parent(&mut cmd).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let status = loop {
+        if let Some(status) = soem.try_wait().unwrap() {
+            break Some(status);
+        }
+        if Instant::now() > deadline {
+            let _ = soem.kill();
+            let _ = soem.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let (mut out, mut err) = (String::new(), String::new());
+    soem.stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    soem.stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    stop(&mut sim);
+    let sim_log = std::fs::read_to_string(dir.path().join("sim.log")).unwrap_or_default();
+    let report = format!("soem_op.py: {status:?}\n{out}{err}\n---- emulator log ----\n{sim_log}");
+    assert!(status.is_some_and(|s| s.success()), "{report}");
+    assert!(
+        out.contains("vendor 0x00bc0000 product 0x00009252") && out.contains("in OP"),
+        "{report}"
+    );
+    assert_eq!(out.lines().last(), Some("OK"), "{report}");
+}
+
+#[test]
+fn ethercrab_transport_without_cap_net_raw_says_how_to_grant_it() {
+    skip_unless_privileged!();
+    if Command::new("setpriv").arg("--version").output().is_err() {
+        eprintln!("skipped: no setpriv (util-linux) to drop CAP_NET_RAW");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let ipc = IpcSettings::isolated(&dir.path().join("iox"));
+    // Root without CAP_NET_RAW in its bounding set: the raw socket is refused (EPERM).
+    let out = Command::new("setpriv")
+        .args(["--bounding-set", "-net_raw", "--"])
+        .arg(env!("CARGO_BIN_EXE_teleop-revo2"))
+        .args(["--transport", "ethercrab:lo"])
+        .envs(ipc.to_env())
+        .env("TELEOP_LOG", "info")
+        .output()
+        .unwrap();
+    ipc.remove_shared_memory();
+    let log = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!out.status.success(), "{log}");
+    assert!(
+        log.contains("setcap cap_net_raw,cap_net_admin=eip")
+            && log.contains("ethercrab's raw EtherCAT socket on lo"),
+        "{log}"
+    );
+}
