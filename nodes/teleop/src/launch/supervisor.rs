@@ -189,6 +189,11 @@ fn spawn(launch: &Launch, process: &Process, ipc: &IpcSettings) -> anyhow::Resul
         .args(&process.args)
         .current_dir(launch.base_dir())
         .envs(ipc.to_env())
+        // The recorder stores the launch file as metadata.
+        .env(
+            "TELEOP_LAUNCH_FILE",
+            std::fs::canonicalize(&launch.path).unwrap_or_else(|_| launch.path.clone()),
+        )
         .envs(&process.env)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())

@@ -1,0 +1,260 @@
+//! Recording the live pipeline: subscribes to every topic of the message contract (any topic
+//! added to `teleop_msgs::topics!` is recorded without code changes here) and writes each sample,
+//! with its receive time, to MCAP through `teleop-recording` (ROS 2 CDR, `ros2msg` schemas,
+//! chunks closed at least every 100 ms). Used by the `teleop-recorder` process and by
+//! `teleop record`.
+//!
+//! The recorder never slows a producer down: iceoryx2 overwrites the oldest queued sample when a
+//! subscriber falls behind; those losses show as gaps in the samples' sequence numbers, which are
+//! counted per topic, logged while recording, written into the file and printed at the end.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use iceoryx2::port::listener::Listener;
+use teleop_msgs::{topics, visit_topic, Message, TopicVisitor};
+use teleop_recording::{
+    RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
+};
+use teleop_runtime::{
+    now_ns, EventLoop, Flow, Input, NodeRuntime, Service, StopReason, Subscriber, Wake,
+};
+
+/// What to record and where.
+#[derive(Debug, Clone)]
+pub struct RecordOptions {
+    /// The file (rotated parts get `_1`, `_2`, ... before `.mcap`).
+    pub out: PathBuf,
+    /// Topics to record (all when `None`).
+    pub topics: Option<Vec<String>>,
+    /// Chunking and rotation.
+    pub writer: WriterOptions,
+    /// Metadata records written at the start of every file.
+    pub metadata: Vec<(String, BTreeMap<String, String>)>,
+    /// Stop after this long (`None`: until SIGINT/SIGTERM).
+    pub duration: Option<Duration>,
+}
+
+/// `recordings/<UTC date>_<time>.mcap` under `dir`.
+pub fn default_path(dir: &Path) -> PathBuf {
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (y, m, d) = civil_from_days((secs / 86_400) as i64);
+    let t = secs % 86_400;
+    dir.join(format!(
+        "{y:04}-{m:02}-{d:02}_{:02}-{:02}-{:02}.mcap",
+        t / 3600,
+        t / 60 % 60,
+        t % 60
+    ))
+}
+
+/// Days since 1970-01-01 to (year, month, day) (Howard Hinnant's algorithm).
+fn civil_from_days(z: i64) -> (i64, u32, u32) {
+    let z = z + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = (doy - (153 * mp + 2) / 5 + 1) as u32;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    (yoe + era * 400 + i64::from(m <= 2), m, d)
+}
+
+/// Metadata every recording carries: the software version, and the launch file named by
+/// `TELEOP_LAUNCH_FILE` (set by `teleop launch`) when there is one.
+pub fn standard_metadata() -> Vec<(String, BTreeMap<String, String>)> {
+    let mut out = vec![(
+        "software".to_string(),
+        BTreeMap::from([
+            ("name".to_string(), "teleop".to_string()),
+            ("version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+        ]),
+    )];
+    if let Some(path) = std::env::var_os("TELEOP_LAUNCH_FILE") {
+        if let Some(m) = file_metadata(Path::new(&path)) {
+            out.push(("launch".to_string(), m));
+        }
+    }
+    out
+}
+
+/// A file's path and text as a metadata record (`None` if unreadable).
+pub fn file_metadata(path: &Path) -> Option<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(path).ok()?;
+    Some(BTreeMap::from([
+        ("file".to_string(), path.display().to_string()),
+        ("text".to_string(), text),
+    ]))
+}
+
+/// One recorded topic.
+trait Tap {
+    fn topic(&self) -> &'static str;
+    fn listener(&self) -> &Listener<Service>;
+    /// Writes every queued sample; returns how many.
+    fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>>;
+    fn dropped(&self) -> u64;
+}
+
+struct TopicTap<M: Message> {
+    sub: Subscriber<M>,
+    id: TopicId,
+}
+
+impl<M: Message> Tap for TopicTap<M> {
+    fn topic(&self) -> &'static str {
+        M::TOPIC
+    }
+    fn listener(&self) -> &Listener<Service> {
+        self.sub.listener()
+    }
+    fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>> {
+        let mut result = Ok(());
+        let n = self.sub.drain(|m| {
+            if result.is_ok() {
+                result = rec.write(self.id, &RecordedMessage::from_sample(m, now_ns()));
+            }
+        });
+        result.map(|()| n).map_err(Box::new)
+    }
+    fn dropped(&self) -> u64 {
+        self.sub.dropped()
+    }
+}
+
+struct MakeTap<'a> {
+    runtime: &'a NodeRuntime,
+    rec: &'a mut Recorder,
+}
+
+impl TopicVisitor for MakeTap<'_> {
+    type Output = anyhow::Result<Box<dyn Tap>>;
+    fn visit<M: Message>(self) -> Self::Output {
+        let id = self.rec.add_message_type::<M>()?;
+        Ok(Box::new(TopicTap::<M> {
+            sub: self.runtime.subscriber()?,
+            id,
+        }))
+    }
+}
+
+/// Records until SIGINT/SIGTERM or the end of `options.duration`, then finishes the file
+/// properly and returns what was written (drops included).
+pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<RecordingSummary> {
+    let mut rec = Recorder::create(&options.out, options.writer.clone(), &options.metadata)?;
+    let names: Vec<&str> = match &options.topics {
+        Some(list) => list.iter().map(String::as_str).collect(),
+        None => topics().iter().map(|t| t.name).collect(),
+    };
+    let mut taps: Vec<Box<dyn Tap>> = Vec::new();
+    for name in names {
+        let tap = visit_topic(
+            name,
+            MakeTap {
+                runtime,
+                rec: &mut rec,
+            },
+        )
+        .ok_or_else(|| {
+            let all: Vec<_> = topics().iter().map(|t| t.name).collect();
+            anyhow::anyhow!("unknown topic {name:?}; topics are: {}", all.join(", "))
+        })??;
+        taps.push(tap);
+    }
+    tracing::info!(file = %options.out.display(), topics = taps.len(), "recording");
+    let start = std::time::Instant::now();
+    let mut reported = vec![0u64; taps.len()];
+    let mut last_report = std::time::Instant::now();
+    let mut failure: Option<anyhow::Error> = None;
+    let inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
+    let stop = EventLoop::new(Duration::from_millis(20)).run(&inputs, |wake| {
+        let result = match wake {
+            Wake::Input(i) => taps[i].drain(&mut rec).map(|_| ()),
+            Wake::Timeout(_) | Wake::Tick => rec.flush_if_due(now_ns()).map_err(Box::new),
+        };
+        if let Err(e) = result {
+            failure = Some(e.into());
+            return Flow::Break(());
+        }
+        if last_report.elapsed() >= Duration::from_secs(1) {
+            last_report = std::time::Instant::now();
+            for (tap, seen) in taps.iter().zip(reported.iter_mut()) {
+                let now = tap.dropped();
+                if now > *seen {
+                    tracing::warn!(
+                        topic = tap.topic(),
+                        lost = now - *seen,
+                        total = now,
+                        "samples lost before the recorder got them"
+                    );
+                    *seen = now;
+                }
+            }
+        }
+        if options.duration.is_some_and(|d| start.elapsed() >= d) {
+            Flow::Break(())
+        } else {
+            Flow::Continue(())
+        }
+    })?;
+    // What is still queued belongs in the file too.
+    for tap in &taps {
+        tap.drain(&mut rec)?;
+        rec.note_drops(tap.topic(), tap.dropped());
+    }
+    let summary = rec.finish()?;
+    if let Some(e) = failure {
+        return Err(e.context("recording stopped early (the file was finished and is readable)"));
+    }
+    tracing::info!(reason = ?stop_reason(stop), messages = summary.messages, "recording finished");
+    Ok(summary)
+}
+
+fn stop_reason(stop: StopReason) -> &'static str {
+    match stop {
+        StopReason::Interrupt => "Ctrl-C",
+        StopReason::Terminate => "SIGTERM",
+        StopReason::Requested => "duration elapsed",
+    }
+}
+
+/// The end-of-recording report: files, then per topic messages and drops.
+pub fn report(summary: &RecordingSummary) -> String {
+    let mut out = String::new();
+    for f in &summary.files {
+        out.push_str(&format!("recorded {}\n", f.display()));
+    }
+    out.push_str(&format!(
+        "{:<22} {:>9} {:>7}\n",
+        "TOPIC", "MESSAGES", "DROPS"
+    ));
+    for t in &summary.topics {
+        out.push_str(&format!(
+            "{:<22} {:>9} {:>7}\n",
+            t.topic, t.messages, t.drops
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(20_778), (2026, 11, 21));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+        let p = default_path(Path::new("recordings"));
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(
+            name.len() == "2026-11-21_08-00-00.mcap".len() && name.ends_with(".mcap"),
+            "{name}"
+        );
+    }
+}

@@ -1,0 +1,80 @@
+//! `teleop-recorder`: records every topic into MCAP until SIGINT/SIGTERM (see the
+//! `teleop_recorder` library).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use teleop_recorder::{
+    default_path, file_metadata, record, report, standard_metadata, RecordOptions,
+};
+use teleop_recording::WriterOptions;
+use teleop_runtime::{init_logging, IpcSettings, NodeRuntime};
+
+#[derive(Parser)]
+#[command(version, about = "Record the pipeline's topics into MCAP")]
+struct Args {
+    /// Output file (default: recordings/<date>_<time>.mcap).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Folder for the default output name.
+    #[arg(long, default_value = "recordings")]
+    dir: PathBuf,
+    /// Record only these topics.
+    #[arg(long, num_args = 1..)]
+    topics: Option<Vec<String>>,
+    /// Start a new file after this many megabytes.
+    #[arg(long)]
+    rotate_mb: Option<u64>,
+    /// Start a new file after this many seconds.
+    #[arg(long)]
+    rotate_s: Option<u64>,
+    /// Embed a file as a metadata record, e.g. `--metadata calibration=config/operator.toml`.
+    #[arg(long, value_parser = parse_metadata)]
+    metadata: Vec<(String, PathBuf)>,
+    /// iceoryx2 node name.
+    #[arg(long, default_value = "recorder")]
+    name: String,
+}
+
+fn parse_metadata(s: &str) -> Result<(String, PathBuf), String> {
+    let (name, path) = s.split_once('=').ok_or("expected NAME=FILE")?;
+    Ok((name.to_string(), PathBuf::from(path)))
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("stopping: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &Args) -> anyhow::Result<()> {
+    let mut metadata = standard_metadata();
+    for (name, path) in &args.metadata {
+        let m = file_metadata(path).ok_or_else(|| {
+            anyhow::anyhow!("--metadata {name}={}: cannot read the file", path.display())
+        })?;
+        metadata.push((name.clone(), m));
+    }
+    let options = RecordOptions {
+        out: args.out.clone().unwrap_or_else(|| default_path(&args.dir)),
+        topics: args.topics.clone(),
+        writer: WriterOptions {
+            rotate_bytes: args.rotate_mb.map(|mb| mb * 1_000_000),
+            rotate_after: args.rotate_s.map(std::time::Duration::from_secs),
+            ..WriterOptions::default()
+        },
+        metadata,
+        duration: None,
+    };
+    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+    let summary = record(&runtime, &options)?;
+    eprint!("{}", report(&summary));
+    Ok(())
+}
