@@ -128,6 +128,9 @@ struct Loop<'a> {
     errors_before: u64,
     /// Link counters at the last health report of the open link.
     reported: LinkStats,
+    /// The connected device, published with every health report (a late subscriber such as the
+    /// recorder gets it within one period).
+    connected: Option<DeviceInfo>,
 }
 
 /// Runs until SIGINT/SIGTERM.
@@ -154,6 +157,7 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
         hot: [false; 5],
         errors_before: 0,
         reported: LinkStats::default(),
+        connected: None,
     };
     teleop_runtime::install_stop_handlers();
     let port = config.port.display().to_string();
@@ -165,12 +169,12 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
         match GloveLink::open(&port, config.baud, config.id, timeout) {
             Ok(mut link) => {
                 tracing::info!(%port, "port open");
-                l.ports.device.publish(&DeviceInfo {
+                l.connected = Some(DeviceInfo {
                     kind: device_kind::GLOVE,
                     id: u32::from(config.id),
                     model: fixed_text("EH55BF1"),
                     ..Default::default()
-                })?;
+                });
                 l.reported = LinkStats::default();
                 backoff = Duration::from_millis(config.reopen_backoff_ms[0]);
                 let why = l.serve(&mut link, &mut last_health);
@@ -430,6 +434,9 @@ impl Loop<'_> {
     }
 
     fn publish_health(&mut self) -> anyhow::Result<()> {
+        if let Some(device) = &self.connected {
+            self.ports.device.publish(device)?;
+        }
         let age = self.ports.forces.age(Instant::now());
         self.ports.health.set_dropped(self.ports.forces.dropped());
         self.ports.health.publish(&[age])?;

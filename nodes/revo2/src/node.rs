@@ -23,6 +23,8 @@ pub const EXPECTED_WKC: u16 = 3;
 
 struct Ports {
     device: Publisher<DeviceInfo>,
+    /// The connected device, published with every health report.
+    connected: Option<DeviceInfo>,
     commands: Subscriber<HandCommand>,
     state: Publisher<HandState>,
     tactile: Publisher<Tactile>,
@@ -42,6 +44,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports {
         device: runtime.publisher()?,
+        connected: None,
         commands: runtime.subscriber()?,
         state: runtime.publisher()?,
         tactile: runtime.publisher()?,
@@ -60,7 +63,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
                     "Revo2 in OP"
                 );
                 backoff = Duration::from_millis(100);
-                ports.device.publish(&device_info(&info))?;
+                ports.connected = Some(device_info(&info));
                 let outcome = cycle(&bus, &group, &info, config, &mut ports, &mut counters);
                 match outcome {
                     Ok(()) => {
@@ -292,6 +295,9 @@ fn cycle(
                     ports
                         .health
                         .publish(&[ports.commands.age(Instant::now())])?;
+                    if let Some(d) = &ports.connected {
+                        ports.device.publish(d)?;
+                    }
                 }
             }
             let _ = last_state;

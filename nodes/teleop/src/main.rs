@@ -9,6 +9,7 @@ mod calibrate;
 mod glove;
 mod inspect;
 mod launch;
+mod recordings;
 mod revo2;
 
 use std::path::PathBuf;
@@ -86,6 +87,63 @@ enum Command {
         #[command(subcommand)]
         command: revo2::Revo2Command,
     },
+    /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
+    Record {
+        /// Output file (default: recordings/<date>_<time>.mcap).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Record only these topics.
+        #[arg(long, num_args = 1..)]
+        topics: Option<Vec<String>>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Republish a recording's samples on their topics with the recorded timing.
+    Replay {
+        /// The recording.
+        file: PathBuf,
+        /// Playback speed (1 = real time).
+        #[arg(long, default_value_t = 1.0, conflicts_with = "max_speed")]
+        speed: f64,
+        /// As fast as possible.
+        #[arg(long)]
+        max_speed: bool,
+        /// Start again at the end, until Ctrl-C.
+        #[arg(long = "loop")]
+        looped: bool,
+        /// Replay only these topics (e.g. `glove/state` to drive the hand from a recorded operator).
+        #[arg(long, num_args = 1..)]
+        topics: Option<Vec<String>>,
+        /// Seconds from the start of the recording to begin at.
+        #[arg(long)]
+        start: Option<f64>,
+        /// Seconds from the start of the recording to end at.
+        #[arg(long)]
+        end: Option<f64>,
+    },
+    /// Inspect or repair recordings.
+    Recordings {
+        #[command(subcommand)]
+        command: RecordingsCommand,
+    },
+    /// Run retargeting and force feedback over a recording's inputs and compare with its outputs.
+    Reprocess {
+        /// The recording.
+        file: PathBuf,
+        /// Where to write inputs and recomputed outputs.
+        #[arg(long)]
+        out: PathBuf,
+        /// Retargeting configuration (default: the node's defaults).
+        #[arg(long)]
+        retarget_config: Option<PathBuf>,
+        /// Operator calibration profile.
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Force-feedback configuration.
+        #[arg(long)]
+        feedback_config: Option<PathBuf>,
+    },
     /// Record an operator calibration profile from the live glove.
     Calibrate {
         /// Where to write the profile.
@@ -100,6 +158,23 @@ enum Command {
         /// Seconds of glove samples averaged per pose.
         #[arg(long, default_value_t = 1.0)]
         capture: f64,
+    },
+}
+
+#[derive(Subcommand)]
+enum RecordingsCommand {
+    /// Topics, message counts, rates, duration, drops and metadata.
+    Info {
+        /// The recording.
+        file: PathBuf,
+    },
+    /// Make a killed recorder's file readable again (every closed chunk is kept).
+    Repair {
+        /// The damaged recording.
+        file: PathBuf,
+        /// Output file (default: FILE with `.repaired.mcap`).
+        #[arg(long)]
+        out: Option<PathBuf>,
     },
 }
 
@@ -122,6 +197,49 @@ fn main() -> ExitCode {
         Command::Stats { seconds } => inspect::stats(&ipc, secs(seconds)),
         Command::Estop { release } => inspect::estop(&ipc, !release),
         Command::Glove { target, command } => glove::run(&target, &command),
+        Command::Record {
+            out,
+            topics,
+            duration,
+        } => recordings::record_cmd(&ipc, out, topics, duration.map(secs)),
+        Command::Replay {
+            file,
+            speed,
+            max_speed,
+            looped,
+            topics,
+            start,
+            end,
+        } => recordings::replay_cmd(
+            &ipc,
+            &file,
+            &recordings::ReplayOptions {
+                speed: (!max_speed).then_some(speed.max(1e-3)),
+                looped,
+                topics,
+                start,
+                end,
+            },
+        ),
+        Command::Recordings { command } => match command {
+            RecordingsCommand::Info { file } => recordings::info_cmd(&file),
+            RecordingsCommand::Repair { file, out } => recordings::repair_cmd(&file, out),
+        },
+        Command::Reprocess {
+            file,
+            out,
+            retarget_config,
+            calibration,
+            feedback_config,
+        } => recordings::reprocess_cmd(
+            &file,
+            &out,
+            &recordings::ReprocessOptions {
+                retarget_config,
+                calibration,
+                feedback_config,
+            },
+        ),
         Command::Revo2 { target, command } => revo2::run(&target, &command),
         Command::Calibrate {
             out,

@@ -1,0 +1,438 @@
+//! `teleop record | replay | recordings info | recordings repair | reprocess`.
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use node_feedback::{Event, FeedbackEngine};
+use node_retarget::RetargetEngine;
+use teleop_msgs::{
+    source_id, visit_topic, EStop, GloveForceCommand, GloveState, HandCommand, HandState, Message,
+    Tactile, TopicVisitor,
+};
+use teleop_recorder::{default_path, record, report, standard_metadata, RecordOptions};
+use teleop_recording::{
+    info as recording_info, read_messages, repair as repair_file, Filter, OwnedMessage,
+    RecordedMessage, Recorder, WriterOptions,
+};
+use teleop_runtime::{IpcSettings, NodeRuntime, Publisher};
+
+pub fn record_cmd(
+    ipc: &IpcSettings,
+    out: Option<PathBuf>,
+    topics: Option<Vec<String>>,
+    duration: Option<Duration>,
+) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new("teleop-record", ipc)?;
+    let options = RecordOptions {
+        out: out.unwrap_or_else(|| default_path(Path::new("recordings"))),
+        topics,
+        writer: WriterOptions::default(),
+        metadata: standard_metadata(),
+        duration,
+    };
+    let summary = record(&runtime, &options)?;
+    print!("{}", report(&summary));
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
+    let info = recording_info(path)?;
+    println!("file       {}", info.path.display());
+    println!(
+        "state      {}",
+        if info.complete {
+            "complete"
+        } else {
+            "not finished (killed recorder?): `teleop recordings repair` makes it indexable"
+        }
+    );
+    println!("duration   {:.3} s", info.duration.as_secs_f64());
+    println!("messages   {}", info.messages);
+    println!(
+        "{:<22} {:<36} {:>9} {:>9} {:>7}",
+        "TOPIC", "SCHEMA", "MESSAGES", "RATE_HZ", "DROPS"
+    );
+    for t in &info.topics {
+        println!(
+            "{:<22} {:<36} {:>9} {:>9.1} {:>7}",
+            t.topic,
+            t.schema_name,
+            t.messages,
+            t.rate_hz,
+            t.drops.map_or("?".to_string(), |d| d.to_string())
+        );
+    }
+    for (name, fields) in &info.metadata {
+        let shown: Vec<String> = fields
+            .iter()
+            .map(|(k, v)| {
+                if v.len() > 60 {
+                    format!("{k}=<{} bytes>", v.len())
+                } else {
+                    format!("{k}={v}")
+                }
+            })
+            .collect();
+        println!("metadata   {name}: {}", shown.join(", "));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+    let out = out.unwrap_or_else(|| path.with_extension("repaired.mcap"));
+    let report = repair_file(path, &out)?;
+    println!(
+        "recovered {} messages into {}{}",
+        report.messages,
+        report.output.display(),
+        if report.input_complete {
+            " (the input was complete already)"
+        } else {
+            ""
+        }
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Republishes recorded samples of one topic.
+trait Replay {
+    fn send(&mut self, payload: &[u8]) -> anyhow::Result<()>;
+}
+
+struct TopicReplay<M: Message>(Publisher<M>);
+
+impl<M: Message> Replay for TopicReplay<M> {
+    fn send(&mut self, payload: &[u8]) -> anyhow::Result<()> {
+        let msg = M::from_bytes(payload).map_err(|e| anyhow::anyhow!("{}: {e}", M::TOPIC))?;
+        // The recorded header is kept: downstream latency accounting sees the original stamps.
+        self.0.send_as_is(&msg)?;
+        Ok(())
+    }
+}
+
+struct MakeReplay<'a>(&'a NodeRuntime);
+
+impl TopicVisitor for MakeReplay<'_> {
+    type Output = anyhow::Result<Box<dyn Replay>>;
+    fn visit<M: Message>(self) -> Self::Output {
+        Ok(Box::new(TopicReplay::<M>(self.0.publisher()?)))
+    }
+}
+
+/// Replay settings.
+pub struct ReplayOptions {
+    pub speed: Option<f64>,
+    pub looped: bool,
+    pub topics: Option<Vec<String>>,
+    pub start: Option<f64>,
+    pub end: Option<f64>,
+}
+
+pub fn replay_cmd(
+    ipc: &IpcSettings,
+    path: &Path,
+    opts: &ReplayOptions,
+) -> anyhow::Result<ExitCode> {
+    let info = recording_info(path)?;
+    let runtime = NodeRuntime::new("teleop-replay", ipc)?;
+    teleop_runtime::install_stop_handlers();
+    let filter = Filter {
+        topics: opts.topics.clone(),
+        start: opts.start.map(Duration::from_secs_f64),
+        end: opts.end.map(Duration::from_secs_f64),
+    };
+    let mut publishers: HashMap<String, Option<Box<dyn Replay>>> = HashMap::new();
+    let total = info.duration.as_secs_f64();
+    loop {
+        let mut first_log: Option<u64> = None;
+        let start = Instant::now();
+        let mut sent = 0u64;
+        let mut last_progress = Instant::now();
+        for msg in read_messages(path, &filter)? {
+            if teleop_runtime::stop_signal().is_some() {
+                eprintln!();
+                return Ok(ExitCode::SUCCESS);
+            }
+            let msg = msg?;
+            let first = *first_log.get_or_insert(msg.log_time_ns);
+            let at = Duration::from_nanos(msg.log_time_ns.saturating_sub(first));
+            if let Some(speed) = opts.speed {
+                teleop_runtime::sleep_until(start + at.div_f64(speed));
+            }
+            let replay = publishers.entry(msg.topic.clone()).or_insert_with(|| {
+                match visit_topic(&msg.topic, MakeReplay(&runtime)) {
+                    Some(Ok(p)) => Some(p),
+                    Some(Err(e)) => {
+                        tracing::warn!("cannot publish {}: {e:#}", msg.topic);
+                        None
+                    }
+                    None => {
+                        tracing::warn!(topic = %msg.topic, "not a topic of the contract: skipped");
+                        None
+                    }
+                }
+            });
+            if let Some(r) = replay {
+                r.send(&msg.payload)?;
+                sent += 1;
+            }
+            if last_progress.elapsed() >= Duration::from_millis(100) {
+                last_progress = Instant::now();
+                progress(at.as_secs_f64(), total, sent);
+            }
+        }
+        progress(total, total, sent);
+        eprintln!();
+        if !opts.looped {
+            break;
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn progress(at: f64, total: f64, sent: u64) {
+    let share = if total > 0.0 {
+        (at / total).clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    let filled = (share * 30.0).round() as usize;
+    let mut err = std::io::stderr().lock();
+    let _ = write!(
+        err,
+        "\r[{}{}] {:5.1}% {:.1}/{:.1} s {sent} messages",
+        "=".repeat(filled),
+        " ".repeat(30 - filled),
+        share * 100.0,
+        at,
+        total
+    );
+    let _ = err.flush();
+}
+
+/// Configuration files for reprocessing.
+pub struct ReprocessOptions {
+    pub retarget_config: Option<PathBuf>,
+    pub calibration: Option<PathBuf>,
+    pub feedback_config: Option<PathBuf>,
+}
+
+/// Differences between recomputed and recorded outputs of one topic.
+#[derive(Default)]
+struct Comparison {
+    recomputed: u64,
+    matched: u64,
+    differing: u64,
+    max_difference: f64,
+}
+
+/// Runs the retargeting and force-feedback engines (the nodes' own code) over the recorded
+/// inputs as fast as possible, writes inputs and recomputed outputs to `out`, and compares them
+/// with the outputs in the recording. Deterministic: no clock, no randomness; every time comes
+/// from the recording.
+pub fn reprocess_cmd(
+    input: &Path,
+    out: &Path,
+    opts: &ReprocessOptions,
+) -> anyhow::Result<ExitCode> {
+    let (rcfg, cal, _) =
+        node_retarget::load(opts.retarget_config.as_deref(), opts.calibration.as_deref())?;
+    let fcfg = node_feedback::load(opts.feedback_config.as_deref())?;
+    let mut retarget = RetargetEngine::new(&rcfg, cal)?;
+    let mut feedback = FeedbackEngine::new(&fcfg)?;
+    let glove_timeout = rcfg.glove_timeout_ms.max(1) * 1_000_000;
+    let tick = fcfg.tick_ms.max(1) * 1_000_000;
+
+    let mut metadata = vec![(
+        "reprocess".to_string(),
+        BTreeMap::from([("input".to_string(), input.display().to_string())]),
+    )];
+    for (name, path) in [
+        ("retarget_config", &opts.retarget_config),
+        ("calibration", &opts.calibration),
+        ("feedback_config", &opts.feedback_config),
+    ] {
+        if let Some(m) = path.as_deref().and_then(teleop_recorder::file_metadata) {
+            metadata.push((name.to_string(), m));
+        }
+    }
+    let _ = std::fs::remove_file(out);
+    let mut rec = Recorder::create(out, WriterOptions::default(), &metadata)?;
+    let glove_id = rec.add_message_type::<GloveState>()?;
+    let state_id = rec.add_message_type::<HandState>()?;
+    let tactile_id = rec.add_message_type::<Tactile>()?;
+    let estop_id = rec.add_message_type::<EStop>()?;
+    let cmd_id = rec.add_message_type::<HandCommand>()?;
+    let force_id = rec.add_message_type::<GloveForceCommand>()?;
+
+    // The recorded outputs, by the origin stamp they descend from (first occurrence).
+    let mut recorded_cmds: HashMap<u64, HandCommand> = HashMap::new();
+    let mut recorded_forces: HashMap<u64, GloveForceCommand> = HashMap::new();
+    let source = source_id("reprocess");
+    let mut cmds = Comparison::default();
+    let mut forces = Comparison::default();
+    let mut out_cmds: Vec<(u64, HandCommand)> = Vec::new();
+    let mut out_forces: Vec<(u64, GloveForceCommand)> = Vec::new();
+    let mut last_glove: Option<u64> = None;
+    let mut next_tick: Option<u64> = None;
+    let mut counter = 0u64;
+    let mut finalize = |mut header: teleop_msgs::SampleHeader, t: u64, origin: u64| {
+        counter += 1;
+        header.seq = counter;
+        header.stamp_ns = t;
+        header.origin_ns = if origin == 0 { t } else { origin };
+        header.source_id = source;
+        header
+    };
+
+    let messages: Vec<OwnedMessage> =
+        read_messages(input, &Filter::all())?.collect::<Result<_, _>>()?;
+    // The recorded outputs are logged after the inputs they answer: index them first.
+    for msg in &messages {
+        match msg.topic.as_str() {
+            "hand/command" => {
+                if let Some(c) = msg.decode::<HandCommand>() {
+                    recorded_cmds.entry(c.header.origin_ns).or_insert(c);
+                }
+            }
+            "glove/force_command" => {
+                if let Some(c) = msg.decode::<GloveForceCommand>() {
+                    recorded_forces.entry(c.header.origin_ns).or_insert(c);
+                }
+            }
+            _ => {}
+        }
+    }
+    for msg in &messages {
+        let t = msg.log_time_ns;
+        // Feedback ticks between events.
+        while let Some(due) = next_tick.filter(|&due| due <= t) {
+            if let Some(mut c) = feedback.handle(&Event::Tick, due).command {
+                c.header = finalize(c.header, due, c.header.origin_ns);
+                out_forces.push((due, c));
+            }
+            next_tick = Some(due + tick);
+        }
+        match msg.topic.as_str() {
+            "glove/state" => {
+                let s: GloveState = msg
+                    .decode()
+                    .ok_or_else(|| anyhow::anyhow!("bad glove/state payload"))?;
+                rec.write(glove_id, &RecordedMessage::from_sample(&s, t))?;
+                // The node's watchdog fires every timeout while the glove is silent.
+                if let Some(prev) = last_glove {
+                    let mut due = prev + glove_timeout;
+                    while due < t {
+                        if let Some(mut c) = retarget.on_timeout().command {
+                            c.header = finalize(c.header, due, c.header.origin_ns);
+                            out_cmds.push((due, c));
+                        }
+                        due += glove_timeout;
+                    }
+                }
+                last_glove = Some(t);
+                if let Some(mut c) = retarget.on_glove(&s).command {
+                    c.header = finalize(c.header, t, c.header.origin_ns);
+                    let _ = feedback.handle(&Event::Command(c), t);
+                    out_cmds.push((t, c));
+                }
+            }
+            "hand/state" => {
+                let s: HandState = msg
+                    .decode()
+                    .ok_or_else(|| anyhow::anyhow!("bad hand/state payload"))?;
+                rec.write(state_id, &RecordedMessage::from_sample(&s, t))?;
+                next_tick.get_or_insert(t + tick);
+                if let Some(mut c) = feedback.handle(&Event::State(s), t).command {
+                    c.header = finalize(c.header, t, c.header.origin_ns);
+                    out_forces.push((t, c));
+                }
+            }
+            "hand/tactile" => {
+                let s: Tactile = msg
+                    .decode()
+                    .ok_or_else(|| anyhow::anyhow!("bad hand/tactile payload"))?;
+                rec.write(tactile_id, &RecordedMessage::from_sample(&s, t))?;
+                next_tick.get_or_insert(t + tick);
+                if let Some(mut c) = feedback.handle(&Event::Tactile(s), t).command {
+                    c.header = finalize(c.header, t, c.header.origin_ns);
+                    out_forces.push((t, c));
+                }
+            }
+            "estop" => {
+                let s: EStop = msg
+                    .decode()
+                    .ok_or_else(|| anyhow::anyhow!("bad estop payload"))?;
+                rec.write(estop_id, &RecordedMessage::from_sample(&s, t))?;
+                if let Some(mut c) = feedback.handle(&Event::EStop(s), t).command {
+                    c.header = finalize(c.header, t, c.header.origin_ns);
+                    out_forces.push((t, c));
+                }
+            }
+            _ => {}
+        }
+        // Write outputs as they are produced, keeping the file in time order.
+        for (at, c) in out_cmds.drain(..) {
+            rec.write(cmd_id, &RecordedMessage::from_sample(&c, at))?;
+            compare_cmd(&mut cmds, &c, recorded_cmds.get(&c.header.origin_ns));
+        }
+        for (at, c) in out_forces.drain(..) {
+            rec.write(force_id, &RecordedMessage::from_sample(&c, at))?;
+            compare_force(&mut forces, &c, recorded_forces.get(&c.header.origin_ns));
+        }
+    }
+    let summary = rec.finish()?;
+    println!(
+        "reprocessed {} messages of {} into {}",
+        messages.len(),
+        input.display(),
+        out.display()
+    );
+    println!(
+        "{:<22} {:>10} {:>10} {:>8} {:>12}",
+        "OUTPUT", "RECOMPUTED", "MATCHED", "DIFFER", "MAX_DIFF"
+    );
+    for (name, c) in [("hand/command", &cmds), ("glove/force_command", &forces)] {
+        println!(
+            "{name:<22} {:>10} {:>10} {:>8} {:>12.6}",
+            c.recomputed, c.matched, c.differing, c.max_difference
+        );
+    }
+    let _ = summary;
+    Ok(ExitCode::SUCCESS)
+}
+
+fn compare_cmd(c: &mut Comparison, new: &HandCommand, old: Option<&HandCommand>) {
+    c.recomputed += 1;
+    let Some(old) = old else { return };
+    c.matched += 1;
+    let d = new
+        .active_joints()
+        .iter()
+        .zip(old.active_joints())
+        .map(|(a, b)| f64::from((a.target - b.target).abs()))
+        .fold(0.0, f64::max);
+    if d > 1e-6 {
+        c.differing += 1;
+    }
+    c.max_difference = c.max_difference.max(d);
+}
+
+fn compare_force(c: &mut Comparison, new: &GloveForceCommand, old: Option<&GloveForceCommand>) {
+    c.recomputed += 1;
+    let Some(old) = old else { return };
+    c.matched += 1;
+    let d = new
+        .force
+        .iter()
+        .zip(old.force)
+        .map(|(a, b)| f64::from((i32::from(*a) - i32::from(b)).abs()))
+        .fold(0.0, f64::max);
+    if d > 0.0 {
+        c.differing += 1;
+    }
+    c.max_difference = c.max_difference.max(d);
+}
