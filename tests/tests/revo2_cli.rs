@@ -88,6 +88,11 @@ fn info_set_and_calibrate_on_the_emulated_revo2() {
         !ok && out.to_lowercase().contains("read"),
         "read-only: {out}"
     );
+    let (ok, out) = revo2(&sandbox, &transport, &["set", "ctrl_sn", "RV2C0001"]);
+    assert!(
+        !ok && out.contains("segmented"),
+        "strings need a segmented download: {out}"
+    );
     let (ok, out) = revo2(&sandbox, &transport, &["set", "no_such_thing", "1"]);
     assert!(!ok && out.contains("no_such_thing"), "{out}");
 

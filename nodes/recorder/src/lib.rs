@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use iceoryx2::port::listener::Listener;
-use teleop_msgs::{topics, visit_topic, Message, TopicVisitor};
+use teleop_msgs::Message;
+use teleop_msgs::{device_kind, text_of, topics, visit_topic, DeviceInfo, TopicVisitor};
 use teleop_recording::{
     RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
 };
@@ -165,14 +166,33 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         })??;
         taps.push(tap);
     }
+    // Device identities also go into metadata records ("device.glove", "device.revo2").
+    let devices = runtime.subscriber::<DeviceInfo>()?;
+    let mut known: Vec<DeviceInfo> = Vec::new();
     tracing::info!(file = %options.out.display(), topics = taps.len(), "recording");
     let start = std::time::Instant::now();
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
     let mut failure: Option<anyhow::Error> = None;
-    let inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
+    let mut inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
+    inputs.push(Input::new(devices.listener()));
+    let device_input = inputs.len() - 1;
     let stop = EventLoop::new(Duration::from_millis(20)).run(&inputs, |wake| {
         let result = match wake {
+            Wake::Input(i) if i == device_input => {
+                let mut result = Ok(());
+                devices.drain(|d| {
+                    if result.is_ok() && !known.iter().any(|k| same_identity(k, d)) {
+                        known.retain(|k| !same_device(k, d));
+                        known.push(*d);
+                        result = rec.add_metadata(
+                            &format!("device.{}", kind_name(d.kind)),
+                            device_fields(d),
+                        );
+                    }
+                });
+                result.map_err(Box::new)
+            }
             Wake::Input(i) => taps[i].drain(&mut rec).map(|_| ()),
             Wake::Timeout(_) | Wake::Tick => rec.flush_if_due(now_ns()).map_err(Box::new),
         };
@@ -212,6 +232,45 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     }
     tracing::info!(reason = ?stop_reason(stop), messages = summary.messages, "recording finished");
     Ok(summary)
+}
+
+fn same_device(a: &DeviceInfo, b: &DeviceInfo) -> bool {
+    a.kind == b.kind && a.id == b.id
+}
+
+/// Same device with the same firmware and serial numbers (the header differs every time).
+fn same_identity(a: &DeviceInfo, b: &DeviceInfo) -> bool {
+    same_device(a, b)
+        && (a.model, a.firmware_a, a.firmware_b, a.serial_a, a.serial_b)
+            == (b.model, b.firmware_a, b.firmware_b, b.serial_a, b.serial_b)
+}
+
+fn kind_name(kind: u8) -> &'static str {
+    match kind {
+        device_kind::GLOVE => "glove",
+        device_kind::REVO2 => "revo2",
+        _ => "other",
+    }
+}
+
+/// A device identity as metadata fields.
+fn device_fields(d: &DeviceInfo) -> BTreeMap<String, String> {
+    let mut m = BTreeMap::from([
+        ("model".to_string(), text_of(&d.model)),
+        ("id".to_string(), d.id.to_string()),
+    ]);
+    for (k, v) in [
+        ("firmware", &d.firmware_a),
+        ("firmware_2", &d.firmware_b),
+        ("serial", &d.serial_a),
+        ("serial_2", &d.serial_b),
+    ] {
+        let t = text_of(v);
+        if !t.is_empty() {
+            m.insert(k.to_string(), t);
+        }
+    }
+    m
 }
 
 fn stop_reason(stop: StopReason) -> &'static str {

@@ -429,6 +429,25 @@ impl Recorder {
         }
     }
 
+    /// Adds a metadata record now (e.g. a device identity learnt while recording). It is written
+    /// into the current file and repeated at the start of every later part; a record of the same
+    /// name given at creation is replaced for later parts.
+    pub fn add_metadata(
+        &mut self,
+        name: &str,
+        fields: BTreeMap<String, String>,
+    ) -> Result<(), RecordingError> {
+        self.writer
+            .write_metadata(&Metadata {
+                name: name.to_string(),
+                metadata: fields.clone(),
+            })
+            .map_err(|e| RecordingError::mcap(&self.current, e))?;
+        self.metadata.retain(|(n, _)| n != name);
+        self.metadata.push((name.to_string(), fields));
+        Ok(())
+    }
+
     /// Finishes the current file properly (drops record, summary, indexes, footer) and returns
     /// every path written with per-topic counts and drops.
     pub fn finish(mut self) -> Result<RecordingSummary, RecordingError> {
