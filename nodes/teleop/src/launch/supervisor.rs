@@ -5,6 +5,7 @@
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::{Node, NodeState, NodeView};
@@ -41,10 +42,12 @@ pub fn run(
     teleop_runtime::install_stop_handlers();
     let config = ipc.config()?;
     clean_dead_nodes(&config);
+    let mut watch = super::summary::SessionWatch::new(ipc)?;
+    let recordings: Arc<Mutex<Vec<String>>> = Arc::default();
     let started = Instant::now();
     let mut slots: Vec<Slot> = Vec::with_capacity(launch.processes.len());
     for process in &launch.processes {
-        let child = spawn(launch, process, ipc)?;
+        let child = spawn(launch, process, ipc, &recordings)?;
         slots.push(Slot {
             process,
             child: Some(child),
@@ -65,6 +68,7 @@ pub fn run(
     let mut last_liveness = Instant::now();
     let outcome = loop {
         std::thread::sleep(Duration::from_millis(50));
+        watch.poll();
         match teleop_runtime::stop_signal() {
             None => {}
             Some(libc::SIGTERM) => break Outcome::Stopped("SIGTERM"),
@@ -81,7 +85,7 @@ pub fn run(
             if slot.restart_at.is_some_and(|t| Instant::now() >= t) {
                 slot.restart_at = None;
                 clean_dead_nodes(&config);
-                match spawn(launch, slot.process, ipc) {
+                match spawn(launch, slot.process, ipc, &recordings) {
                     Ok(child) => {
                         slot.child = Some(child);
                         slot.started = Instant::now();
@@ -116,6 +120,13 @@ pub fn run(
         }
     }
     clean_dead_nodes(&config);
+    watch.poll();
+    let restarts: Vec<(String, u32)> = slots
+        .iter()
+        .map(|s| (s.process.name.clone(), s.restarts))
+        .collect();
+    let recorded = recordings.lock().map(|r| r.clone()).unwrap_or_default();
+    print!("{}", watch.report(started.elapsed(), &restarts, &recorded));
     Ok(outcome)
 }
 
@@ -182,7 +193,12 @@ fn describe(status: ExitStatus) -> String {
     }
 }
 
-fn spawn(launch: &Launch, process: &Process, ipc: &IpcSettings) -> anyhow::Result<Child> {
+fn spawn(
+    launch: &Launch,
+    process: &Process,
+    ipc: &IpcSettings,
+    recordings: &Arc<Mutex<Vec<String>>>,
+) -> anyhow::Result<Child> {
     let program = launch.resolve_program(process);
     let mut command = Command::new(&program);
     command
@@ -219,22 +235,35 @@ fn spawn(launch: &Launch, process: &Process, ipc: &IpcSettings) -> anyhow::Resul
     })?;
     tracing::info!(process = %process.name, pid = child.id(), program = %program.display(), "started");
     if let Some(out) = child.stdout.take() {
-        forward(&process.name, out)?;
+        forward(&process.name, out, recordings.clone())?;
     }
     if let Some(err) = child.stderr.take() {
-        forward(&process.name, err)?;
+        forward(&process.name, err, recordings.clone())?;
     }
     Ok(child)
 }
 
-/// Copies a child's output line by line to our stderr, tagged with the process name.
-fn forward(name: &str, stream: impl Read + Send + 'static) -> anyhow::Result<()> {
+/// Copies a child's output line by line to our stderr, tagged with the process name, and notes
+/// the files a recorder reports (`recorded PATH`) for the session summary.
+fn forward(
+    name: &str,
+    stream: impl Read + Send + 'static,
+    recordings: Arc<Mutex<Vec<String>>>,
+) -> anyhow::Result<()> {
     let tag = name.to_string();
     std::thread::Builder::new()
         .name(format!("log-{name}"))
         .spawn(move || {
             for line in BufReader::new(stream).lines() {
                 let Ok(line) = line else { break };
+                if let Some(path) = line
+                    .strip_prefix("recorded ")
+                    .filter(|p| p.ends_with(".mcap"))
+                {
+                    if let Ok(mut r) = recordings.lock() {
+                        r.push(path.to_string());
+                    }
+                }
                 let mut err = std::io::stderr().lock();
                 let _ = writeln!(err, "{tag:>12} | {line}");
             }

@@ -1,0 +1,219 @@
+//! What `teleop launch` prints when a session ends: per-topic rates, latency since the device
+//! sample (p50/p99/max, from the headers), drops, the faults the nodes handled, restarts, and
+//! where the recording is. Collected during the session by subscribing to every topic, with
+//! fixed-size histograms so that a long session does not grow memory.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use teleop_msgs::{topics, visit_topic, Message, NodeHealth, TopicVisitor};
+use teleop_runtime::{NodeRuntime, Subscriber};
+
+/// Latency histogram with about 5 % resolution from 1 us to about 100 s.
+pub struct Histogram {
+    buckets: Vec<u64>,
+    count: u64,
+    max_us: u64,
+}
+
+const GROWTH: f64 = 1.05;
+const BUCKETS: usize = 400;
+
+impl Histogram {
+    fn new() -> Self {
+        Self {
+            buckets: vec![0; BUCKETS],
+            count: 0,
+            max_us: 0,
+        }
+    }
+
+    fn add(&mut self, us: u64) {
+        let i = (((us + 1) as f64).ln() / GROWTH.ln()) as usize;
+        self.buckets[i.min(BUCKETS - 1)] += 1;
+        self.count += 1;
+        self.max_us = self.max_us.max(us);
+    }
+
+    /// The value below which `q` of the samples lie (upper bucket edge), in us.
+    fn quantile(&self, q: f64) -> Option<f64> {
+        if self.count == 0 {
+            return None;
+        }
+        let target = (q * self.count as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (i, n) in self.buckets.iter().enumerate() {
+            seen += n;
+            if seen >= target {
+                return Some((GROWTH.powi(i as i32 + 1) - 1.0).min(self.max_us as f64));
+            }
+        }
+        Some(self.max_us as f64)
+    }
+}
+
+trait Probe {
+    fn poll(&mut self);
+    fn line(&self, seconds: f64) -> String;
+}
+
+struct TopicProbe<M: Message> {
+    sub: Subscriber<M>,
+    count: u64,
+    latency: Histogram,
+    dropped_before: u64,
+}
+
+impl<M: Message> Probe for TopicProbe<M> {
+    fn poll(&mut self) {
+        let (count, latency) = (&mut self.count, &mut self.latency);
+        self.sub.drain(|m| {
+            let h = m.header();
+            *count += 1;
+            latency.add(h.stamp_ns.saturating_sub(h.origin_ns) / 1000);
+        });
+    }
+
+    fn line(&self, seconds: f64) -> String {
+        let ms = |q: f64| {
+            self.latency
+                .quantile(q)
+                .map_or("-".to_string(), |us| format!("{:.3}", us / 1000.0))
+        };
+        format!(
+            "{:<22} {:>9.1} {:>9} {:>9} {:>9} {:>7}",
+            M::TOPIC,
+            self.count as f64 / seconds.max(1e-9),
+            ms(0.5),
+            ms(0.99),
+            if self.latency.count > 0 {
+                format!("{:.3}", self.latency.max_us as f64 / 1000.0)
+            } else {
+                "-".into()
+            },
+            self.sub.dropped().saturating_sub(self.dropped_before)
+        )
+    }
+}
+
+struct MakeProbe<'a>(&'a NodeRuntime);
+
+impl TopicVisitor for MakeProbe<'_> {
+    type Output = anyhow::Result<Box<dyn Probe>>;
+    fn visit<M: Message>(self) -> Self::Output {
+        let sub = self.0.subscriber::<M>()?;
+        // The history sample predates the session.
+        sub.drain(|_| {});
+        let dropped_before = sub.dropped();
+        Ok(Box::new(TopicProbe::<M> {
+            sub,
+            count: 0,
+            latency: Histogram::new(),
+            dropped_before,
+        }))
+    }
+}
+
+/// Watches a running session.
+pub struct SessionWatch {
+    probes: Vec<Box<dyn Probe>>,
+    health: Subscriber<NodeHealth>,
+    latest: BTreeMap<String, NodeHealth>,
+    _runtime: NodeRuntime,
+}
+
+impl SessionWatch {
+    /// Subscribes to every topic of the contract.
+    pub fn new(ipc: &teleop_runtime::IpcSettings) -> anyhow::Result<Self> {
+        let runtime = NodeRuntime::new("teleop-launch", ipc)?;
+        let mut probes = Vec::new();
+        for t in topics() {
+            if let Some(p) = visit_topic(t.name, MakeProbe(&runtime)) {
+                probes.push(p?);
+            }
+        }
+        Ok(Self {
+            probes,
+            health: runtime.subscriber()?,
+            latest: BTreeMap::new(),
+            _runtime: runtime,
+        })
+    }
+
+    /// Takes everything that arrived since the last call.
+    pub fn poll(&mut self) {
+        for p in &mut self.probes {
+            p.poll();
+        }
+        let latest = &mut self.latest;
+        self.health.drain(|h| {
+            latest.insert(h.name(), *h);
+        });
+    }
+
+    /// The summary text.
+    pub fn report(
+        &self,
+        elapsed: Duration,
+        restarts: &[(String, u32)],
+        recordings: &[String],
+    ) -> String {
+        let s = elapsed.as_secs_f64();
+        let mut out = format!(
+            "\nsession summary ({s:.1} s); latency = stamp - device sample (origin), ms\n{:<22} {:>9} {:>9} {:>9} {:>9} {:>7}\n",
+            "TOPIC", "RATE_HZ", "LAT_P50", "LAT_P99", "LAT_MAX", "DROPS"
+        );
+        for p in &self.probes {
+            out.push_str(&p.line(s));
+            out.push('\n');
+        }
+        out.push_str(&format!(
+            "{:<22} {:>9} {:>9} {:>9} {:>9}\n",
+            "NODE", "TIMEOUTS", "ERRORS", "CLAMPS", "DROPS"
+        ));
+        for (name, h) in &self.latest {
+            out.push_str(&format!(
+                "{name:<22} {:>9} {:>9} {:>9} {:>9}\n",
+                h.timeouts, h.errors, h.clamps, h.dropped
+            ));
+        }
+        let restarted: Vec<String> = restarts
+            .iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(p, n)| format!("{p} x{n}"))
+            .collect();
+        out.push_str(&format!(
+            "restarts: {}\n",
+            if restarted.is_empty() {
+                "none".to_string()
+            } else {
+                restarted.join(", ")
+            }
+        ));
+        for r in recordings {
+            out.push_str(&format!("recording: {r}\n"));
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn histogram_quantiles_within_five_percent() {
+        let mut h = Histogram::new();
+        for us in 1..=1000 {
+            h.add(us);
+        }
+        let p50 = h.quantile(0.5).unwrap();
+        assert!((p50 - 500.0).abs() / 500.0 < 0.06, "{p50}");
+        let p99 = h.quantile(0.99).unwrap();
+        assert!((p99 - 990.0).abs() / 990.0 < 0.06, "{p99}");
+        assert_eq!(h.quantile(1.0).unwrap(), 1000.0);
+        assert!(Histogram::new().quantile(0.5).is_none());
+        h.add(u64::MAX / 2);
+        assert!(h.quantile(1.0).unwrap() > 1e9);
+    }
+}
