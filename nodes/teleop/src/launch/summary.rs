@@ -40,11 +40,18 @@ impl Histogram {
         if self.count == 0 {
             return None;
         }
+        if q >= 1.0 {
+            return Some(self.max_us as f64);
+        }
         let target = (q * self.count as f64).ceil().max(1.0) as u64;
         let mut seen = 0;
         for (i, n) in self.buckets.iter().enumerate() {
             seen += n;
             if seen >= target {
+                // The last bucket also holds everything above the range: report the maximum.
+                if i == BUCKETS - 1 {
+                    return Some(self.max_us as f64);
+                }
                 return Some((GROWTH.powi(i as i32 + 1) - 1.0).min(self.max_us as f64));
             }
         }
