@@ -58,6 +58,71 @@ impl Sandbox {
         path
     }
 
+    /// The repository's top folder.
+    pub fn repo() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    }
+
+    /// Writes the default simulated session (the repository's `launch.toml` and `config/`) into
+    /// the sandbox with its device paths, socket and recording folder moved inside the sandbox,
+    /// so that sessions of parallel tests never meet. `patch` may change the launch file text.
+    /// Returns the launch file's path.
+    pub fn default_session(&self, patch: impl Fn(String) -> String) -> PathBuf {
+        let repo = Self::repo();
+        let dir = self.dir.path();
+        let relocate = |text: String| {
+            text.replace(
+                "/tmp/teleop-glove",
+                &dir.join("glove").display().to_string(),
+            )
+            .replace(
+                "/tmp/teleop-revo2.sock",
+                &dir.join("revo2.sock").display().to_string(),
+            )
+        };
+        for name in ["glove.toml", "revo2.toml", "retarget.toml", "feedback.toml"] {
+            let text =
+                std::fs::read_to_string(repo.join("config").join(name)).expect("config file");
+            self.write(&format!("config/{name}"), &relocate(text));
+        }
+        let launch = std::fs::read_to_string(repo.join("launch.toml")).expect("launch.toml");
+        self.write("launch.toml", &patch(relocate(launch)))
+    }
+
+    /// Sends one command to a simulator's control socket and returns its one-line answer.
+    pub fn control(&self, socket: &str, command: &str) -> String {
+        use std::io::{BufRead, BufReader, Write};
+        let path = self.dir.path().join(socket);
+        let mut stream = std::os::unix::net::UnixStream::connect(&path)
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        writeln!(stream, "{command}").expect("send command");
+        stream
+            .shutdown(std::net::Shutdown::Write)
+            .expect("shutdown");
+        let mut reply = String::new();
+        BufReader::new(stream).read_line(&mut reply).expect("reply");
+        reply
+    }
+
+    /// Pid of the live iceoryx2 node `name` (from `teleop nodes`).
+    pub fn pid_of(&self, name: &str) -> Option<u32> {
+        let out = String::from_utf8(self.run_teleop(&["nodes"]).stdout).ok()?;
+        out.lines()
+            .find(|l| l.split_whitespace().next() == Some(name) && l.contains("alive"))
+            .and_then(|l| l.split_whitespace().nth(2)?.parse().ok())
+    }
+
+    /// Pid of a running process whose command line contains `needle` (for processes without an
+    /// iceoryx2 node, such as the device simulators).
+    pub fn pid_with_arg(needle: &str) -> Option<u32> {
+        std::fs::read_dir("/proc").ok()?.flatten().find_map(|e| {
+            let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+            let cmd = std::fs::read(e.path().join("cmdline")).ok()?;
+            let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+            cmd.contains(needle).then_some(pid)
+        })
+    }
+
     /// A `teleop` command with this sandbox's IPC settings.
     pub fn teleop(&self) -> Command {
         let mut cmd = Command::new(bin("teleop"));

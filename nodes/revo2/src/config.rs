@@ -93,9 +93,9 @@ pub struct Revo2Config {
     pub cycle_hz: f64,
     /// A hand command older than this is stale: the hand holds its position.
     pub stale_command_ms: u64,
-    /// Cycles in a row without a valid exchange before the link counts as lost and the bus is
-    /// brought up again.
-    pub max_lost_cycles: u32,
+    /// Without a valid exchange (answer with the right working counter, device in OP) for this
+    /// long, the link counts as lost: `hand/state` says so and the bus is brought up again.
+    pub link_timeout_ms: u64,
     /// Tactile data source.
     pub tactile: TactileSource,
     /// SDO polling rate of the tactile object when it is not in the process data.
@@ -121,7 +121,7 @@ impl Default for Revo2Config {
             transport: "sim:/tmp/teleop-revo2.sock".into(),
             cycle_hz: 1000.0,
             stale_command_ms: 100,
-            max_lost_cycles: 50,
+            link_timeout_ms: 100,
             tactile: TactileSource::Pdo,
             tactile_poll_hz: 50.0,
             full_speed_travel_per_s: 2.0,
@@ -174,8 +174,8 @@ impl Revo2Config {
                 ));
             }
         }
-        if self.max_lost_cycles == 0 {
-            return Err("max_lost_cycles must be > 0".into());
+        if self.link_timeout_ms == 0 {
+            return Err("link_timeout_ms must be > 0".into());
         }
         Ok(transport)
     }

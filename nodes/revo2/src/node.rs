@@ -161,6 +161,9 @@ fn cycle(
             let mut stale = true;
             let mut holding = false;
             let mut lost_in_a_row = 0u32;
+            let mut wrong_in_a_row = 0u32;
+            let mut last_good = Instant::now();
+            let link_timeout = Duration::from_millis(config.link_timeout_ms);
             let mut last_health = Instant::now();
             let mut last_state = teleop_msgs::HandState::default();
             while teleop_runtime::stop_signal().is_none() {
@@ -222,16 +225,37 @@ fn cycle(
                         counters.lost_frames += 1;
                         lost_in_a_row += 1;
                         tracing::debug!("cycle lost: {e}");
-                        if lost_in_a_row >= config.max_lost_cycles {
+                        if last_good.elapsed() > link_timeout {
                             anyhow::bail!(
-                                "{lost_in_a_row} cycles in a row without an answer ({e})"
+                                "no answer for {} ms ({lost_in_a_row} cycles; {e})",
+                                last_good.elapsed().as_millis()
                             );
                         }
                         continue;
                     }
                 };
+                // The AL state comes in the same frame; check it first: a device that lost OP
+                // (watchdog, power cycle, emulator restart) also answers with a wrong working
+                // counter, which must not hide it.
+                let state = response.subdevice_states.first().copied();
+                match state {
+                    Some(ethercrab::SubDeviceState::Op) => {}
+                    Some(ethercrab::SubDeviceState::SafeOp) => {
+                        let code = block_on(recover_op(md, group))?;
+                        counters.recoveries += 1;
+                        tracing::warn!(
+                            al_status_code = format!("{code:#06x}"),
+                            "Revo2 dropped to SAFE-OP: acknowledged, OP requested"
+                        );
+                        ports.health.count_error();
+                        holding = false; // re-send the hold/command after recovery
+                        continue;
+                    }
+                    other => anyhow::bail!("the Revo2 left OP ({other:?})"),
+                }
                 if response.working_counter != EXPECTED_WKC {
                     counters.wkc_errors += 1;
+                    wrong_in_a_row += 1;
                     if counters.wkc_errors % 100 == 1 {
                         tracing::warn!(
                             wkc = response.working_counter,
@@ -240,29 +264,15 @@ fn cycle(
                             "wrong working counter: inputs of this cycle ignored"
                         );
                     }
+                    if last_good.elapsed() > link_timeout {
+                        anyhow::bail!(
+                            "{wrong_in_a_row} cycles in a row with a wrong working counter"
+                        );
+                    }
                     continue;
                 }
-                let in_op = response
-                    .subdevice_states
-                    .first()
-                    .is_some_and(|s| *s == ethercrab::SubDeviceState::Op);
-                if !in_op {
-                    let state = response.subdevice_states.first().copied();
-                    match state {
-                        Some(ethercrab::SubDeviceState::SafeOp) => {
-                            let code = block_on(recover_op(md, group))?;
-                            counters.recoveries += 1;
-                            tracing::warn!(
-                                al_status_code = format!("{code:#06x}"),
-                                "Revo2 dropped to SAFE-OP: acknowledged, OP requested"
-                            );
-                            ports.health.count_error();
-                            holding = false; // re-send the hold/command after recovery
-                            continue;
-                        }
-                        other => anyhow::bail!("the Revo2 left OP ({other:?})"),
-                    }
-                }
+                wrong_in_a_row = 0;
+                last_good = Instant::now();
                 let inputs = {
                     let io = sd.io_raw();
                     Inputs::unpack(io.inputs(), &assignment)

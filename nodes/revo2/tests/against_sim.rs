@@ -82,7 +82,7 @@ impl Rig {
         std::fs::write(
             &config,
             format!(
-                "transport = \"sim:{}\"\nmax_lost_cycles = 30\n{extra_config}",
+                "transport = \"sim:{}\"\nlink_timeout_ms = 100\n{extra_config}",
                 socket.display()
             ),
         )

@@ -245,7 +245,7 @@ impl Rig {
         let config = dir.path().join("revo2.toml");
         std::fs::write(
             &config,
-            format!("transport = \"{transport}\"\nmax_lost_cycles = 30\n"),
+            format!("transport = \"{transport}\"\nlink_timeout_ms = 100\n"),
         )
         .unwrap();
         let log = std::fs::File::create(dir.path().join("node.log")).unwrap();

@@ -5,7 +5,7 @@
 //! echo "fault drop=0.2" | socat - UNIX-CONNECT:/tmp/glove.ctl
 //! ```
 //! Commands: `fault NAME=P` (garbage, drop, corrupt, other-id), `clear`, `unplug SECONDS`,
-//! `stats`.
+//! `stats`, `state` (the force set-points the device has and the positions it reports).
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixListener;
@@ -147,6 +147,18 @@ fn command(sim: &SimGlove, line: &str) -> String {
             _ => "error: unplug SECONDS".into(),
         },
         "stats" => format!("{:?}", sim.stats()),
-        _ => format!("error: unknown command {word:?}: fault NAME=P, clear, unplug SECONDS, stats"),
+        "state" => match sim.device() {
+            Some(d) => format!(
+                "id={} baud={} force_set={:?} positions={:?}",
+                d.id,
+                d.baud.bits_per_second(),
+                d.force_set,
+                d.positions
+            ),
+            None => "no exchange yet".into(),
+        },
+        _ => format!(
+            "error: unknown command {word:?}: fault NAME=P, clear, unplug SECONDS, stats, state"
+        ),
     }
 }

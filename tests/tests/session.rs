@@ -1,0 +1,353 @@
+//! The default simulated session end to end, and its fault suite: each process killed in turn,
+//! the glove unplugged, the EtherCAT link cut, corrupted serial frames and lost EtherCAT frames.
+//! Every case ends in the documented safe state (hand holds, glove force zero) and recovers.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use teleop_e2e::{Sandbox, Session};
+use teleop_msgs::{
+    command_flags, contact_source, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand,
+    HandState, Tactile,
+};
+use teleop_runtime::{NodeRuntime, Subscriber};
+
+struct Watch {
+    glove: Subscriber<GloveState>,
+    diag: Subscriber<GloveDiagnostics>,
+    cmd: Subscriber<HandCommand>,
+    state: Subscriber<HandState>,
+    tactile: Subscriber<Tactile>,
+    force: Subscriber<GloveForceCommand>,
+    _node: NodeRuntime,
+}
+
+impl Watch {
+    fn new(sandbox: &Sandbox) -> Self {
+        let node = NodeRuntime::new("session-test", &sandbox.ipc).unwrap();
+        Self {
+            glove: node.subscriber().unwrap(),
+            diag: node.subscriber().unwrap(),
+            cmd: node.subscriber().unwrap(),
+            state: node.subscriber().unwrap(),
+            tactile: node.subscriber().unwrap(),
+            force: node.subscriber().unwrap(),
+            _node: node,
+        }
+    }
+
+    /// Waits until `ok` holds for the samples of the last poll.
+    fn until(
+        &self,
+        session: &Session,
+        timeout: Duration,
+        what: &str,
+        mut ok: impl FnMut(&Self) -> bool,
+    ) {
+        let start = Instant::now();
+        loop {
+            for s in [
+                &self.glove as &dyn Drain,
+                &self.diag,
+                &self.cmd,
+                &self.state,
+                &self.tactile,
+                &self.force,
+            ] {
+                s.drain_all();
+            }
+            if ok(self) {
+                return;
+            }
+            assert!(
+                start.elapsed() < timeout,
+                "timed out waiting for {what}\n{}",
+                session.log()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
+trait Drain {
+    fn drain_all(&self);
+}
+
+impl<M: teleop_msgs::Message> Drain for Subscriber<M> {
+    fn drain_all(&self) {
+        self.drain(|_| {});
+    }
+}
+
+fn fresh<M: teleop_msgs::Message>(s: &Subscriber<M>) -> bool {
+    s.is_fresh(Instant::now(), Duration::from_millis(150))
+}
+
+/// The hand holds: the Revo2 node holds on a stale command, or the retargeting node sends the
+/// last command again flagged as held (its glove input is stale or the glove's link is down).
+fn hand_holds(w: &Watch) -> bool {
+    w.state
+        .latest()
+        .is_some_and(|s| s.holding == 1 && s.link_up == 1)
+        || (fresh(&w.cmd)
+            && w.cmd
+                .latest()
+                .is_some_and(|c| c.flags & command_flags::HELD != 0))
+}
+
+fn start(sandbox: &Sandbox) -> (Session, Watch) {
+    let launch = sandbox.default_session(|t| t);
+    let session = sandbox.launch(&launch);
+    let watch = Watch::new(sandbox);
+    watch.until(
+        &session,
+        Duration::from_secs(30),
+        "the whole pipeline running",
+        |w| {
+            fresh(&w.glove)
+                && fresh(&w.cmd)
+                && fresh(&w.state)
+                && fresh(&w.tactile)
+                && fresh(&w.force)
+        },
+    );
+    (session, watch)
+}
+
+#[test]
+fn the_default_session_closes_the_loop_and_ends_with_a_summary() {
+    let sandbox = Sandbox::new();
+    let (mut session, watch) = start(&sandbox);
+    // The scripted operator grasps the ball: tactile force, force feedback from tactile, and the
+    // operator's fingers feel it (measured forces in the glove's diagnostics).
+    let (mut max_normal, mut max_force, mut felt) = (0.0f32, 0i16, 0i16);
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(7)
+        && !(max_normal > 1.0 && max_force > 100 && felt > 50)
+    {
+        watch.tactile.drain(|t| {
+            max_normal = t
+                .fingertips
+                .iter()
+                .fold(max_normal, |m, f| m.max(f.normal_n))
+        });
+        watch.force.drain(|f| {
+            for (i, &v) in f.force.iter().enumerate() {
+                if f.source[i] == contact_source::TACTILE {
+                    max_force = max_force.max(v);
+                }
+            }
+        });
+        watch
+            .diag
+            .drain(|d| felt = d.force.iter().fold(felt, |m, &v| m.max(v)));
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    assert!(
+        max_normal > 1.0,
+        "tactile force on the ball: {max_normal} N\n{}",
+        session.log()
+    );
+    assert!(max_force > 100, "glove force from tactile: {max_force}");
+    assert!(felt > 50, "the simulated operator feels it: {felt}");
+    let status = session.stop();
+    assert!(status.success());
+    let log = session.log();
+    assert!(
+        log.contains("session summary") && log.contains("hand/tactile"),
+        "{log}"
+    );
+    let recording = log
+        .lines()
+        .find_map(|l| l.strip_prefix("recording: "))
+        .expect("the summary says where the recording is");
+    let info = teleop_recording::info(&sandbox.dir.path().join(recording)).unwrap();
+    assert!(
+        info.complete && info.messages > 2_000,
+        "{} messages",
+        info.messages
+    );
+}
+
+/// Log times of every sample per (topic, source), to look for gaps.
+fn topic_gaps(path: &std::path::Path) -> BTreeMap<String, (u64, Duration)> {
+    let mut last: BTreeMap<(String, u32), (u64, u64)> = BTreeMap::new();
+    let mut worst: BTreeMap<String, (u64, Duration)> = BTreeMap::new();
+    for m in teleop_recording::read_messages(path, &teleop_recording::Filter::all()).unwrap() {
+        let m = m.unwrap();
+        let header = teleop_msgs::SampleHeader {
+            seq: u64::from_le_bytes(m.payload[0..8].try_into().unwrap()),
+            source_id: u32::from_le_bytes(m.payload[24..28].try_into().unwrap()),
+            ..Default::default()
+        };
+        let e = worst.entry(m.topic.clone()).or_insert((0, Duration::ZERO));
+        if let Some((seq, at)) = last.insert(
+            (m.topic.clone(), header.source_id),
+            (header.seq, m.log_time_ns),
+        ) {
+            if header.seq > seq + 1 {
+                e.0 += header.seq - seq - 1;
+            }
+            e.1 =
+                e.1.max(Duration::from_nanos(m.log_time_ns.saturating_sub(at)));
+        }
+    }
+    worst
+}
+
+#[test]
+fn killing_each_process_in_turn_ends_safe_and_recovers() {
+    let sandbox = Sandbox::new();
+    let (mut session, watch) = start(&sandbox);
+    let glove_link = sandbox.dir.path().join("glove").display().to_string();
+    for victim in [
+        "retarget",
+        "feedback",
+        "revo2",
+        "glove",
+        "sim-revo2",
+        "sim-glove",
+    ] {
+        let pid = match victim {
+            "sim-glove" => Sandbox::pid_with_arg(&format!("--link {glove_link}")),
+            "sim-revo2" => {
+                Sandbox::pid_with_arg(&sandbox.dir.path().join("revo2.sock").display().to_string())
+            }
+            node => sandbox.pid_of(node),
+        }
+        .unwrap_or_else(|| panic!("pid of {victim}"));
+        // SAFETY: kill(2) of a process of this test's own session.
+        unsafe {
+            libc::kill(pid as libc::pid_t, libc::SIGKILL);
+        }
+        let killed = Instant::now();
+        // The documented safe state for each stage.
+        match victim {
+            "retarget" | "glove" | "sim-glove" => watch.until(
+                &session,
+                Duration::from_secs(3),
+                "the hand holding",
+                hand_holds,
+            ),
+            "feedback" | "revo2" | "sim-revo2" => {
+                let cmd_zero = |w: &Watch| {
+                    victim != "feedback" && w.force.latest().is_some_and(|f| f.force == [0; 5])
+                };
+                let device_zero = || {
+                    sandbox
+                        .control("glove.ctl", "state")
+                        .contains("force_set=[0, 0, 0, 0, 0]")
+                };
+                watch.until(&session, Duration::from_secs(3), "glove force zero", |w| {
+                    cmd_zero(w) || device_zero()
+                });
+            }
+            _ => {}
+        }
+        assert!(killed.elapsed() < Duration::from_secs(3));
+        // Restarted by the launcher (its log says so) ...
+        let restarted = |session: &Session| {
+            session
+                .log()
+                .lines()
+                .any(|l| l.contains("restarting in") && l.ends_with(&format!("process={victim}")))
+        };
+        watch.until(
+            &session,
+            Duration::from_secs(5),
+            &format!("{victim} restarted"),
+            |_| restarted(&session),
+        );
+        // ... and once the new process runs, everything flows again.
+        std::thread::sleep(Duration::from_millis(700));
+        watch.until(
+            &session,
+            Duration::from_secs(25),
+            &format!("recovery after killing {victim}"),
+            |w| {
+                fresh(&w.glove)
+                    && fresh(&w.cmd)
+                    && fresh(&w.force)
+                    && w.state.latest().is_some_and(|s| s.link_up == 1)
+                    && fresh(&w.state)
+                    && w.cmd
+                        .latest()
+                        .is_some_and(|c| c.flags & command_flags::HELD == 0)
+            },
+        );
+    }
+    session.stop();
+    let log = session.log();
+    let recording = log
+        .lines()
+        .find_map(|l| l.strip_prefix("recording: "))
+        .unwrap();
+    let recording = sandbox.dir.path().join(recording);
+    // The recorder was never killed: topics of processes that stayed alive have no sequence gap.
+    let gaps = topic_gaps(&recording);
+    for (topic, (lost, _)) in &gaps {
+        assert_eq!(*lost, 0, "{topic} lost samples in the recording: {gaps:?}");
+    }
+}
+
+#[test]
+fn device_faults_are_ridden_out() {
+    let sandbox = Sandbox::new();
+    let (session, watch) = start(&sandbox);
+
+    // Glove unplugged: the glove reports its link down, the hand holds; replugged: it follows.
+    assert!(sandbox.control("glove.ctl", "unplug 1.0").starts_with("ok"));
+    watch.until(
+        &session,
+        Duration::from_secs(3),
+        "glove link down and hand holding",
+        |w| w.glove.latest().is_some_and(|g| g.link_up == 0) && hand_holds(w),
+    );
+    watch.until(&session, Duration::from_secs(10), "glove back", |w| {
+        w.glove.latest().is_some_and(|g| g.link_up == 1) && !hand_holds(w)
+    });
+
+    // EtherCAT link cut: the hand state reports the link down, glove force goes to zero; then back.
+    assert!(sandbox
+        .control("revo2.ctl", "link-down 1.0")
+        .starts_with("ok"));
+    watch.until(
+        &session,
+        Duration::from_secs(3),
+        "EtherCAT link down and zero glove force",
+        |w| {
+            w.state.latest().is_some_and(|s| s.link_up == 0)
+                && w.force.latest().is_some_and(|f| f.force == [0; 5])
+        },
+    );
+    watch.until(&session, Duration::from_secs(15), "EtherCAT back", |w| {
+        w.state.latest().is_some_and(|s| s.link_up == 1) && fresh(&w.state)
+    });
+
+    // Corrupted serial frames and lost EtherCAT frames: counted, no interruption.
+    let errors_before = watch.glove.latest().unwrap().errors;
+    let lost_before = watch.state.latest().unwrap().lost_frames;
+    assert!(sandbox
+        .control("glove.ctl", "fault corrupt=0.2")
+        .starts_with("ok"));
+    assert!(sandbox.control("revo2.ctl", "drop 0.1").starts_with("ok"));
+    std::thread::sleep(Duration::from_millis(1500));
+    watch.until(
+        &session,
+        Duration::from_secs(2),
+        "faults counted while running",
+        |w| {
+            w.glove
+                .latest()
+                .is_some_and(|g| g.errors > errors_before && g.link_up == 1)
+                && w.state
+                    .latest()
+                    .is_some_and(|s| s.lost_frames > lost_before && s.link_up == 1)
+                && fresh(&w.glove)
+                && fresh(&w.state)
+        },
+    );
+    assert!(sandbox.control("glove.ctl", "clear").starts_with("ok"));
+    assert!(sandbox.control("revo2.ctl", "drop 0").starts_with("ok"));
+}
