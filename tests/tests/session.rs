@@ -351,3 +351,52 @@ fn device_faults_are_ridden_out() {
     assert!(sandbox.control("glove.ctl", "clear").starts_with("ok"));
     assert!(sandbox.control("revo2.ctl", "drop 0").starts_with("ok"));
 }
+
+/// The short soak CI runs (the long one is `cargo run --release -p teleop-e2e --example soak`):
+/// 20 s of the default session without a drop, a restart or a lost link.
+#[test]
+fn short_soak_without_drops_or_restarts() {
+    let sandbox = Sandbox::new();
+    let (mut session, watch) = start(&sandbox);
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(20) {
+        watch.until(
+            &session,
+            Duration::from_secs(2),
+            "the pipeline flowing",
+            |w| {
+                fresh(&w.glove)
+                    && fresh(&w.state)
+                    && fresh(&w.force)
+                    && w.state.latest().is_some_and(|s| s.link_up == 1)
+            },
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    assert!(session.stop().success());
+    let log = session.log();
+    let summary = log.split("session summary").nth(1).expect("summary");
+    assert!(summary.contains("restarts: none"), "{summary}");
+    let mut rows = 0;
+    for line in summary
+        .lines()
+        .skip(2)
+        .take_while(|l| !l.starts_with("NODE"))
+    {
+        let drops = line.split_whitespace().last().unwrap();
+        assert_eq!(drops, "0", "drops on {line}");
+        rows += 1;
+    }
+    assert!(rows >= 9, "{summary}");
+    let recording = sandbox.dir.path().join(
+        log.lines()
+            .find_map(|l| l.strip_prefix("recording: "))
+            .unwrap(),
+    );
+    let info = teleop_recording::info(&recording).unwrap();
+    assert!(
+        info.topics.iter().all(|t| t.drops == Some(0)),
+        "{:?}",
+        info.topics
+    );
+}
