@@ -19,4 +19,4 @@ pub mod device;
 pub mod hand;
 pub mod serve;
 
-pub use serve::{AnswerTiming, DeviceView, Faults, SimGlove, SimOptions, SimStats};
+pub use serve::{AnswerTiming, DeviceView, Faults, ForceTiming, SimGlove, SimOptions, SimStats};

@@ -106,6 +106,17 @@ struct Shared {
     log: Mutex<Vec<String>>,
     record: AtomicBool,
     answers: Mutex<Vec<AnswerTiming>>,
+    forces: Mutex<Vec<ForceTiming>>,
+}
+
+/// When a force-control request's last byte arrived and the forces it carried, recorded for
+/// benchmarks with [`SimGlove::record_answers`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ForceTiming {
+    /// CLOCK_MONOTONIC ns when the request's last byte was on the device side of the line.
+    pub received_ns: u64,
+    /// The forces it carried (glove order).
+    pub forces: [i16; 5],
 }
 
 /// When one answer's data was sampled and when its last byte was on the line (CLOCK_MONOTONIC
@@ -205,6 +216,11 @@ impl SimGlove {
     /// Takes the answer timings recorded so far, in order.
     pub fn take_answer_timings(&self) -> Vec<AnswerTiming> {
         std::mem::take(&mut *lock(&self.shared.answers))
+    }
+
+    /// Takes the force requests recorded so far, in order.
+    pub fn take_force_timings(&self) -> Vec<ForceTiming> {
+        std::mem::take(&mut *lock(&self.shared.forces))
     }
 
     /// Takes the event log lines written since the last call (unplugs, baud changes, ...).
@@ -359,6 +375,17 @@ fn connection(
                 teleop_runtime::sleep_until(rx_line_free);
                 device.advance_to(start.elapsed().as_secs_f32());
                 let sampled_ns = teleop_runtime::now_ns();
+                if let (true, teleop_glove_protocol::Request::ForceControl { forces }) =
+                    (shared.record.load(Ordering::Relaxed), &frame.body)
+                {
+                    let mut log = lock(&shared.forces);
+                    if log.len() < MAX_RECORDED {
+                        log.push(ForceTiming {
+                            received_ns: sampled_ns,
+                            forces: *forces,
+                        });
+                    }
+                }
                 let Some(answer) = device.handle(&frame) else {
                     continue;
                 };

@@ -1,0 +1,280 @@
+//! Benchmark: the session's latency budget, split per stage, beside its physical floor.
+//!
+//! Method: both device simulators run inside this program (so it sees device-side times) at the
+//! paths the nodes expect; `teleop launch` runs the glove, retargeting, Revo2 and force-feedback
+//! nodes as processes (release build, the repository's configurations). For 20 s after a warm-up:
+//! - Path A, glove sample -> the EtherCAT cycle that carries its hand command: the simulated
+//!   glove records when it sampled each answer; `glove/state` (origin = the node's receive time)
+//!   is matched to the last answer sent before it; `hand/command` to the glove state by
+//!   `origin_ns`; the cycle by the first frame at the emulated Revo2, after the command's stamp,
+//!   whose position targets equal the command's. Stages: device sample -> `glove/state`
+//!   published -> `hand/command` published -> frame at the device. Floor: one EtherCAT cycle.
+//! - Path B, Revo2 tactile sample -> the glove force frame's last byte on the serial line: the
+//!   emulated Revo2 records when it answered each frame (its inputs are sampled then);
+//!   `hand/tactile` is matched to the last frame before its origin; `glove/force_command` by
+//!   `origin_ns`; the force frame by the first request at the simulated glove, after the
+//!   command's stamp, carrying the same forces (last byte, at 115200 baud). Stages: device
+//!   sample -> `hand/tactile` published -> `glove/force_command` published -> last byte at the
+//!   glove. Floor: one serial exchange (34 bytes at 115200 baud = 2.95 ms).
+//! Then the same under CPU stress (two `yes > /dev/null` processes, one per core).
+//!
+//! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_latency`
+#![allow(clippy::unwrap_used, clippy::print_stdout)]
+
+use std::collections::HashMap;
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use sim_glove::hand::{Hand as GloveHand, HandModel, Script};
+use sim_glove::{Faults, SimGlove, SimOptions};
+use sim_revo2::hand::{Drive, VirtualObject};
+use sim_revo2::{revo2_subdevice, Revo2};
+use teleop_e2e::Sandbox;
+use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
+use teleop_ecat_sim::SubDevice;
+use teleop_glove_protocol::BaudRate;
+use teleop_msgs::{GloveForceCommand, GloveState, HandCommand, Tactile};
+use teleop_runtime::{now_ns, NodeRuntime, Subscriber};
+
+const SECONDS: u64 = 20;
+
+/// What the emulated Revo2 saw per frame: when, and the position targets it then had.
+#[derive(Default)]
+struct Frames {
+    at: Vec<(u64, [f32; 6])>,
+}
+
+fn serve_revo2(
+    server: StreamServer,
+    sim: Arc<Mutex<SubDevice<Revo2>>>,
+    frames: Arc<Mutex<Frames>>,
+    stop: Arc<AtomicBool>,
+) {
+    let start = Instant::now();
+    let mut buf = vec![0u8; MAX_FRAME];
+    let mut out = vec![0u8; MAX_FRAME];
+    while !stop.load(Ordering::SeqCst) {
+        let Some(mut conn) = server.accept().unwrap() else {
+            std::thread::sleep(Duration::from_millis(1));
+            continue;
+        };
+        while !stop.load(Ordering::SeqCst) {
+            match conn.recv(&mut buf, Duration::from_millis(1)) {
+                Ok(Some(n)) => {
+                    let mut dev = sim.lock().unwrap();
+                    let reply = dev.process_frame_into(&buf[..n], &mut out, start.elapsed());
+                    let t = now_ns();
+                    let targets = dev.app().hand().drives().map(|d| match d {
+                        Drive::Position { target, .. } | Drive::Hold(target) => target,
+                        _ => f32::NAN,
+                    });
+                    drop(dev);
+                    frames.lock().unwrap().at.push((t, targets));
+                    if let Some(len) = reply {
+                        let _ = conn.send(&out[..len]);
+                    }
+                }
+                Ok(None) => sim.lock().unwrap().tick(start.elapsed()),
+                Err(_) => break,
+            }
+        }
+    }
+}
+
+fn percentiles(mut v: Vec<u64>) -> String {
+    if v.is_empty() {
+        return "-".into();
+    }
+    v.sort_unstable();
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1e6;
+    format!(
+        "p50 {:>7.3}  p99 {:>7.3}  max {:>7.3}  (n={})",
+        at(0.5),
+        at(0.99),
+        at(1.0),
+        v.len()
+    )
+}
+
+fn run(label: &str) {
+    let sandbox = Sandbox::new();
+    let launch = sandbox.default_session(|t| {
+        // The simulators run in this program; the recorder is not part of the budget.
+        let mut out = String::new();
+        for block in t.split("[[process]]") {
+            if block.contains("teleop-sim-") || block.contains("teleop-recorder") {
+                continue;
+            }
+            if !out.is_empty() {
+                out.push_str("[[process]]");
+            }
+            out.push_str(block);
+        }
+        out
+    });
+    let link = sandbox.dir.path().join("glove");
+    let glove = SimGlove::start(
+        SimOptions {
+            link,
+            id: 1,
+            baud: BaudRate::B115200,
+            response_delay: Duration::from_micros(200),
+            faults: Faults::default(),
+            seed: 1,
+        },
+        GloveHand::new(Script::Grasp { period_s: 6.0 }, HandModel::default()),
+    )
+    .unwrap();
+    let revo2 = Arc::new(Mutex::new(revo2_subdevice(Some(VirtualObject::ball()), 42)));
+    let frames = Arc::new(Mutex::new(Frames::default()));
+    let stop = Arc::new(AtomicBool::new(false));
+    let server = StreamServer::bind(&sandbox.dir.path().join("revo2.sock")).unwrap();
+    let serve = {
+        let (revo2, frames, stop) = (revo2.clone(), frames.clone(), stop.clone());
+        std::thread::spawn(move || serve_revo2(server, revo2, frames, stop))
+    };
+    let mut session = sandbox.launch(&launch);
+    let node = NodeRuntime::new("bench-latency", &sandbox.ipc).unwrap();
+    let states: Subscriber<GloveState> = node.subscriber().unwrap();
+    let cmds: Subscriber<HandCommand> = node.subscriber().unwrap();
+    let tactile: Subscriber<Tactile> = node.subscriber().unwrap();
+    let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
+    let warm = Instant::now();
+    while warm.elapsed() < Duration::from_secs(30)
+        && !(states.poll_latest().is_some()
+            && forces.poll_latest().is_some()
+            && tactile.poll_latest().is_some())
+    {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_secs(1));
+    states.drain(|_| {});
+    cmds.drain(|_| {});
+    tactile.drain(|_| {});
+    forces.drain(|_| {});
+    glove.record_answers(true);
+    let _ = glove.take_answer_timings();
+    frames.lock().unwrap().at.clear();
+    let (mut s_v, mut c_v, mut t_v, mut f_v) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(SECONDS) {
+        std::thread::sleep(Duration::from_millis(2));
+        states.drain(|m| s_v.push(*m));
+        cmds.drain(|m| c_v.push(*m));
+        tactile.drain(|m| t_v.push(*m));
+        forces.drain(|m| f_v.push(*m));
+    }
+    glove.record_answers(false);
+    session.stop();
+    stop.store(true, Ordering::SeqCst);
+    let _ = serve.join();
+    let answers = glove.take_answer_timings();
+    let requests = glove.take_force_timings();
+    let frames = std::mem::take(&mut frames.lock().unwrap().at);
+
+    // Path A.
+    let cmd_by_origin: HashMap<u64, &HandCommand> = c_v
+        .iter()
+        .filter(|c| c.flags & teleop_msgs::command_flags::HELD == 0)
+        .map(|c| (c.header.origin_ns, c))
+        .collect();
+    let (mut a1, mut a2, mut a3, mut a_total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for s in &s_v {
+        let i = answers.partition_point(|a| a.sent_ns <= s.header.origin_ns);
+        let Some(answer) = i.checked_sub(1).map(|i| answers[i]) else {
+            continue;
+        };
+        let Some(cmd) = cmd_by_origin.get(&s.header.origin_ns) else {
+            continue;
+        };
+        let want: Vec<f32> = cmd
+            .active_joints()
+            .iter()
+            .map(|j| (j.target * 1000.0).round())
+            .collect();
+        let from = frames.partition_point(|f| f.0 < cmd.header.stamp_ns);
+        let carried = frames[from..]
+            .iter()
+            .find(|f| f.1.iter().zip(&want).all(|(a, b)| (a - b).abs() < 0.6));
+        let Some(frame) = carried else { continue };
+        a1.push(s.header.stamp_ns.saturating_sub(answer.sampled_ns));
+        a2.push(cmd.header.stamp_ns.saturating_sub(s.header.stamp_ns));
+        a3.push(frame.0.saturating_sub(cmd.header.stamp_ns));
+        a_total.push(frame.0.saturating_sub(answer.sampled_ns));
+    }
+    // Path B: the glove node sends the newest force command when an exchange starts, so a
+    // request carries the newest command published before its first byte (its last byte
+    // arrives 16 byte times = 1.39 ms later); commands replaced before that are never sent.
+    let wire = 1_389_000u64;
+    let tactile_by_origin: HashMap<u64, &Tactile> = t_v.iter().map(|t| (t.header.origin_ns, t)).collect();
+    let (mut b1, mut b2, mut b3, mut b_total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for r in &requests {
+        let i = f_v.partition_point(|f| f.header.stamp_ns + wire <= r.received_ns);
+        let Some(f) = i.checked_sub(1).map(|i| &f_v[i]) else { continue };
+        if f.force != r.forces {
+            continue;
+        }
+        let Some(t) = tactile_by_origin.get(&f.header.origin_ns) else { continue };
+        let j = frames.partition_point(|fr| fr.0 <= t.header.origin_ns);
+        let Some(sample) = j.checked_sub(1).map(|j| frames[j].0) else { continue };
+        b1.push(t.header.stamp_ns.saturating_sub(sample));
+        b2.push(f.header.stamp_ns.saturating_sub(t.header.stamp_ns));
+        b3.push(r.received_ns.saturating_sub(f.header.stamp_ns));
+        b_total.push(r.received_ns.saturating_sub(sample));
+    }
+    let exchanges = answers.len() as f64 / SECONDS as f64;
+    println!("\n{label}: ms ({exchanges:.0} glove exchanges/s, {:.0} EtherCAT frames/s)", frames.len() as f64 / SECONDS as f64);
+    println!(
+        "A  glove sample -> EtherCAT cycle carrying its hand command (floor: one cycle, 1.000 ms)"
+    );
+    println!(
+        "   glove sample -> glove/state published       {}",
+        percentiles(a1)
+    );
+    println!(
+        "   glove/state -> hand/command published        {}",
+        percentiles(a2)
+    );
+    println!(
+        "   hand/command -> frame at the Revo2           {}",
+        percentiles(a3)
+    );
+    println!(
+        "   total                                        {}",
+        percentiles(a_total)
+    );
+    println!(
+        "B  Revo2 tactile sample -> glove force frame's last byte (floor: one exchange, 2.951 ms)"
+    );
+    println!(
+        "   tactile sample -> hand/tactile published     {}",
+        percentiles(b1)
+    );
+    println!(
+        "   hand/tactile -> glove/force_command          {}",
+        percentiles(b2)
+    );
+    println!(
+        "   glove/force_command -> last byte at glove    {}",
+        percentiles(b3)
+    );
+    println!(
+        "   total                                        {}",
+        percentiles(b_total)
+    );
+}
+
+fn main() {
+    println!("method: see the program's doc comment (20 s per case, release build, 2-core VM)");
+    run("idle");
+    let hogs: Vec<Child> = (0..2)
+        .map(|_| Command::new("yes").stdout(Stdio::null()).spawn().unwrap())
+        .collect();
+    run("under CPU stress (two `yes` processes)");
+    for mut h in hogs {
+        let _ = h.kill();
+        let _ = h.wait();
+    }
+}
