@@ -113,3 +113,144 @@ fn a_missing_device_is_a_clear_error() {
         "{out}"
     );
 }
+
+/// A firmware file as the packaging tool makes it: magic, version (little-endian u32
+/// 0x00MMmmpp), reserved zeros, then the image.
+fn firmware(
+    sandbox: &Sandbox,
+    name: &str,
+    magic: &[u8; 8],
+    (major, minor, patch): (u8, u8, u8),
+    image: usize,
+) -> String {
+    let mut bytes = magic.to_vec();
+    bytes.extend_from_slice(&[patch, minor, major, 0, 0, 0, 0, 0]);
+    bytes.extend((0..image).map(|i| (i * 13 % 251) as u8));
+    let path = sandbox.dir.path().join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path.display().to_string()
+}
+
+/// One command on the emulator's control socket.
+fn control(sandbox: &Sandbox, line: &str) -> String {
+    use std::io::Write;
+    let mut stream =
+        std::os::unix::net::UnixStream::connect(sandbox.dir.path().join("revo2.ctl")).unwrap();
+    writeln!(stream, "{line}").unwrap();
+    let mut answer = String::new();
+    BufReader::new(stream).read_line(&mut answer).unwrap();
+    answer
+}
+
+#[test]
+fn flash_both_boards_of_the_emulated_revo2() {
+    let sandbox = Sandbox::new();
+    let (_sim, transport) = start(&sandbox);
+    let wrist = firmware(
+        &sandbox,
+        "Revo2EC_1.0.3_2506231346.bin",
+        b"BRCW2025",
+        (1, 0, 3),
+        6000,
+    );
+    let control_fw = firmware(
+        &sandbox,
+        "Revo2_V2.1.0_2506231346.bin",
+        b"BRCC2025",
+        (2, 1, 0),
+        9000,
+    );
+    let (ok, out) = revo2(&sandbox, &transport, &["flash", &wrist, "--board", "wrist"]);
+    assert!(
+        ok && out.contains("wrist board firmware 0.9.7 -> 1.0.3") && out.contains("KiB/s"),
+        "{out}"
+    );
+    let (ok, out) = revo2(
+        &sandbox,
+        &transport,
+        &["flash", &control_fw, "--board", "control"],
+    );
+    assert!(
+        ok && out.contains("control board firmware 1.4.2 -> 2.1.0"),
+        "{out}"
+    );
+    assert_eq!(
+        control(&sandbox, "versions").trim(),
+        "control 2.1.0 wrist 1.0.3"
+    );
+
+    // Refused before the device is touched.
+    let wrong_magic = firmware(
+        &sandbox,
+        "Revo2EC_1.0.4_2506231346.bin",
+        b"BRCC2025",
+        (1, 0, 4),
+        100,
+    );
+    let lower_case = firmware(
+        &sandbox,
+        "revo2EC_1.0.4_2506231346.bin",
+        b"BRCW2025",
+        (1, 0, 4),
+        100,
+    );
+    let truncated = sandbox.dir.path().join("Revo2EC_1.0.5_2506231346.bin");
+    std::fs::write(&truncated, b"BRCW2025\x05\x00").unwrap();
+    let truncated = truncated.display().to_string();
+    for (file, board, expected) in [
+        (
+            &wrong_magic,
+            "wrist",
+            "magic number BRCC2025 is the control board's",
+        ),
+        (&control_fw, "wrist", "firmware is for the control board"),
+        (&lower_case, "wrist", "must start with \"Revo2EC_\""),
+        (&truncated, "wrist", "truncated"),
+    ] {
+        let (ok, out) = revo2(&sandbox, &transport, &["flash", file, "--board", board]);
+        assert!(
+            !ok && out.contains(expected) && out.contains("refused before contacting the device"),
+            "{out}"
+        );
+    }
+    // Refused by the device.
+    let again = firmware(
+        &sandbox,
+        "Revo2EC_1.1.0_2506231346.bin",
+        b"BRCW2025",
+        (1, 1, 0),
+        3000,
+    );
+    let (ok, out) = revo2(
+        &sandbox,
+        &transport,
+        &[
+            "flash",
+            &again,
+            "--board",
+            "wrist",
+            "--auth-code",
+            "BRCC2025",
+        ],
+    );
+    assert!(
+        !ok && out.contains("FoE error 0x800a") && out.contains("authentication code"),
+        "{out}"
+    );
+    // A device that stops answering mid-transfer.
+    assert!(control(&sandbox, "foe-stall 4").starts_with("ok"));
+    let (ok, out) = revo2(&sandbox, &transport, &["flash", &again, "--board", "wrist"]);
+    assert!(
+        !ok && out.contains("no answer from the device to data packet 5")
+            && out.contains("stopped answering"),
+        "{out}"
+    );
+    // Still usable: its configuration reads, and the next upgrade works.
+    let (ok, info) = revo2(&sandbox, &transport, &["info"]);
+    assert!(
+        ok && info.contains("wrist_fw_version           1.0.3"),
+        "{info}"
+    );
+    let (ok, out) = revo2(&sandbox, &transport, &["flash", &again, "--board", "wrist"]);
+    assert!(ok && out.contains("1.0.3 -> 1.1.0"), "{out}");
+}

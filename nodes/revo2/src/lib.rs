@@ -7,13 +7,19 @@
 //! - [`convert`]: pure conversions between hand commands/state/tactile messages and the Revo2
 //!   process data;
 //! - [`node`]: the cycle (absolute deadlines, stale command -> hold, working-counter checks,
-//!   recovery, reconnect) and publishing.
+//!   recovery, reconnect) and publishing;
+//! - [`mailbox`]: raw mailbox access on ethercrab's `Command` API (any device): the FoE
+//!   mailbox port of `teleop-foe` and the normal SDO download ethercrab lacks;
+//! - [`flash`]: the Revo2 firmware upgrade (section 6): file checks, upgrade settings, BOOT on
+//!   the bootstrap mailbox, FoE transfer, restart, version read-back.
 //!
 //! The Revo2's dictionary and process-data layout live in `teleop-revo2-protocol`.
 
 pub mod bus;
 pub mod config;
 pub mod convert;
+pub mod flash;
+pub mod mailbox;
 pub mod node;
 pub mod pump;
 

@@ -3,8 +3,9 @@
 //! bring-up to OP, then every control mode in both unit modes moves the simulated fingers.
 #![allow(clippy::unwrap_used)]
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use futures_lite::future::block_on;
 use sim_revo2::{revo2_subdevice, Revo2};
@@ -17,13 +18,17 @@ use teleop_revo2_protocol::{multi_command, ControlMode, Inputs, Outputs, UnitMod
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
 
-fn bus(sim: &Sim) -> Bus {
-    let start = Instant::now();
-    let sim = sim.clone();
+/// The emulator's clock, one per test: advanced by the test, 1 ms per cycle, so the hand's
+/// motion does not depend on how loaded the machine is.
+type Clock = Arc<AtomicU64>;
+
+fn bus(sim: &Sim, clock: &Clock) -> Bus {
+    let (sim, clock) = (sim.clone(), clock.clone());
     Bus::open(Box::new(move || {
-        let sim = sim.clone();
+        let (sim, clock) = (sim.clone(), clock.clone());
         Ok(Box::new(InProcessLink::new(move |frame: &[u8]| {
-            sim.lock().unwrap().process_frame(frame, start.elapsed())
+            let now = Duration::from_micros(clock.load(Ordering::SeqCst));
+            sim.lock().unwrap().process_frame(frame, now)
         })) as Box<dyn FrameLink>)
     }))
     .unwrap()
@@ -31,6 +36,7 @@ fn bus(sim: &Sim) -> Bus {
 
 /// Drives `outputs` for `cycles` 1 ms cycles and returns the last inputs.
 fn drive(
+    clock: &Clock,
     bus: &Bus,
     group: &teleop_revo2::bus::OpGroup,
     outputs: &Outputs,
@@ -39,14 +45,23 @@ fn drive(
 ) -> Inputs {
     let sd = group.subdevice(&bus.md, 0).unwrap();
     let mut last = None;
+    let mut lost = 0;
     for _ in 0..cycles {
+        clock.fetch_add(1000, Ordering::SeqCst);
         {
             let mut io = sd.io_raw_mut();
             outputs.pack(io.outputs()).unwrap();
         }
-        let r = block_on(group.tx_rx(&bus.md)).unwrap();
-        assert_eq!(r.working_counter, 3);
-        last = Some(Inputs::unpack(sd.io_raw().inputs(), assignment).unwrap());
+        // A cycle whose frame times out (20 ms, reachable when the machine is loaded) is lost, as
+        // on a real bus: the next one goes on. What matters here is where the fingers go.
+        match block_on(group.tx_rx(&bus.md)) {
+            Ok(r) => {
+                assert_eq!(r.working_counter, 3);
+                last = Some(Inputs::unpack(sd.io_raw().inputs(), assignment).unwrap());
+            }
+            Err(_) => lost += 1,
+        }
+        assert!(lost < cycles / 2, "most cycles lost ({lost})");
         std::thread::sleep(Duration::from_millis(1));
     }
     last.unwrap()
@@ -54,7 +69,8 @@ fn drive(
 
 fn run_modes(unit_mode: u8) {
     let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(None, 3)));
-    let bus = bus(&sim);
+    let clock = Clock::default();
+    let bus = bus(&sim, &clock);
     let config = Revo2Config {
         tactile: TactileSource::Pdo,
         device: DeviceSettings {
@@ -81,6 +97,7 @@ fn run_modes(unit_mode: u8) {
 
     // Position + speed.
     drive(
+        &clock,
         &bus,
         &group,
         &cmd(ControlMode::PositionSpeed, pos_mid, 1000.0),
@@ -94,6 +111,7 @@ fn run_modes(unit_mode: u8) {
     );
     // Position + time back to open in 300 ms.
     drive(
+        &clock,
         &bus,
         &group,
         &cmd(ControlMode::PositionTime, pos_open, 300.0),
@@ -106,6 +124,7 @@ fn run_modes(unit_mode: u8) {
         "position+time moves over its time: {halfway}"
     );
     drive(
+        &clock,
         &bus,
         &group,
         &cmd(ControlMode::PositionTime, pos_open, 300.0),
@@ -115,13 +134,14 @@ fn run_modes(unit_mode: u8) {
     assert!(hand(&sim)[2] < 10.0);
     // Speed, current, PWM close the hand.
     for mode in [ControlMode::Speed, ControlMode::Current, ControlMode::Pwm] {
-        drive(&bus, &group, &cmd(mode, 300.0, 0.0), 200, a);
+        drive(&clock, &bus, &group, &cmd(mode, 300.0, 0.0), 200, a);
         assert!(hand(&sim)[3] > 50.0, "{mode:?} closes: {:?}", hand(&sim));
-        drive(&bus, &group, &cmd(mode, -1000.0, 0.0), 600, a);
+        drive(&clock, &bus, &group, &cmd(mode, -1000.0, 0.0), 600, a);
         assert!(hand(&sim)[3] < 5.0, "{mode:?} opens: {:?}", hand(&sim));
     }
     // The inputs report what the hand does, in the configured units.
     let inputs = drive(
+        &clock,
         &bus,
         &group,
         &cmd(ControlMode::PositionSpeed, pos_mid, 1000.0),
@@ -173,7 +193,8 @@ fn a_wrong_identity_is_refused_with_a_clear_error() {
         ),
     );
     let sim: Sim = Arc::new(Mutex::new(SubDevice::new(config, app)));
-    let bus = bus(&sim);
+    let clock = Clock::default();
+    let bus = bus(&sim, &clock);
     let err = block_on(bring_up(&bus.md, &Revo2Config::default()))
         .err()
         .unwrap()

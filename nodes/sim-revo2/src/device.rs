@@ -1,18 +1,24 @@
 //! The Revo2's firmware as an EtherCAT application: its object dictionary (from
-//! `teleop-revo2-protocol`), PDO assignment, process data, configuration side effects, and the
-//! simulated hand behind them. Plugs into the generic `teleop-ecat-sim` SubDevice.
+//! `teleop-revo2-protocol`), PDO assignment, process data, configuration side effects, the
+//! simulated hand behind them, and the firmware upgrade over FoE in BOOT ([`crate::firmware`]:
+//! after a successful one the device restarts with the new version). Plugs into the generic
+//! `teleop-ecat-sim` SubDevice.
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
-use teleop_ecat_sim::{AlState, Application, SdoAbort};
+use teleop_ecat_sim::{AlState, AppRequest, Application, MailboxContext, MailboxReply, SdoAbort};
 use teleop_revo2_protocol::{
-    entry, mapping_entries, obj, Access, DefaultValue, Inputs, JointData, Outputs, TactileData,
-    UnitMode, DEFAULT_JOINT_RANGES, DEFAULT_RX_ASSIGNMENT, DEFAULT_TX_ASSIGNMENT, DICTIONARY,
-    MODE_NONE,
+    entry, mapping_entries, obj, Access, Board, DefaultValue, Inputs, JointData, Outputs,
+    TactileData, UnitMode, Version, DEFAULT_JOINT_RANGES, DEFAULT_RX_ASSIGNMENT,
+    DEFAULT_TX_ASSIGNMENT, DICTIONARY, FOE_AUTH_CODE, FOE_FILE_TYPE, MODE_NONE,
 };
 
+use crate::firmware::{FlashTiming, Upgrade};
 use crate::hand::{Hand, FINGERTIPS, JOINTS};
+
+/// FoE mailbox type.
+const MAILBOX_FOE: u8 = 0x04;
 
 /// Firmware versions and serial numbers the emulated device reports.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -52,6 +58,9 @@ pub struct Revo2 {
     pub output_cycles: u64,
     /// Times the SM watchdog made the hand hold.
     pub holds: u64,
+    upgrade: Upgrade,
+    /// Restarts after a firmware upgrade.
+    pub restarts: u64,
 }
 
 impl Revo2 {
@@ -94,7 +103,47 @@ impl Revo2 {
             last_outputs: Outputs::default(),
             output_cycles: 0,
             holds: 0,
+            upgrade: Upgrade::new(FlashTiming::default()),
+            restarts: 0,
         }
+    }
+
+    /// The boot loader (flash content, timing, faults).
+    pub fn upgrade(&self) -> &Upgrade {
+        &self.upgrade
+    }
+
+    /// The boot loader, to set its timing or inject faults.
+    pub fn upgrade_mut(&mut self) -> &mut Upgrade {
+        &mut self.upgrade
+    }
+
+    /// The firmware versions now reported: (control board 0x8000:11, wrist board 0x8000:13).
+    pub fn firmware_versions(&self) -> (String, String) {
+        let text = |sub| {
+            String::from_utf8_lossy(self.value(obj::CONFIG, sub).unwrap_or_default()).into_owned()
+        };
+        (text(0x11), text(0x13))
+    }
+
+    /// The restart after an upgrade: the new version is reported, the upgrade settings are
+    /// gone and the PDO assignment is back to its power-on default (the device boots).
+    fn restart_with(&mut self, board: Board, (major, minor, patch): Version) {
+        let sub = match board {
+            Board::Control => 0x11,
+            Board::Wrist => 0x13,
+        };
+        self.values.insert(
+            (obj::CONFIG, sub),
+            format!("{major}.{minor}.{patch}").into_bytes(),
+        );
+        self.values.insert(FOE_FILE_TYPE, vec![0]);
+        self.values.insert(FOE_AUTH_CODE, Vec::new());
+        self.rx_assign = DEFAULT_RX_ASSIGNMENT.to_vec();
+        self.tx_assign = DEFAULT_TX_ASSIGNMENT.to_vec();
+        self.last_outputs = Outputs::default();
+        self.hand.hold();
+        self.restarts += 1;
     }
 
     /// The hand.
@@ -422,5 +471,41 @@ impl Application for Revo2 {
         self.hand.hold();
         self.last_outputs = Outputs::default();
         self.holds += 1;
+    }
+
+    fn transition(&mut self, from: AlState, to: AlState) -> Result<(), u16> {
+        if from == AlState::Boot || to == AlState::Boot {
+            self.upgrade.reset();
+        }
+        Ok(())
+    }
+
+    fn mailbox_request(
+        &mut self,
+        mailbox_type: u8,
+        payload: &[u8],
+        cx: &MailboxContext,
+    ) -> MailboxReply {
+        if mailbox_type != MAILBOX_FOE {
+            return MailboxReply::Unsupported;
+        }
+        let file_type = self
+            .value(FOE_FILE_TYPE.0, FOE_FILE_TYPE.1)
+            .and_then(|v| v.first().copied())
+            .unwrap_or(0);
+        let auth = self.values.get(&FOE_AUTH_CODE).cloned().unwrap_or_default();
+        self.upgrade.handle(payload, cx, file_type, &auth)
+    }
+
+    fn poll(&mut self, now: Duration, _state: AlState) -> AppRequest {
+        match self.upgrade.poll(now) {
+            Some((board, version)) => {
+                self.restart_with(board, version);
+                AppRequest::Restart {
+                    offline: self.upgrade.timing.reboot,
+                }
+            }
+            None => AppRequest::None,
+        }
     }
 }

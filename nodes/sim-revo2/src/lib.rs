@@ -4,18 +4,27 @@
 //!   follows the load, virtual objects that produce tactile force (pure);
 //! - [`device`]: the Revo2 firmware as an EtherCAT application: the object dictionary of
 //!   `teleop-revo2-protocol`, PDO assignment, process data, configuration side effects;
+//! - [`firmware`]: the firmware upgrade over FoE in BOOT (section 6): checks with the FoE error
+//!   codes, simulated flash with its write time (BUSY), restart with the new version;
 //! - [`revo2_subdevice`]: the two inside the generic emulated ESC of `teleop-ecat-sim`, with the
-//!   Revo2's identity.
+//!   Revo2's identity, CoE and FoE, and a bootstrap mailbox of its own ([`BOOTSTRAP_MAILBOX`]).
 //!
 //! Must not depend on: the Revo2 node or ethercrab (a master bug must not hide behind shared
 //! master code).
 
 pub mod device;
+pub mod firmware;
 pub mod hand;
 
-use teleop_ecat_sim::{EscConfig, Identity, SubDevice};
+use teleop_ecat_sim::{mailbox_protocols, EscConfig, Identity, SubDevice};
 
 pub use device::{Revo2, Versions};
+pub use firmware::{FlashTiming, Upgrade};
+
+/// The bootstrap mailbox (receive, send: offset and size) of the emulated Revo2, used in BOOT:
+/// larger than the standard 128-byte mailbox, and elsewhere, so that a master has to move its
+/// sync managers before requesting BOOT, as on devices whose boot loader has its own mailbox.
+pub const BOOTSTRAP_MAILBOX: ((u16, u16), (u16, u16)) = ((0x1000, 256), (0x1200, 256));
 
 /// An emulated Revo2 with an optional virtual object in its hand.
 pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubDevice<Revo2> {
@@ -27,6 +36,9 @@ pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubD
             serial,
         },
         name: teleop_revo2_protocol::DEVICE_NAME.to_string(),
+        mailbox_protocols: mailbox_protocols::COE | mailbox_protocols::FOE,
+        bootstrap_rx_mailbox: BOOTSTRAP_MAILBOX.0,
+        bootstrap_tx_mailbox: BOOTSTRAP_MAILBOX.1,
         ..EscConfig::default()
     };
     let hand = hand::Hand::new(hand::HandParams::default(), object);

@@ -3,7 +3,8 @@
 //! interface with a raw socket (`--interface IF`, e.g. one end of a veth pair; needs
 //! CAP_NET_RAW), and takes commands at run time on a control socket:
 //! `drop P`, `wrong-wkc P`, `watchdog`, `link-down SECONDS`, `refuse CODE`, `object ball|none`,
-//! `stats`.
+//! `foe-stall N|off` (the boot loader stops answering after N data packets of the next firmware
+//! transfer), `flash-time ERASE_MS PER_KIB_MS`, `power-cycle SECONDS`, `versions`, `stats`.
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixListener;
@@ -223,6 +224,45 @@ fn command(sim: &Sim, line: &str, start: Instant) -> String {
             }
             Err(e) => format!("error: {e}"),
         },
+        "foe-stall" => match rest {
+            "off" => {
+                dev.app_mut().upgrade_mut().stall_after = None;
+                "ok foe-stall off".into()
+            }
+            n => match n.parse::<u32>() {
+                Ok(n) => {
+                    dev.app_mut().upgrade_mut().stall_after = Some(n);
+                    format!("ok the boot loader stops answering after {n} data packets")
+                }
+                Err(_) => "error: foe-stall PACKETS|off".into(),
+            },
+        },
+        "flash-time" => {
+            let ms: Vec<u64> = rest
+                .split_whitespace()
+                .filter_map(|w| w.parse().ok())
+                .collect();
+            match ms[..] {
+                [erase, per_kib] => {
+                    let timing = &mut dev.app_mut().upgrade_mut().timing;
+                    timing.erase = Duration::from_millis(erase);
+                    timing.per_kib = Duration::from_millis(per_kib);
+                    format!("ok flash erase {erase} ms, {per_kib} ms per KiB")
+                }
+                _ => "error: flash-time ERASE_MS PER_KIB_MS".into(),
+            }
+        }
+        "power-cycle" => match rest.parse::<f64>() {
+            Ok(s) if (0.0..3600.0).contains(&s) => {
+                dev.restart(start.elapsed(), Duration::from_secs_f64(s));
+                format!("ok restarting, off the bus for {s} s")
+            }
+            _ => "error: power-cycle SECONDS".into(),
+        },
+        "versions" => {
+            let (control, wrist) = dev.app().firmware_versions();
+            format!("control {control} wrist {wrist}")
+        }
         "stats" => {
             let (state, error, code) = dev.al_state();
             format!(

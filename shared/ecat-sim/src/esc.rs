@@ -8,10 +8,15 @@ use crate::al::{self, Check, Step};
 use crate::coe::{Outcome, SdoServer};
 use crate::fault::{Faults, Rng, Stats};
 use crate::frame::{self, Cmd, Datagram, DGRAM_HEADER, ECAT_HEADER, ETH_HEADER};
-use crate::mailbox::{self, mailbox_error, Header, MailboxState, HEADER_LEN, TYPE_COE, TYPE_ERR};
+use crate::mailbox::{
+    self, mailbox_error, Header, MailboxState, HEADER_LEN, TYPE_COE, TYPE_ERR, TYPE_FOE,
+};
 use crate::registers::{self as reg, sii_control as sc, NUM_FMMUS, NUM_SMS};
 use crate::sii::{self, Eeprom};
-use crate::{al_status, AlState, Application, ConfigError, EscConfig};
+use crate::{
+    al_status, AlState, AppRequest, Application, ConfigError, EscConfig, MailboxContext,
+    MailboxReply,
+};
 
 /// ESC type register value.
 const ESC_TYPE: u8 = 0x04;
@@ -134,6 +139,8 @@ pub struct SubDevice<A: Application> {
     faults: Faults,
     rng: Rng,
     stats: Stats,
+    /// Restarting: no frames are answered until then.
+    offline_until: Option<Duration>,
 }
 
 impl<A: Application> core::fmt::Debug for SubDevice<A> {
@@ -202,8 +209,18 @@ impl<A: Application> SubDevice<A> {
             rng: Rng::new(0),
             faults: Faults::default(),
             stats: Stats::default(),
+            offline_until: None,
             config,
         };
+        sd.init_registers();
+        sd
+    }
+
+    /// The registers as at power-on (memory zeroed by the caller), the configuration area loaded
+    /// from the SII.
+    fn init_registers(&mut self) {
+        let ram_kib = (self.mem.len() - usize::from(reg::RAM_START)) / 1024;
+        let sd = self;
         sd.mem[usize::from(reg::TYPE)] = ESC_TYPE;
         sd.mem[usize::from(reg::REVISION)] = 0x01;
         sd.set_u16(reg::BUILD, 0x0001);
@@ -234,7 +251,35 @@ impl<A: Application> SubDevice<A> {
         }
         sd.set_u16(reg::SII_CONTROL, sii_status);
         sd.update_status();
-        sd
+    }
+
+    /// Restarts the device as a power cycle does: it answers no frame for `offline` (frames
+    /// are lost, as behind a device that reboots), and comes back as at power-on: INIT,
+    /// station address 0, sync managers and FMMUs cleared, mailbox emptied, SII configuration
+    /// reloaded (the SII content, the application, the faults and the counters stay). The
+    /// application is not told (it asked for it, or it is being power-cycled with its ESC).
+    pub fn restart(&mut self, now: Duration, offline: Duration) {
+        tracing::info!(?offline, "SubDevice restarting");
+        self.stats.restarts += 1;
+        self.mem.fill(0);
+        self.sii_pending = None;
+        self.state = AlState::Init;
+        self.error = false;
+        self.code = al_status::NO_ERROR;
+        self.mbx.reset();
+        self.sdo.reset();
+        self.last_outputs = now;
+        self.init_registers();
+        self.offline_until = if offline.is_zero() {
+            None
+        } else {
+            Some(now + offline)
+        };
+    }
+
+    /// True while the device restarts and answers no frame.
+    pub fn restarting(&self) -> bool {
+        self.offline_until.is_some()
     }
 
     /// The configuration this SubDevice was built with.
@@ -297,9 +342,21 @@ impl<A: Application> SubDevice<A> {
         }
     }
 
-    /// Advances the SubDevice's own clock without a frame (the SM watchdog is checked on every
-    /// frame and here).
+    /// Advances the SubDevice's own clock without a frame (the end of a restart, the
+    /// application's [`poll`](Application::poll) and the SM watchdog are checked on every frame
+    /// and here).
     pub fn tick(&mut self, now: Duration) {
+        if let Some(until) = self.offline_until {
+            if now < until {
+                return;
+            }
+            tracing::info!("SubDevice up again after its restart");
+            self.offline_until = None;
+        }
+        if let AppRequest::Restart { offline } = self.app.poll(now, self.state) {
+            self.restart(now, offline);
+            return;
+        }
         if self.state != AlState::Op {
             return;
         }
@@ -354,6 +411,10 @@ impl<A: Application> SubDevice<A> {
         }
         self.stats.frames += 1;
         self.tick(now);
+        if self.offline_until.is_some() {
+            self.stats.frames_while_restarting += 1;
+            return false;
+        }
         if self.faults.link_down
             || self
                 .rng
@@ -708,7 +769,7 @@ impl<A: Application> SubDevice<A> {
         for n in 0..NUM_SMS {
             if ev.sm_last_written[n] {
                 if self.sm(n).mailbox() {
-                    self.mailbox_written(n);
+                    self.mailbox_written(n, now);
                 } else {
                     self.outputs_written(n, now);
                 }
@@ -1114,13 +1175,13 @@ impl<A: Application> SubDevice<A> {
     }
 
     /// SM0 was written up to its last byte: the application takes the request at once.
-    fn mailbox_written(&mut self, n: usize) {
+    fn mailbox_written(&mut self, n: usize, now: Duration) {
         let range = self.sm(n).range();
         let Some(request) = self.mem.get(range).map(<[u8]>::to_vec) else {
             return;
         };
         self.stats.mailbox_requests += 1;
-        if let Some(reply) = self.handle_mailbox(&request) {
+        if let Some(reply) = self.handle_mailbox(&request, now) {
             if !self.mbx.push(reply) {
                 tracing::warn!("mailbox reply queue full, oldest reply dropped");
             }
@@ -1128,7 +1189,7 @@ impl<A: Application> SubDevice<A> {
         self.try_deliver();
     }
 
-    fn handle_mailbox(&mut self, request: &[u8]) -> Option<Vec<u8>> {
+    fn handle_mailbox(&mut self, request: &[u8], now: Duration) -> Option<Vec<u8>> {
         let capacity = self
             .reply_sm()
             .map_or(0, |(_, sm)| usize::from(sm.len).saturating_sub(HEADER_LEN));
@@ -1154,7 +1215,8 @@ impl<A: Application> SubDevice<A> {
         let kind = header.mailbox_type;
         let supported =
             mailbox::protocol_bit(kind).is_some_and(|bit| self.config.mailbox_protocols & bit != 0);
-        if !supported || (kind == TYPE_COE && self.state == AlState::Boot) {
+        // BOOT offers FoE only (ETG.1000.6: the bootstrap mailbox is for firmware download).
+        if !supported || (self.state == AlState::Boot && kind != TYPE_FOE) {
             return Some(self.mailbox_error(mailbox_error::UNSUPPORTED_PROTOCOL));
         }
         if kind == TYPE_COE {
@@ -1167,10 +1229,19 @@ impl<A: Application> SubDevice<A> {
                 Outcome::MailboxError(detail) => Some(self.mailbox_error(detail)),
             };
         }
-        match self.app.mailbox(kind, payload, self.state) {
-            Some(p) if p.len() <= capacity => Some(self.message(kind, &p)),
-            Some(_) => Some(self.mailbox_error(mailbox_error::NO_MORE_MEMORY)),
-            None => Some(self.mailbox_error(mailbox_error::UNSUPPORTED_PROTOCOL)),
+        let cx = MailboxContext {
+            state: self.state,
+            now,
+            request_size: request.len(),
+            reply_capacity: capacity,
+        };
+        match self.app.mailbox_request(kind, payload, &cx) {
+            MailboxReply::Reply(p) if p.len() <= capacity => Some(self.message(kind, &p)),
+            MailboxReply::Reply(_) => Some(self.mailbox_error(mailbox_error::NO_MORE_MEMORY)),
+            MailboxReply::Silent => None,
+            MailboxReply::Unsupported => {
+                Some(self.mailbox_error(mailbox_error::UNSUPPORTED_PROTOCOL))
+            }
         }
     }
 

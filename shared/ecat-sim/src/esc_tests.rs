@@ -737,6 +737,189 @@ fn other_mailbox_protocols_reach_the_application() {
     assert_eq!(&reply[..9], &[3, 0, 0, 0, 0, 0x14, 3, 2, 1]);
 }
 
+/// An application with a firmware loader: FoE requests are recorded with their context and
+/// echoed (or not answered, for an FoE ERR); it asks for a restart at a set time.
+#[derive(Default)]
+struct Loader {
+    requests: Vec<(u8, Vec<u8>, MailboxContext)>,
+    restart_at: Option<Duration>,
+    polls: u32,
+}
+
+impl Application for Loader {
+    fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, SdoAbort> {
+        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
+    }
+    fn sdo_write(&mut self, _: u16, _: u8, _: &[u8], _: AlState) -> Result<(), SdoAbort> {
+        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
+    }
+    fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
+        Ok((0, 0))
+    }
+    fn write_outputs(&mut self, _: &[u8], _: Duration) {}
+    fn read_inputs(&mut self, _: &mut [u8], _: Duration) {}
+    fn mailbox_request(&mut self, kind: u8, payload: &[u8], cx: &MailboxContext) -> MailboxReply {
+        self.requests.push((kind, payload.to_vec(), *cx));
+        if payload.first() == Some(&5) {
+            MailboxReply::Silent
+        } else {
+            MailboxReply::Reply(payload.to_vec())
+        }
+    }
+    fn poll(&mut self, now: Duration, _: AlState) -> AppRequest {
+        self.polls += 1;
+        match self.restart_at {
+            Some(at) if now >= at => {
+                self.restart_at = None;
+                AppRequest::Restart {
+                    offline: Duration::from_millis(50),
+                }
+            }
+            _ => AppRequest::None,
+        }
+    }
+}
+
+#[test]
+fn boot_uses_the_bootstrap_mailbox_and_offers_foe_only() {
+    let config = EscConfig {
+        mailbox_protocols: mailbox_protocols::COE | mailbox_protocols::FOE | mailbox_protocols::EOE,
+        bootstrap_rx_mailbox: (0x1800, 256),
+        bootstrap_tx_mailbox: (0x1A00, 256),
+        ..EscConfig::default()
+    };
+    let mut sd = SubDevice::new(config, Loader::default());
+    let mut now = Duration::ZERO;
+    let mut run = |sd: &mut SubDevice<Loader>, d: Dg| {
+        now += Duration::from_millis(1);
+        parse_reply(&sd.process_frame(&build_frame(&[d]), now).expect("reply")).remove(0)
+    };
+    // The SII announces the bootstrap mailbox in words 0x14..0x17.
+    let image = sd.sii_image();
+    assert_eq!(&image[0x28..0x30], &[0x00, 0x18, 0, 1, 0x00, 0x1A, 0, 1]);
+    // SM0/SM1 on the standard mailbox: BOOT refused with 0x0015.
+    run(
+        &mut sd,
+        dg(BWR, 0, reg::sm(0, 0), &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0]),
+    );
+    run(
+        &mut sd,
+        dg(BWR, 0, reg::sm(1, 0), &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0]),
+    );
+    run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x03, 0]));
+    assert_eq!(sd.al_state(), (AlState::Init, true, 0x0015));
+    // Moved to the bootstrap mailbox (disable, configure, enable): BOOT.
+    for (n, cfg) in [
+        (0, [0x00, 0x18, 0, 1, 0x26, 0, 1, 0]),
+        (1, [0x00, 0x1A, 0, 1, 0x22, 0, 1, 0]),
+    ] {
+        run(&mut sd, dg(BWR, 0, reg::sm(n, 6), &[0]));
+        run(&mut sd, dg(BWR, 0, reg::sm(n, 0), &cfg));
+    }
+    run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x13, 0]));
+    assert_eq!(sd.al_state(), (AlState::Boot, false, 0));
+    // An FoE request reaches the application with its context and is answered.
+    let mut m = vec![3, 0, 0, 0, 0, 0x14, 3, 0, 1];
+    m.resize(256, 0);
+    assert_eq!(run(&mut sd, dg(BWR, 0, 0x1800, &m)).2, 1);
+    let (_, reply, wkc) = run(&mut sd, dg(BRD, 0, 0x1A00, &[0; 256]));
+    assert_eq!(wkc, 1);
+    assert_eq!(&reply[..9], &[3, 0, 0, 0, 0, 0x14, 3, 0, 1]);
+    let (kind, payload, cx) = sd.app().requests[0].clone();
+    assert_eq!((kind, payload), (4, vec![3, 0, 1]));
+    assert_eq!(cx.state, AlState::Boot);
+    assert_eq!(cx.request_size, 256);
+    assert_eq!(cx.reply_capacity, 250);
+    assert_eq!(cx.now, Duration::from_millis(9));
+    // An FoE ERR is not answered (the application stays silent).
+    let mut m = vec![6, 0, 0, 0, 0, 0x24, 5, 0, 0, 0x80, 0, 0];
+    m.resize(256, 0);
+    run(&mut sd, dg(BWR, 0, 0x1800, &m));
+    assert_eq!(run(&mut sd, dg(BRD, 0, 0x1A00, &[0; 256])).2, 0);
+    // EoE is announced but not offered in BOOT: mailbox error "unsupported protocol".
+    let mut m = vec![2, 0, 0, 0, 0, 0x32, 1, 2];
+    m.resize(256, 0);
+    run(&mut sd, dg(BWR, 0, 0x1800, &m));
+    let (_, reply, _) = run(&mut sd, dg(BRD, 0, 0x1A00, &[0; 256]));
+    assert_eq!(&reply[5..10], &[reply[5] & 0xF0, 0x01, 0x00, 0x02, 0x00]);
+    assert_eq!(sd.app().requests.len(), 2);
+    // Back to INIT, then PRE-OP needs the standard mailbox again.
+    run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x01, 0]));
+    run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x02, 0]));
+    assert_eq!(sd.al_state(), (AlState::Init, true, 0x0016));
+}
+
+#[test]
+fn a_restart_takes_the_device_off_the_bus_then_back_as_at_power_on() {
+    let config = EscConfig {
+        mailbox_protocols: mailbox_protocols::COE | mailbox_protocols::FOE,
+        ..EscConfig::default()
+    };
+    let app = Loader {
+        restart_at: Some(Duration::from_millis(100)),
+        ..Loader::default()
+    };
+    let mut sd = SubDevice::new(config, app);
+    let frame = |d: Dg| build_frame(&[d]);
+    let at = |ms: u64| Duration::from_millis(ms);
+    sd.process_frame(
+        &frame(dg(APWR, 0, reg::STATION_ADDRESS, &[0x00, 0x10])),
+        at(1),
+    )
+    .expect("reply");
+    sd.process_frame(
+        &frame(dg(
+            BWR,
+            0,
+            reg::sm(0, 0),
+            &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0],
+        )),
+        at(2),
+    );
+    sd.process_frame(
+        &frame(dg(
+            BWR,
+            0,
+            reg::sm(1, 0),
+            &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0],
+        )),
+        at(3),
+    );
+    sd.process_frame(&frame(dg(BWR, 0, reg::AL_CONTROL, &[0x02, 0])), at(4));
+    assert_eq!(sd.al_state(), (AlState::PreOp, false, 0));
+    assert!(sd.app().polls >= 4, "polled on every frame");
+    // The application asks for a restart at 100 ms: from then on, no answers for 50 ms.
+    sd.tick(at(100));
+    assert!(sd.restarting());
+    assert_eq!(sd.al_state(), (AlState::Init, false, 0));
+    let read = frame(dg(FPRD, 0x1000, reg::AL_STATUS, &[0, 0]));
+    assert_eq!(sd.process_frame(&read, at(120)), None);
+    assert_eq!(sd.process_frame(&read, at(149)), None);
+    // Back: INIT, station address 0 (the FPRD misses), sync managers cleared.
+    let reply = parse_reply(&sd.process_frame(&read, at(150)).expect("reply"));
+    assert_eq!(reply[0].2, 0, "station address is gone");
+    let reply = parse_reply(
+        &sd.process_frame(&frame(dg(APRD, 0, reg::STATION_ADDRESS, &[0; 2])), at(151))
+            .expect("reply"),
+    );
+    assert_eq!(reply[0].1, [0, 0]);
+    let reply = parse_reply(
+        &sd.process_frame(&frame(dg(APRD, 0, reg::sm(0, 0), &[0; 8])), at(152))
+            .expect("reply"),
+    );
+    // Start, length, control, activate cleared; PDI control says "deactivated" (INIT).
+    assert_eq!(reply[0].1, [0, 0, 0, 0, 0, 0, 0, 1]);
+    assert!(!sd.restarting());
+    let stats = sd.stats();
+    assert_eq!((stats.restarts, stats.frames_while_restarting), (1, 2));
+    // The SII survives (identity), the configuration area is loaded again.
+    assert!(sii::checksum_ok(sd.sii_image()));
+    // A caller-made power cycle with no offline time is immediate.
+    sd.restart(at(200), Duration::ZERO);
+    assert!(!sd.restarting());
+    assert_eq!(sd.stats().restarts, 2);
+}
+
 #[test]
 fn sm_watchdog_drops_to_safe_op() {
     let mut bus = Bus::new(App::new(4, 6));

@@ -49,6 +49,10 @@ pub struct Stats {
     pub wrong_wkc: u64,
     /// Injected: transitions refused through `Faults::refuse_next_transition`.
     pub injected_refusals: u64,
+    /// Restarts (asked by the application or by the caller).
+    pub restarts: u64,
+    /// Frames lost because they came while the device restarted.
+    pub frames_while_restarting: u64,
 }
 
 /// SplitMix64: small, seedable, good enough for fault injection.

@@ -13,7 +13,10 @@
 //! - the **SII EEPROM** ([`sii`]): identity, mailbox layout, Strings/General/FMMU/SyncManager
 //!   categories, CRC, and the 0x0500 EEPROM interface with 4- or 8-byte reads;
 //! - the **AL state machine** (INIT, PRE-OP, BOOT, SAFE-OP, OP) with real AL status codes, the
-//!   error flag and its acknowledge;
+//!   error flag and its acknowledge; BOOT on the bootstrap mailbox (SII words 0x14..0x17: SM0/SM1
+//!   must be moved there before INIT -> BOOT) with FoE only;
+//! - **restarts** requested by the application ([`AppRequest::Restart`], e.g. after a firmware
+//!   update) or by the caller ([`SubDevice::restart`]): offline for a while, then as at power-on;
 //! - the **mailbox** (SM0/SM1 handshake, counters, repeat, mailbox error replies) and **CoE SDO**
 //!   (expedited, normal and segmented upload and download, abort codes);
 //! - **process data** through the configured FMMUs, only exchanged in SAFE-OP (inputs) and OP
@@ -34,8 +37,9 @@
 //!
 //! Distributed clocks (the DC registers 0x0900.. are absent: reads leave the datagram untouched
 //! and do not count in the working counter, exactly like an ESC without DC), FoE/EoE/SoE/AoE
-//! (mailbox types other than CoE are handed to [`Application::mailbox`], which answers with a
-//! mailbox error by default), SDO Information, CoE complete access (aborted with 0x0601_0000),
+//! (mailbox types other than CoE are handed to [`Application::mailbox_request`], which answers
+//! with a mailbox error by default; in BOOT only FoE reaches it, on the bootstrap mailbox, so a
+//! firmware update is the application's), SDO Information, CoE complete access (aborted with 0x0601_0000),
 //! CoE emergencies (never sent), bit-granular FMMU mappings (FMMUs map whole bytes), explicit
 //! device identification (AL control bit 5), EEPROM emulation by the PDI, ESC write protection,
 //! and more than one port (port 0 has the link, port 1 is closed).
@@ -297,12 +301,80 @@ pub trait Application {
     /// 5 SoE, 15 VoE) that the SII advertises in [`EscConfig::mailbox_protocols`]. `payload` is
     /// the mailbox data after the 6-byte mailbox header. Return the reply payload (sent back with
     /// the same mailbox type), or `None` to answer with a mailbox error "unsupported protocol"
-    /// (the default). In BOOT only this hook is used (CoE is not available there), so FoE can be
-    /// built on it.
+    /// (the default). In BOOT only FoE reaches it (CoE and the others get "unsupported
+    /// protocol" there), so a boot loader is built on it. Called through the default
+    /// [`mailbox_request`](Self::mailbox_request); implement that one instead to know the time
+    /// and the mailbox sizes, or to stay silent.
     fn mailbox(&mut self, mailbox_type: u8, payload: &[u8], state: AlState) -> Option<Vec<u8>> {
         let _ = (mailbox_type, payload, state);
         None
     }
+
+    /// The full form of [`mailbox`](Self::mailbox), which is what the ESC calls: `cx` also says
+    /// when the request came and how large the mailboxes are (a file transfer sizes its packets
+    /// from the receive mailbox), and the reply may be [`MailboxReply::Silent`] (no answer at
+    /// all: a request that is not answered, such as an FoE ERR, or a device that hangs). The
+    /// default calls [`mailbox`](Self::mailbox).
+    fn mailbox_request(
+        &mut self,
+        mailbox_type: u8,
+        payload: &[u8],
+        cx: &MailboxContext,
+    ) -> MailboxReply {
+        match self.mailbox(mailbox_type, payload, cx.state) {
+            Some(reply) => MailboxReply::Reply(reply),
+            None => MailboxReply::Unsupported,
+        }
+    }
+
+    /// Called with the ESC's clock before every frame is processed and on every
+    /// [`SubDevice::tick`] (not while the device restarts): lets the application run its own
+    /// timers (e.g. a flash write) and ask the ESC for something ([`AppRequest`]).
+    fn poll(&mut self, now: Duration, state: AlState) -> AppRequest {
+        let _ = (now, state);
+        AppRequest::None
+    }
+}
+
+/// When and where a mailbox request arrived (see [`Application::mailbox_request`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MailboxContext {
+    /// The AL state.
+    pub state: AlState,
+    /// The ESC's clock when the request was written.
+    pub now: Duration,
+    /// Length of the receive mailbox (SM0) as the MainDevice configured it: the longest
+    /// request, header included.
+    pub request_size: usize,
+    /// The longest reply payload (the send mailbox, SM1, minus the 6-byte mailbox header).
+    pub reply_capacity: usize,
+}
+
+/// The application's answer to a mailbox request (see [`Application::mailbox_request`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MailboxReply {
+    /// Reply with this payload, in a mailbox message of the request's type.
+    Reply(Vec<u8>),
+    /// No reply at all.
+    Silent,
+    /// A mailbox error "unsupported protocol".
+    Unsupported,
+}
+
+/// What the application asks of its ESC (see [`Application::poll`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AppRequest {
+    /// Nothing.
+    #[default]
+    None,
+    /// The device restarts (e.g. after a firmware update): the ESC stops answering frames for
+    /// `offline` (a device that reboots forwards nothing) and comes back as at power-on: INIT,
+    /// station address 0, sync managers and FMMUs cleared, SII reloaded. See
+    /// [`SubDevice::restart`].
+    Restart {
+        /// How long the device does not answer.
+        offline: Duration,
+    },
 }
 
 /// The identity object as the SII EEPROM (words 0x08..0x0F) carries it.

@@ -8,6 +8,8 @@ pub(crate) const HEADER_LEN: usize = 6;
 pub(crate) const TYPE_ERR: u8 = 0x00;
 /// Mailbox type: CoE.
 pub(crate) const TYPE_COE: u8 = 0x03;
+/// Mailbox type: FoE.
+pub(crate) const TYPE_FOE: u8 = 0x04;
 /// Replies waiting for SM1 beyond this are dropped (oldest first).
 const QUEUE_LIMIT: usize = 16;
 
