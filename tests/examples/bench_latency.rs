@@ -208,24 +208,34 @@ fn run(label: &str) {
     // request carries the newest command published before its first byte (its last byte
     // arrives 16 byte times = 1.39 ms later); commands replaced before that are never sent.
     let wire = 1_389_000u64;
-    let tactile_by_origin: HashMap<u64, &Tactile> = t_v.iter().map(|t| (t.header.origin_ns, t)).collect();
+    let tactile_by_origin: HashMap<u64, &Tactile> =
+        t_v.iter().map(|t| (t.header.origin_ns, t)).collect();
     let (mut b1, mut b2, mut b3, mut b_total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for r in &requests {
         let i = f_v.partition_point(|f| f.header.stamp_ns + wire <= r.received_ns);
-        let Some(f) = i.checked_sub(1).map(|i| &f_v[i]) else { continue };
+        let Some(f) = i.checked_sub(1).map(|i| &f_v[i]) else {
+            continue;
+        };
         if f.force != r.forces {
             continue;
         }
-        let Some(t) = tactile_by_origin.get(&f.header.origin_ns) else { continue };
+        let Some(t) = tactile_by_origin.get(&f.header.origin_ns) else {
+            continue;
+        };
         let j = frames.partition_point(|fr| fr.0 <= t.header.origin_ns);
-        let Some(sample) = j.checked_sub(1).map(|j| frames[j].0) else { continue };
+        let Some(sample) = j.checked_sub(1).map(|j| frames[j].0) else {
+            continue;
+        };
         b1.push(t.header.stamp_ns.saturating_sub(sample));
         b2.push(f.header.stamp_ns.saturating_sub(t.header.stamp_ns));
         b3.push(r.received_ns.saturating_sub(f.header.stamp_ns));
         b_total.push(r.received_ns.saturating_sub(sample));
     }
     let exchanges = answers.len() as f64 / SECONDS as f64;
-    println!("\n{label}: ms ({exchanges:.0} glove exchanges/s, {:.0} EtherCAT frames/s)", frames.len() as f64 / SECONDS as f64);
+    println!(
+        "\n{label}: ms ({exchanges:.0} glove exchanges/s, {:.0} EtherCAT frames/s)",
+        frames.len() as f64 / SECONDS as f64
+    );
     println!(
         "A  glove sample -> EtherCAT cycle carrying its hand command (floor: one cycle, 1.000 ms)"
     );

@@ -144,6 +144,16 @@ enum Command {
         #[arg(long)]
         feedback_config: Option<PathBuf>,
     },
+    /// Show the live pipeline or a recording in a rerun viewer (`teleop view --help`).
+    ///
+    /// Runs `teleop-viewer` with these arguments:
+    /// `teleop view [FILE.mcap] [--spawn | --connect [URL] | --save FILE.rrd]`.
+    #[command(disable_help_flag = true)]
+    View {
+        /// Arguments for `teleop-viewer`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Record an operator calibration profile from the live glove.
     Calibrate {
         /// Where to write the profile.
@@ -247,6 +257,7 @@ fn main() -> ExitCode {
             settle,
             capture,
         } => calibrate::run(&ipc, &out, yes, secs(settle), secs(capture)),
+        Command::View { args } => run_viewer(&ipc, &args),
     };
     match result {
         Ok(code) => code,
@@ -289,4 +300,26 @@ fn run_launch(
             Ok(ExitCode::FAILURE)
         }
     }
+}
+
+/// `teleop view`: replaces this process with `teleop-viewer` (next to `teleop`, else from
+/// PATH), passing the arguments on and the pipeline's IPC settings as environment variables.
+/// The viewer lives in its own executable so that `teleop` does not depend on rerun.
+fn run_viewer(ipc: &IpcSettings, args: &[String]) -> anyhow::Result<ExitCode> {
+    use std::os::unix::process::CommandExt;
+    const VIEWER: &str = "teleop-viewer";
+    let program = std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(|dir| dir.join(VIEWER)))
+        .filter(|p| p.is_file())
+        .unwrap_or_else(|| PathBuf::from(VIEWER));
+    let err = std::process::Command::new(&program)
+        .args(args)
+        .envs(ipc.to_env())
+        .exec();
+    anyhow::bail!(
+        "could not run {}: {err} (build it with `cargo build -p node-viewer`; it is looked \
+         for next to `teleop`, then in PATH)",
+        program.display()
+    )
 }
