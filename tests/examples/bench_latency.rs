@@ -16,6 +16,7 @@
 //!   command's stamp, carrying the same forces (last byte, at 115200 baud). Stages: device
 //!   sample -> `hand/tactile` published -> `glove/force_command` published -> last byte at the
 //!   glove. Floor: one serial exchange (34 bytes at 115200 baud = 2.95 ms).
+//!
 //! Then the same under CPU stress (two `yes > /dev/null` processes, one per core).
 //!
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_latency`
