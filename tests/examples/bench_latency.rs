@@ -31,9 +31,9 @@ use std::time::{Duration, Instant};
 use sim_glove::hand::{Hand as GloveHand, HandModel, Script};
 use sim_glove::{Faults, SimGlove, SimOptions};
 use sim_revo2::hand::{Drive, VirtualObject};
-use sim_revo2::{revo2_subdevice, Revo2};
+use sim_revo2::{revo2_subdevice, serve_socket, Revo2};
 use teleop_e2e::Sandbox;
-use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
+use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::SubDevice;
 use teleop_glove_protocol::BaudRate;
 use teleop_msgs::{GloveForceCommand, GloveState, HandCommand, Tactile};
@@ -53,35 +53,16 @@ fn serve_revo2(
     frames: Arc<Mutex<Frames>>,
     stop: Arc<AtomicBool>,
 ) {
-    let start = Instant::now();
-    let mut buf = vec![0u8; MAX_FRAME];
-    let mut out = vec![0u8; MAX_FRAME];
-    while !stop.load(Ordering::SeqCst) {
-        let Some(mut conn) = server.accept().unwrap() else {
-            std::thread::sleep(Duration::from_millis(1));
-            continue;
-        };
-        while !stop.load(Ordering::SeqCst) {
-            match conn.recv(&mut buf, Duration::from_millis(1)) {
-                Ok(Some(n)) => {
-                    let mut dev = sim.lock().unwrap();
-                    let reply = dev.process_frame_into(&buf[..n], &mut out, start.elapsed());
-                    let t = now_ns();
-                    let targets = dev.app().hand().drives().map(|d| match d {
-                        Drive::Position { target, .. } | Drive::Hold(target) => target,
-                        _ => f32::NAN,
-                    });
-                    drop(dev);
-                    frames.lock().unwrap().at.push((t, targets));
-                    if let Some(len) = reply {
-                        let _ = conn.send(&out[..len]);
-                    }
-                }
-                Ok(None) => sim.lock().unwrap().tick(start.elapsed()),
-                Err(_) => break,
-            }
-        }
-    }
+    let stopping = || stop.load(Ordering::SeqCst);
+    let mut record = |_received: u64, dev: &SubDevice<Revo2>| {
+        let targets = dev.app().hand().drives().map(|d| match d {
+            Drive::Position { target, .. } | Drive::Hold(target) => target,
+            _ => f32::NAN,
+        });
+        // The frame has been answered: its inputs were sampled now.
+        frames.lock().unwrap().at.push((now_ns(), targets));
+    };
+    serve_socket(&server, &sim, Instant::now(), &stopping, &mut record).unwrap();
 }
 
 fn percentiles(mut v: Vec<u64>) -> String {

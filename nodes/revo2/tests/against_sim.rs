@@ -9,8 +9,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice, Revo2};
-use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
+use sim_revo2::{revo2_subdevice, serve_socket, Revo2};
+use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::{AlState, SubDevice};
 use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
@@ -24,31 +24,8 @@ fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, SubDevice<Revo2>> {
 /// Serves the emulated Revo2 on a socket until `stop`.
 fn serve(server: StreamServer, sim: Sim, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
     std::thread::spawn(move || {
-        let start = Instant::now();
-        let mut buf = vec![0u8; MAX_FRAME];
-        let mut out = vec![0u8; MAX_FRAME];
-        while !stop.load(Ordering::SeqCst) {
-            let Some(mut conn) = server.accept().unwrap() else {
-                lock(&sim).tick(start.elapsed());
-                std::thread::sleep(Duration::from_millis(1));
-                continue;
-            };
-            while !stop.load(Ordering::SeqCst) {
-                match conn.recv(&mut buf, Duration::from_millis(1)) {
-                    Ok(Some(n)) => {
-                        let reply =
-                            lock(&sim).process_frame_into(&buf[..n], &mut out, start.elapsed());
-                        if let Some(len) = reply {
-                            if conn.send(&out[..len]).is_err() {
-                                break;
-                            }
-                        }
-                    }
-                    Ok(None) => lock(&sim).tick(start.elapsed()),
-                    Err(_) => break,
-                }
-            }
-        }
+        let stopping = || stop.load(Ordering::SeqCst);
+        serve_socket(&server, &sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
     })
 }
 

@@ -44,3 +44,73 @@ pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubD
     let hand = hand::Hand::new(hand::HandParams::default(), object);
     SubDevice::new(config, Revo2::new(hand, &Versions::default()))
 }
+
+/// An emulated Revo2 shared between the thread that serves it and whoever injects faults.
+pub type SharedRevo2 = std::sync::Mutex<SubDevice<Revo2>>;
+
+fn lock(sim: &SharedRevo2) -> std::sync::MutexGuard<'_, SubDevice<Revo2>> {
+    sim.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Answers the frames of one master link until it fails or `stop()` says so. `on_frame` runs
+/// after each frame with the time it was received (CLOCK_MONOTONIC ns) and the device after
+/// processing it (benchmarks and tests record what the device saw). The device's clock is
+/// `start.elapsed()`; between frames its watchdog is ticked.
+pub fn serve_link(
+    link: &mut dyn teleop_ecat_link::FrameLink,
+    sim: &SharedRevo2,
+    start: std::time::Instant,
+    stop: &dyn Fn() -> bool,
+    on_frame: &mut dyn FnMut(u64, &SubDevice<Revo2>),
+) {
+    let mut buf = vec![0u8; teleop_ecat_link::MAX_FRAME];
+    let mut out = vec![0u8; teleop_ecat_link::MAX_FRAME];
+    while !stop() {
+        match link.recv(&mut buf, std::time::Duration::from_millis(1)) {
+            Ok(Some(n)) => {
+                let received = teleop_runtime::now_ns();
+                let mut dev = lock(sim);
+                let reply = dev.process_frame_into(&buf[..n], &mut out, start.elapsed());
+                on_frame(received, &dev);
+                drop(dev);
+                if let Some(len) = reply {
+                    if let Err(e) = link.send(&out[..len]) {
+                        // A device whose reply cannot go out just loses that frame; only a
+                        // closed connection ends the session (the next recv reports it).
+                        tracing::debug!("reply lost: {e}");
+                    }
+                }
+            }
+            Ok(None) => lock(sim).tick(start.elapsed()),
+            Err(e) => {
+                tracing::debug!("link: {e}");
+                return;
+            }
+        }
+    }
+}
+
+/// Serves masters connecting to `server`, one at a time, until `stop()` says so (see
+/// [`serve_link`]).
+pub fn serve_socket(
+    server: &teleop_ecat_link::StreamServer,
+    sim: &SharedRevo2,
+    start: std::time::Instant,
+    stop: &dyn Fn() -> bool,
+    on_frame: &mut dyn FnMut(u64, &SubDevice<Revo2>),
+) -> Result<(), teleop_ecat_link::LinkError> {
+    while !stop() {
+        match server.accept()? {
+            Some(mut conn) => {
+                tracing::info!("master connected");
+                serve_link(&mut conn, sim, start, stop, on_frame);
+                tracing::info!("master disconnected");
+            }
+            None => {
+                lock(sim).tick(start.elapsed());
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+        }
+    }
+    Ok(())
+}

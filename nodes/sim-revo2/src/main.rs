@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice, Revo2};
-use teleop_ecat_link::{Accept, FrameLink, RawSocketLink, StreamServer, MAX_FRAME};
+use sim_revo2::{revo2_subdevice, serve_link, serve_socket, Revo2};
+use teleop_ecat_link::{Accept, RawSocketLink, StreamServer};
 use teleop_ecat_sim::SubDevice;
 
 #[derive(Parser)]
@@ -89,19 +89,7 @@ fn run(args: Args) -> anyhow::Result<()> {
                 control.display()
             );
             std::io::stdout().flush()?;
-            while teleop_runtime::stop_signal().is_none() {
-                match server.accept()? {
-                    Some(mut conn) => {
-                        tracing::info!("master connected");
-                        serve(&mut conn, &sim, start);
-                        tracing::info!("master disconnected");
-                    }
-                    None => {
-                        tick(&sim, start);
-                        std::thread::sleep(Duration::from_millis(2));
-                    }
-                }
-            }
+            serve_socket(&server, &sim, start, &stopping, &mut |_, _| {})?;
         }
         (None, Some(interface)) => {
             let mut link = RawSocketLink::open(interface, Accept::FromMaster)?;
@@ -110,7 +98,7 @@ fn run(args: Args) -> anyhow::Result<()> {
                 control.display()
             );
             std::io::stdout().flush()?;
-            serve(&mut link, &sim, start);
+            serve_link(&mut link, &sim, start, &stopping, &mut |_, _| {});
         }
         (None, None) => anyhow::bail!("give --socket PATH or --interface IF"),
     }
@@ -119,33 +107,8 @@ fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn tick(sim: &Sim, start: Instant) {
-    lock(sim).tick(start.elapsed());
-}
-
-/// Answers frames until the link fails or a stop signal arrives.
-fn serve(link: &mut dyn FrameLink, sim: &Sim, start: Instant) {
-    let mut buf = vec![0u8; MAX_FRAME];
-    let mut out = vec![0u8; MAX_FRAME];
-    while teleop_runtime::stop_signal().is_none() {
-        match link.recv(&mut buf, Duration::from_millis(1)) {
-            Ok(Some(n)) => {
-                let reply = lock(sim).process_frame_into(&buf[..n], &mut out, start.elapsed());
-                if let Some(len) = reply {
-                    if let Err(e) = link.send(&out[..len]) {
-                        // A device whose reply cannot go out just loses that frame; only a
-                        // closed connection ends the session (the next recv reports it).
-                        tracing::debug!("reply lost: {e}");
-                    }
-                }
-            }
-            Ok(None) => tick(sim, start),
-            Err(e) => {
-                tracing::debug!("link: {e}");
-                return;
-            }
-        }
-    }
+fn stopping() -> bool {
+    teleop_runtime::stop_signal().is_some()
 }
 
 fn spawn_control(path: &PathBuf, sim: Sim, start: Instant) -> anyhow::Result<()> {
