@@ -209,14 +209,14 @@ fn killing_each_process_in_turn_ends_safe_and_recovers() {
         "sim-revo2",
         "sim-glove",
     ] {
-        let pid = match victim {
+        let pid_now = || match victim {
             "sim-glove" => Sandbox::pid_with_arg(&format!("--link {glove_link}")),
             "sim-revo2" => {
                 Sandbox::pid_with_arg(&sandbox.dir.path().join("revo2.sock").display().to_string())
             }
             node => sandbox.pid_of(node),
-        }
-        .unwrap_or_else(|| panic!("pid of {victim}"));
+        };
+        let pid = pid_now().unwrap_or_else(|| panic!("pid of {victim}"));
         // SAFETY: kill(2) of a process of this test's own session.
         unsafe {
             libc::kill(pid as libc::pid_t, libc::SIGKILL);
@@ -259,8 +259,15 @@ fn killing_each_process_in_turn_ends_safe_and_recovers() {
             &format!("{victim} restarted"),
             |_| restarted(&session),
         );
-        // ... and once the new process runs, everything flows again.
-        std::thread::sleep(Duration::from_millis(700));
+        // ... a new process runs (after the restart delay, so no sample of the killed one is
+        // still fresh) ...
+        watch.until(
+            &session,
+            Duration::from_secs(10),
+            &format!("a new {victim}"),
+            |_| pid_now().is_some_and(|p| p != pid),
+        );
+        // ... and everything flows again.
         watch.until(
             &session,
             Duration::from_secs(25),
