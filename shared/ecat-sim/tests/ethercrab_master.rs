@@ -36,6 +36,18 @@ fn timeouts() -> Timeouts {
     }
 }
 
+/// Asserts that an SDO transfer was aborted with `code`; returns the aborted (index, sub-index).
+fn assert_aborted<T: core::fmt::Debug>(result: Result<T, Error>, code: CoeAbortCode) -> (u16, u8) {
+    match result {
+        Err(Error::Mailbox(MailboxError::Aborted {
+            code: got,
+            address,
+            sub_index,
+        })) if got == code => (address, sub_index),
+        other => panic!("expected SDO abort {code:?}, got {other:?}"),
+    }
+}
+
 /// One cycle: advance the virtual clock by 1 ms, exchange process data.
 macro_rules! cycle {
     ($group:expr, $md:expr, $clock:expr) => {{
@@ -111,50 +123,21 @@ fn discovers_the_device_and_serves_sdos_in_pre_op() {
         );
 
         // Aborts surface as ethercrab errors with the code.
-        let missing_sub = sd.sdo_read::<u8>(0x2000, 9).await;
-        assert!(
-            matches!(
-                missing_sub,
-                Err(Error::Mailbox(MailboxError::Aborted {
-                    code: CoeAbortCode::SubIndexNotFound,
-                    address: 0x2000,
-                    sub_index: 9
-                }))
+        assert_eq!(
+            assert_aborted(
+                sd.sdo_read::<u8>(0x2000, 9).await,
+                CoeAbortCode::SubIndexNotFound
             ),
-            "{missing_sub:?}"
+            (0x2000, 9)
         );
-        let missing_object = sd.sdo_read::<u8>(0x5555, 0).await;
-        assert!(
-            matches!(
-                missing_object,
-                Err(Error::Mailbox(MailboxError::Aborted {
-                    code: CoeAbortCode::NotFound,
-                    ..
-                }))
-            ),
-            "{missing_object:?}"
+        assert_aborted(sd.sdo_read::<u8>(0x5555, 0).await, CoeAbortCode::NotFound);
+        assert_aborted(
+            sd.sdo_write(0x2000, 1, 0x1234u16).await,
+            CoeAbortCode::DataLengthMismatch,
         );
-        let wrong_length = sd.sdo_write(0x2000, 1, 0x1234u16).await;
-        assert!(
-            matches!(
-                wrong_length,
-                Err(Error::Mailbox(MailboxError::Aborted {
-                    code: CoeAbortCode::DataLengthMismatch,
-                    ..
-                }))
-            ),
-            "{wrong_length:?}"
-        );
-        let read_only = sd.sdo_write(0x1018, 1, 1u32).await;
-        assert!(
-            matches!(
-                read_only,
-                Err(Error::Mailbox(MailboxError::Aborted {
-                    code: CoeAbortCode::ReadOnlyWrite,
-                    ..
-                }))
-            ),
-            "{read_only:?}"
+        assert_aborted(
+            sd.sdo_write(0x1018, 1, 1u32).await,
+            CoeAbortCode::ReadOnlyWrite,
         );
         // Segmented upload (150 bytes > 128-byte mailbox). The simulator follows ETG.1000.6
         // and SOEM: the initiate response carries the complete size and the first 112 bytes,
@@ -214,16 +197,9 @@ fn reaches_op_and_exchanges_process_data() {
 
         // PDO assignment is only writable in PRE-OP.
         let sd = group.subdevice(&md, 0).expect("subdevice 0");
-        let refused = sd.sdo_write(0x1C12, 0, 0u8).await;
-        assert!(
-            matches!(
-                refused,
-                Err(Error::Mailbox(MailboxError::Aborted {
-                    code: CoeAbortCode::InvalidState,
-                    ..
-                }))
-            ),
-            "{refused:?}"
+        assert_aborted(
+            sd.sdo_write(0x1C12, 0, 0u8).await,
+            CoeAbortCode::InvalidState,
         );
 
         for i in 0..20u8 {
