@@ -390,6 +390,21 @@ impl Rig {
         std::thread::sleep(Duration::from_millis(500));
         self.ns.ip(&["link", "set", "ecm0", "up"]);
     }
+
+    /// [`Self::reset_master_interface`], then wait for the node to report the link up again
+    /// and check it recovered in the same process with the emulator still serving; returns
+    /// the node's log.
+    fn reset_master_interface_and_recover(&mut self) -> String {
+        let pid = self.node_pid();
+        self.reset_master_interface();
+        self.wait_state(Duration::from_secs(20), "the link up again", |s| {
+            s.link_up == 1
+        });
+        assert!(self.node_running(), "same process");
+        assert_eq!(self.node_pid(), pid);
+        assert!(self.sim_running(), "the emulator is still serving");
+        self.log()
+    }
 }
 
 impl Drop for Rig {
@@ -435,15 +450,7 @@ fn ethercrab_task_reaches_op_follows_commands_and_recovers_with_a_fresh_bus() {
     // Admin-down makes the task's next send fail (ENETDOWN): ethercrab's task ends for good and
     // takes its PDU handles with it. The node reports the link down, and once the interface is
     // up again opens a fresh bus (new storage, MainDevice and task) in the same process.
-    let pid = rig.node_pid();
-    rig.reset_master_interface();
-    rig.wait_state(Duration::from_secs(20), "the link up again", |s| {
-        s.link_up == 1
-    });
-    assert!(rig.node_running(), "same process");
-    assert_eq!(rig.node_pid(), pid);
-    assert!(rig.sim_running(), "the emulator is still serving");
-    let log = rig.log();
+    let log = rig.reset_master_interface_and_recover();
     assert!(
         log.contains("ethercrab's task ended") && log.contains("opened a fresh bus"),
         "{log}"
@@ -472,15 +479,7 @@ fn pump_on_interface_reaches_op_follows_commands_and_survives_an_interface_reset
     );
 
     // The pump reopens its raw socket and the same bus is brought up again.
-    let pid = rig.node_pid();
-    rig.reset_master_interface();
-    rig.wait_state(Duration::from_secs(20), "the link up again", |s| {
-        s.link_up == 1
-    });
-    assert!(rig.node_running(), "same process");
-    assert_eq!(rig.node_pid(), pid);
-    assert!(rig.sim_running(), "the emulator is still serving");
-    let log = rig.log();
+    let log = rig.reset_master_interface_and_recover();
     assert!(
         log.contains("EtherCAT link lost") && !log.contains("opened a fresh bus"),
         "{log}"
