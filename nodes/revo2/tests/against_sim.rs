@@ -12,7 +12,10 @@ use sim_revo2::hand::VirtualObject;
 use sim_revo2::{revo2_subdevice, serve_socket, Revo2};
 use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::{AlState, SubDevice};
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, Tactile};
+mod common;
+
+use common::{position_command, positions};
+use teleop_msgs::{HandCommand, HandState, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
@@ -101,44 +104,16 @@ impl Rig {
         &self,
         timeout: Duration,
         what: &str,
-        mut ok: impl FnMut(&HandState) -> bool,
+        ok: impl FnMut(&HandState) -> bool,
     ) -> HandState {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            self.states.drain(|s| {
-                if ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        common::wait_state(&self.states, timeout, what, ok, || self.log())
     }
 
     /// Publishes position targets every 10 ms for `d`, returning the last hand state.
     fn command(&mut self, targets: [f32; 6], d: Duration) -> HandState {
         let start = Instant::now();
         while start.elapsed() < d {
-            let mut c = HandCommand {
-                hand_model: hand_model::REVO2,
-                joint_count: 6,
-                control_mode: control_mode::POSITION,
-                units: units::NORMALISED,
-                ..Default::default()
-            };
-            for (j, t) in c.joints.iter_mut().zip(targets) {
-                j.target = t;
-                j.speed_limit = 2.0;
-            }
-            self.commands.publish(&c).unwrap();
+            self.commands.publish(&position_command(targets)).unwrap();
             std::thread::sleep(Duration::from_millis(10));
         }
         self.states.poll_latest().unwrap()
@@ -163,10 +138,6 @@ impl Drop for Rig {
         }
         self.ipc.remove_shared_memory();
     }
-}
-
-fn positions(s: &HandState) -> Vec<f32> {
-    s.active_joints().iter().map(|j| j.position).collect()
 }
 
 #[test]

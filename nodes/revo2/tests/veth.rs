@@ -13,6 +13,9 @@
 //! iceoryx2 shared memory is not network-namespaced.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
+use common::{position_command, positions};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::net::UnixStream;
 use std::os::unix::process::CommandExt;
@@ -22,7 +25,7 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState};
+use teleop_msgs::{HandCommand, HandState};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 /// Prefix of the namespaces these tests create: `<prefix><pid>-<n>`.
@@ -286,27 +289,15 @@ impl Rig {
         &self,
         timeout: Duration,
         what: &str,
-        mut ok: impl FnMut(&HandState) -> bool,
+        ok: impl FnMut(&HandState) -> bool,
     ) -> HandState {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            self.states.drain(|s| {
-                if found.is_none() && ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n---- node log ----\n{}\n---- emulator log ----\n{}",
+        common::wait_state(&self.states, timeout, what, ok, || {
+            format!(
+                "---- node log ----\n{}\n---- emulator log ----\n{}",
                 self.log(),
                 self.sim_log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
+            )
+        })
     }
 
     /// Publishes position targets every 10 ms until the hand state (link up) reports every
@@ -315,18 +306,7 @@ impl Rig {
         let start = Instant::now();
         let mut last = None;
         loop {
-            let mut c = HandCommand {
-                hand_model: hand_model::REVO2,
-                joint_count: 6,
-                control_mode: control_mode::POSITION,
-                units: units::NORMALISED,
-                ..Default::default()
-            };
-            for (j, t) in c.joints.iter_mut().zip(targets) {
-                j.target = t;
-                j.speed_limit = 2.0;
-            }
-            self.commands.publish(&c).unwrap();
+            self.commands.publish(&position_command(targets)).unwrap();
             std::thread::sleep(Duration::from_millis(10));
             let mut reached = None;
             self.states.drain(|s| {
@@ -424,10 +404,6 @@ impl Drop for Rig {
         }
         self.ipc.remove_shared_memory();
     }
-}
-
-fn positions(s: &HandState) -> Vec<f32> {
-    s.active_joints().iter().map(|j| j.position).collect()
 }
 
 #[test]
