@@ -348,9 +348,9 @@ fn report(
         published.len()
     );
     println!(
-        "  node counters during the run: lost frames {}, wkc errors {}; link_up {}; recoveries logged: {}",
+        "  node counters during the run: lost frames {}, link errors (wrong working counter) {}; link_up {}; recoveries logged: {}",
         after.lost_frames - before.lost_frames,
-        after.wkc_errors - before.wkc_errors,
+        after.link_errors - before.link_errors,
         after.link_up,
         node_log.matches("dropped to SAFE-OP").count()
     );

@@ -100,7 +100,8 @@ impl Rig {
                     hand_model: hand_model::REVO2,
                     joint_count: 6,
                     link_up: 1,
-                    al_state: 8,
+                    link_kind: teleop_msgs::link_kind::ETHERCAT,
+                    bus_state: teleop_msgs::bus_state::AL_OP,
                     units: units::NORMALISED,
                     ..Default::default()
                 };

@@ -1,7 +1,10 @@
 //! Pure conversions between the message contract and the Revo2 process data: hand commands to
 //! outputs (with joint limits), the hold command, and inputs to hand state and tactile samples.
 
-use teleop_msgs::{control_mode, hand_model, units, Fingertip, HandCommand, HandState, Tactile};
+use teleop_msgs::{
+    control_mode, fingertip_sensor, hand_model, link_kind, units, Fingertip, HandCommand,
+    HandState, Tactile,
+};
 use teleop_revo2_protocol::{
     direction, newtons, ControlMode, Inputs, JointData, MultiFingerCommand, Outputs, TouchStatus,
     UnitMode, DEFAULT_JOINT_RANGES, JOINTS,
@@ -103,6 +106,7 @@ pub fn hand_state(inputs: &Inputs, unit_mode: UnitMode, full_speed: f32) -> Hand
         hand_model: hand_model::REVO2,
         joint_count: JOINTS as u8,
         units: units::NORMALISED,
+        link_kind: link_kind::ETHERCAT,
         ..Default::default()
     };
     let j = &inputs.joints;
@@ -114,6 +118,8 @@ pub fn hand_state(inputs: &Inputs, unit_mode: UnitMode, full_speed: f32) -> Hand
         state.joints[i] = teleop_msgs::JointState {
             position: normalised_position(j.position[i], i, unit_mode),
             speed,
+            // The Revo2 neither measures nor estimates joint torque.
+            effort: f32::NAN,
             // Percentage mode reports current as per mille of 1000 mA, i.e. mA.
             current_ma: f32::from(j.current[i]),
             status: u32::from(j.status[i]),
@@ -141,7 +147,9 @@ pub fn tactile(inputs: &Inputs) -> Option<Tactile> {
             status: status.bits(),
             update_counter: status.counter(),
             direction_valid: u8::from(dir.is_some()),
-            reserved: 0,
+            pressure: 0,
+            temperature: 0,
+            sensor_kind: fingertip_sensor::REVO2_FORCE,
         };
     }
     Some(msg)
@@ -219,7 +227,13 @@ mod tests {
         let p: Vec<f32> = s.active_joints().iter().map(|j| j.position).collect();
         assert_eq!(p, vec![0.0, 0.25, 0.5, 0.75, 1.0, 1.0]);
         assert_eq!(s.joints[0].current_ma, 100.0);
+        assert!(s.active_joints().iter().all(|j| j.effort.is_nan()));
+        assert_eq!(s.link_kind, link_kind::ETHERCAT);
         let t = tactile(&inputs).unwrap();
+        assert!(t
+            .active_fingertips()
+            .iter()
+            .all(|f| f.sensor_kind == fingertip_sensor::REVO2_FORCE));
         assert!((t.fingertips[0].normal_n - 2.3).abs() < 1e-6);
         assert_eq!(
             (t.fingertips[0].status, t.fingertips[0].update_counter),

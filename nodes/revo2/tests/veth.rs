@@ -272,7 +272,7 @@ impl Rig {
             ns,
         };
         rig.wait_state(Duration::from_secs(30), "the hand in OP", |s| {
-            s.link_up == 1 && s.al_state == 8
+            s.link_up == 1 && s.bus_state == teleop_msgs::bus_state::AL_OP
         });
         rig
     }

@@ -415,13 +415,13 @@ impl Scene {
             ),
             ("health/glove/errors", "glove link errors", GLOVE_COLOR),
             (
-                "health/revo2/wkc_errors",
-                "EtherCAT working-counter errors",
+                "health/hand/link_errors",
+                "hand link errors (EtherCAT: wrong working counter)",
                 COMMAND_COLOR,
             ),
             (
-                "health/revo2/lost_frames",
-                "EtherCAT lost frames",
+                "health/hand/lost_frames",
+                "hand link lost frames",
                 CONTACT_COLOR,
             ),
             (
@@ -445,13 +445,13 @@ impl Scene {
                 [200, 60, 60, 255],
             ),
             (
-                "health/revo2/link_up",
-                "Revo2 link up (1/0)",
+                "health/hand/link_up",
+                "hand link up (1/0)",
                 [250, 200, 150, 255],
             ),
             (
-                "health/revo2/holding",
-                "Revo2 holding (1/0)",
+                "health/hand/holding",
+                "hand holding (1/0)",
                 [200, 150, 60, 255],
             ),
             ("health/estop", "e-stop engaged (1/0)", [255, 0, 0, 255]),
@@ -578,15 +578,15 @@ impl Scene {
 
     fn hand_state(&mut self, m: &HandState, visuals: bool, out: &mut Vec<Entry>) {
         out.push(Entry::scalar(
-            "health/revo2/wkc_errors",
-            f64::from(m.wkc_errors),
+            "health/hand/link_errors",
+            f64::from(m.link_errors),
         ));
         out.push(Entry::scalar(
-            "health/revo2/lost_frames",
+            "health/hand/lost_frames",
             f64::from(m.lost_frames),
         ));
-        out.push(Entry::scalar("health/revo2/link_up", f64::from(m.link_up)));
-        out.push(Entry::scalar("health/revo2/holding", f64::from(m.holding)));
+        out.push(Entry::scalar("health/hand/link_up", f64::from(m.link_up)));
+        out.push(Entry::scalar("health/hand/holding", f64::from(m.holding)));
         if !is_revo2_layout(m.hand_model, m.joint_count) {
             return;
         }
@@ -949,7 +949,7 @@ mod tests {
             hand_model: hand_model::REVO2,
             joint_count: 6,
             link_up: 1,
-            wkc_errors: 4,
+            link_errors: 4,
             ..Default::default()
         };
         for (j, q) in [0.1, 0.2, 0.3, 0.4, 0.5, 0.6].into_iter().enumerate() {
@@ -965,7 +965,7 @@ mod tests {
             Some(&Visual::Scalar(f64::from(0.2f32)))
         );
         assert_eq!(
-            frame.get("health/revo2/wkc_errors"),
+            frame.get("health/hand/link_errors"),
             Some(&Visual::Scalar(4.0))
         );
         let posed = scene.robot_model().pose(&[0.1, 0.2, 0.3, 0.4, 0.5, 0.6]);

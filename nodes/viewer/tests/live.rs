@@ -75,7 +75,7 @@ fn live_samples_are_decimated_and_logged() {
     };
     state.joints[2].position = 0.25;
     for i in 0..300 {
-        state.wkc_errors = i;
+        state.link_errors = i;
         publisher.publish(&state).unwrap();
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -97,13 +97,13 @@ fn live_samples_are_decimated_and_logged() {
     let index = scalars(&msgs, "fingers/index/position/measured");
     assert_eq!(index.len() as u64, summary.forwarded);
     assert!(index.iter().all(|v| *v == 0.25));
-    let times = sample_times(&msgs, "health/revo2/wkc_errors");
+    let times = sample_times(&msgs, "health/hand/link_errors");
     assert_eq!(times.len() as u64, summary.forwarded);
     assert!(
         times.windows(2).all(|w| w[1] - w[0] >= 10_000_000),
         "at most one sample per 10 ms of sample time: {times:?}"
     );
-    let wkc = scalars(&msgs, "health/revo2/wkc_errors");
+    let wkc = scalars(&msgs, "health/hand/link_errors");
     assert!(wkc.windows(2).all(|w| w[1] > w[0]), "{wkc:?}");
     // The viewer's own drop counters are logged too.
     assert!(scalars(&msgs, "health/viewer/queue_full")

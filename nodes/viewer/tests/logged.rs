@@ -203,7 +203,7 @@ fn tactile_logs_bars_and_contacts_scaled_by_force() {
         hand_model: hand_model::REVO2,
         joint_count: 6,
         link_up: 1,
-        wkc_errors: 3,
+        link_errors: 3,
         lost_frames: 1,
         ..Default::default()
     };
@@ -269,8 +269,8 @@ fn tactile_logs_bars_and_contacts_scaled_by_force() {
     assert_eq!(origins, vec![vec![Position3D::from(posed[1].to_array())]]);
 
     // Link health of the hand and its measured joints.
-    assert_eq!(logged.scalars("health/revo2/wkc_errors"), vec![3.0]);
-    assert_eq!(logged.scalars("health/revo2/lost_frames"), vec![1.0]);
+    assert_eq!(logged.scalars("health/hand/link_errors"), vec![3.0]);
+    assert_eq!(logged.scalars("health/hand/lost_frames"), vec![1.0]);
     assert_eq!(logged.scalars("fingers/index/position/measured"), vec![0.5]);
 }
 

@@ -102,6 +102,53 @@ pub mod contact_source {
     pub const ESTOP: u8 = 5;
 }
 
+/// Link kinds (`HandState::link_kind`): how the node reaches the hand. They give
+/// [`HandState::bus_state`] and [`HandState::link_error_code`] their meaning.
+pub mod link_kind {
+    /// No link reported (a node without a bus, or not known).
+    pub const NONE: u8 = 0;
+    /// EtherCAT (Revo2; Shadow Hand palm).
+    pub const ETHERCAT: u8 = 1;
+    /// CAN (Allegro Hand).
+    pub const CAN: u8 = 2;
+}
+
+/// Values of [`HandState::bus_state`]; which ones apply depends on [`HandState::link_kind`].
+pub mod bus_state {
+    /// Not known (and the value for [`link_kind::NONE`](super::link_kind::NONE)).
+    pub const UNKNOWN: u8 = 0;
+    /// EtherCAT AL state INIT.
+    pub const AL_INIT: u8 = 1;
+    /// EtherCAT AL state PRE-OP.
+    pub const AL_PRE_OP: u8 = 2;
+    /// EtherCAT AL state BOOT.
+    pub const AL_BOOT: u8 = 3;
+    /// EtherCAT AL state SAFE-OP.
+    pub const AL_SAFE_OP: u8 = 4;
+    /// EtherCAT AL state OP.
+    pub const AL_OP: u8 = 8;
+    /// EtherCAT: added to the AL state when the SubDevice reports an error (AL status bit 4).
+    pub const AL_ERROR: u8 = 0x10;
+    /// CAN controller error-active (normal operation).
+    pub const CAN_ERROR_ACTIVE: u8 = 1;
+    /// CAN controller error-passive (an error counter passed 127).
+    pub const CAN_ERROR_PASSIVE: u8 = 2;
+    /// CAN controller bus-off (transmit error counter passed 255): no traffic until recovery.
+    pub const CAN_BUS_OFF: u8 = 3;
+}
+
+/// Fingertip sensor kinds (`Fingertip::sensor_kind`): which fields of a [`Fingertip`] it fills.
+pub mod fingertip_sensor {
+    /// No sensor (or an unused entry): no field is meaningful.
+    pub const NONE: u8 = 0;
+    /// Revo2 fingertip force sensor: normal and tangential force in newtons, direction,
+    /// proximity, status and update counter; `pressure` and `temperature` are 0.
+    pub const REVO2_FORCE: u8 = 1;
+    /// Shadow Hand PST pressure sensor: `pressure` and `temperature` in the sensor's raw units
+    /// as the palm reports them; the force fields are NaN, proximity 0.
+    pub const PST_PRESSURE: u8 = 2;
+}
+
 /// Bits of [`Fingertip::status`] (the Revo2 touch-status low byte).
 pub mod touch_status {
     /// The sensor's raw value is invalid.
@@ -148,7 +195,11 @@ nested! {
         position: f32 => "float32",
         /// Measured speed in the state's units.
         speed: f32 => "float32",
-        /// Motor current in milliamperes.
+        /// Joint effort in SI units (N m for revolute joints), measured (Shadow Hand strain
+        /// gauges) or estimated (Allegro commanded torque); NaN when the hand neither measures
+        /// nor estimates it (Revo2).
+        effort: f32 => "float32",
+        /// Motor current in milliamperes (NaN when the hand does not report it).
         current_ma: f32 => "float32",
         /// Device-specific joint status word.
         status: u32 => "uint32",
@@ -156,7 +207,8 @@ nested! {
 }
 
 nested! {
-    /// One fingertip of a [`Tactile`] sample.
+    /// One fingertip of a [`Tactile`] sample. `sensor_kind` says which fields the fingertip's
+    /// sensor fills (see [`fingertip_sensor`]); the others are NaN (floats) or 0 (raw values).
     Fingertip("teleop_msgs/Fingertip", "teleop::Fingertip") {
         /// Normal force in newtons.
         normal_n: f32 => "float32",
@@ -167,14 +219,20 @@ nested! {
         direction_deg: f32 => "float32",
         /// Proximity (raw sensor units, larger = closer).
         proximity: u32 => "uint32",
+        /// Pressure in the raw units of the sensor (Shadow PST: the sensor's pressure reading
+        /// as the palm reports it, uncalibrated; larger = more pressure).
+        pressure: i32 => "int32",
+        /// Temperature in the raw units of the sensor (Shadow PST: the sensor's temperature
+        /// reading as the palm reports it, uncalibrated).
+        temperature: i32 => "int32",
         /// Sensor status bits, see [`touch_status`].
         status: u8 => "uint8",
         /// The sensor's update counter (changes when the sensor produced new data).
         update_counter: u8 => "uint8",
         /// 1 when `direction_deg` is valid.
         direction_valid: u8 => "uint8",
-        /// Zero.
-        reserved: u8 => "uint8",
+        /// See [`fingertip_sensor`].
+        sensor_kind: u8 => "uint8",
     }
 }
 
@@ -259,7 +317,7 @@ message! {
 }
 
 message! {
-    /// Measured joint state and link status of a hand.
+    /// Measured joint state and link status of a hand, whatever its bus.
     HandState("teleop_msgs/msg/HandState", topic "hand/state", nested [SampleHeader, JointState]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
@@ -267,18 +325,24 @@ message! {
         hand_model: u8 => "uint8",
         /// How many entries of `joints` are used.
         joint_count: u8 => "uint8",
-        /// 1 while the hand's link is up and cycling.
-        link_up: u8 => "uint8",
-        /// EtherCAT AL state (1 INIT, 2 PRE-OP, 3 BOOT, 4 SAFE-OP, 8 OP; bit 4 = error).
-        al_state: u8 => "uint8",
         /// See [`units`].
         units: u8 => "uint8",
         /// 1 when the hand is holding because its command went stale.
         holding: u8 => "uint8",
-        /// EtherCAT AL status code (0 = no error).
-        al_status_code: u16 => "uint16",
-        /// Cycles with a wrong working counter since start.
-        wkc_errors: u32 => "uint32",
+        /// 1 while the hand's link is up and cycling.
+        link_up: u8 => "uint8",
+        /// See [`link_kind`].
+        link_kind: u8 => "uint8",
+        /// The bus state, see [`bus_state`]: EtherCAT the AL state (1 INIT, 2 PRE-OP, 3 BOOT,
+        /// 4 SAFE-OP, 8 OP; bit 4 = error), CAN error-active, error-passive or bus-off.
+        bus_state: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 5] => "uint8[5]",
+        /// The link's last error code (0 = no error): EtherCAT the AL status code.
+        link_error_code: u32 => "uint32",
+        /// Cycles with a bad exchange since start (EtherCAT: wrong working counter; CAN: a
+        /// device's frame missing from the cycle).
+        link_errors: u32 => "uint32",
         /// Cycles whose frame was lost since start.
         lost_frames: u32 => "uint32",
         /// Joints in the hand's joint order.

@@ -18,6 +18,25 @@
 mod contract;
 mod message;
 
+/// The contract version as a literal, for `concat!` (see [`CONTRACT_VERSION`]).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! contract_version {
+    () => {
+        2
+    };
+}
+
+/// The version of the message contract: raised whenever any payload's layout or meaning
+/// changes. It is part of every payload's iceoryx2 type name ([`Message::TYPE_NAME`]), so a
+/// process built with another contract is refused when it opens a service instead of misreading
+/// its samples, and recordings store it (see `teleop-recording`).
+///
+/// History: 1, the first contract (EtherCAT-shaped `HandState`, Revo2-only `Fingertip`);
+/// 2, link-neutral `HandState` (link kind, bus state, link error code, link errors), joint
+/// effort, fingertip sensor kind with pressure and temperature.
+pub const CONTRACT_VERSION: u32 = contract_version!();
+
 pub use contract::*;
 pub use message::{DecodeError, Field, Message, Nested, TopicInfo, TopicVisitor};
 

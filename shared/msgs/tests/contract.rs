@@ -142,8 +142,10 @@ impl TopicVisitor for CheckLayout {
         );
         assert_eq!(cdr_size, size_of::<M>(), "{}: CDR size", M::SCHEMA_NAME);
         assert_eq!(align_of::<M>(), 8);
-        // iceoryx2 matches services by this name.
-        assert_eq!(unsafe { <M as ZeroCopySend>::type_name() }, M::SCHEMA_NAME);
+        // iceoryx2 matches services by this name: the schema name and the contract version.
+        let type_name = unsafe { <M as ZeroCopySend>::type_name() };
+        assert_eq!(type_name, M::TYPE_NAME);
+        assert_eq!(type_name, format!("{}@v{CONTRACT_VERSION}", M::SCHEMA_NAME));
     }
 }
 
@@ -151,6 +153,37 @@ impl TopicVisitor for CheckLayout {
 fn every_schema_matches_the_struct_layout_as_cdr() {
     for topic in topics() {
         visit_topic(topic.name, CheckLayout).unwrap();
+    }
+}
+
+#[test]
+fn contract_version_2_layout_of_the_hand_types() {
+    assert_eq!(CONTRACT_VERSION, 2);
+    assert_eq!(HandState::TYPE_NAME, "teleop_msgs/msg/HandState@v2");
+    assert_eq!(size_of::<HandState>(), 536);
+    assert_eq!(size_of::<Tactile>(), 176);
+    assert_eq!(size_of::<JointState>(), 20);
+    assert_eq!(size_of::<Fingertip>(), 28);
+    let offset = |fields: &[Field], name: &str| {
+        fields
+            .iter()
+            .find(|f| f.name == name)
+            .map(|f| (f.offset, f.ros_type))
+            .unwrap()
+    };
+    assert_eq!(offset(HandState::FIELDS, "link_kind"), (37, "uint8"));
+    assert_eq!(offset(HandState::FIELDS, "bus_state"), (38, "uint8"));
+    assert_eq!(offset(HandState::FIELDS, "link_error_code"), (44, "uint32"));
+    assert_eq!(offset(HandState::FIELDS, "link_errors"), (48, "uint32"));
+    assert_eq!(offset(HandState::FIELDS, "lost_frames"), (52, "uint32"));
+    assert_eq!(offset(JointState::FIELDS, "effort"), (8, "float32"));
+    assert_eq!(offset(Fingertip::FIELDS, "pressure"), (16, "int32"));
+    assert_eq!(offset(Fingertip::FIELDS, "temperature"), (20, "int32"));
+    assert_eq!(offset(Fingertip::FIELDS, "sensor_kind"), (27, "uint8"));
+    for schema in [HandState::schema(), Tactile::schema()] {
+        for gone in ["al_state", "al_status_code", "wkc_errors"] {
+            assert!(!schema.contains(gone), "{gone} in {schema}");
+        }
     }
 }
 
@@ -220,13 +253,13 @@ fn source_ids_differ_between_nodes() {
 
 proptest! {
     #[test]
-    fn any_bytes_of_the_right_size_round_trip(bytes in proptest::collection::vec(any::<u8>(), 432)) {
+    fn any_bytes_of_the_right_size_round_trip(bytes in proptest::collection::vec(any::<u8>(), 536)) {
         let state = HandState::from_bytes(&bytes).unwrap();
         prop_assert_eq!(state.as_bytes(), &bytes[..]);
         let cmd = HandCommand::from_bytes(&bytes[..328]).unwrap();
         prop_assert_eq!(cmd.as_bytes(), &bytes[..328]);
-        let tactile = Tactile::from_bytes(&bytes[1..137]).unwrap();
-        prop_assert_eq!(tactile.as_bytes(), &bytes[1..137]);
+        let tactile = Tactile::from_bytes(&bytes[1..177]).unwrap();
+        prop_assert_eq!(tactile.as_bytes(), &bytes[1..177]);
     }
 
     #[test]
