@@ -29,10 +29,16 @@ fn main() {
 [[process]]
 name = "feedback"
 program = "teleop-feedback"
+args = ["--profile", "revo2.toml"]
 [[process]]
 name = "retarget"
 program = "teleop-retarget"
+args = ["--profile", "revo2.toml"]
 "#,
+    );
+    sandbox.write(
+        "revo2.toml",
+        &std::fs::read_to_string(Sandbox::repo().join("config/hands/revo2.toml")).unwrap(),
     );
     let _session = sandbox.launch(&sandbox.dir.path().join("launch.toml"));
     let node = NodeRuntime::new("bench", &sandbox.ipc).unwrap();

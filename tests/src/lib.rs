@@ -80,7 +80,15 @@ impl Sandbox {
                 &dir.join("revo2.sock").display().to_string(),
             )
         };
-        for name in ["glove.toml", "revo2.toml", "retarget.toml", "feedback.toml"] {
+        for name in [
+            "glove.toml",
+            "revo2.toml",
+            "retarget.toml",
+            "feedback.toml",
+            "hands/revo2.toml",
+            "hands/allegro.toml",
+            "hands/shadow.toml",
+        ] {
             let text =
                 std::fs::read_to_string(repo.join("config").join(name)).expect("config file");
             self.write(&format!("config/{name}"), &relocate(text));

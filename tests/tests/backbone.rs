@@ -20,6 +20,12 @@ max_speed = 5.0
 max = 0.6
 "#;
 
+/// A node configuration for this test's sandbox: `text` naming the repository's Revo2 profile.
+fn with_profile(text: &str) -> String {
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
+}
+
 const FEEDBACK_TOML: &str = r#"
 tactile_timeout_ms = 100
 hand_timeout_ms = 100
@@ -142,8 +148,8 @@ fn assert_close(actual: &[f32], expected: &[f32], tol: f32) {
 #[test]
 fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     let sandbox = Sandbox::new();
-    sandbox.write("retarget.toml", RETARGET_TOML);
-    sandbox.write("feedback.toml", FEEDBACK_TOML);
+    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
     let launch = sandbox.write("launch.toml", &launch_toml("on-failure"));
     let mut session = sandbox.launch(&launch);
     let node = NodeRuntime::new("e2e-rig", &sandbox.ipc).unwrap();
@@ -262,8 +268,8 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
 #[test]
 fn a_killed_process_is_restarted_and_the_pipeline_resumes() {
     let sandbox = Sandbox::new();
-    sandbox.write("retarget.toml", RETARGET_TOML);
-    sandbox.write("feedback.toml", FEEDBACK_TOML);
+    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
     let launch = sandbox.write("launch.toml", &launch_toml("on-failure"));
     let _session = sandbox.launch(&launch);
     let node = NodeRuntime::new("e2e-rig", &sandbox.ipc).unwrap();
@@ -357,7 +363,7 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     use std::sync::Arc;
 
     let sandbox = Sandbox::new();
-    sandbox.write("retarget.toml", RETARGET_TOML);
+    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
     let launch = sandbox.write(
         "launch.toml",
         "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--config\", \"retarget.toml\"]\n",
@@ -441,6 +447,8 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     // The retargeting node accepts the profile.
     let mut node = std::process::Command::new(teleop_e2e::bin("teleop-retarget"))
         .args(["--calibration", "operator.toml", "--name", "retarget-check"])
+        .arg("--profile")
+        .arg(Sandbox::repo().join("config/hands/revo2.toml"))
         .envs(sandbox.ipc.to_env())
         .current_dir(sandbox.dir.path())
         .stderr(std::process::Stdio::piped())

@@ -3,9 +3,10 @@
 //! its receive time) into glove force commands. The `teleop-feedback` executable feeds it from the
 //! live topics; `teleop reprocess` feeds it from a recording, so both run the same code.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use teleop_feedback::{FeedbackConfig, ForceFeedback, HandInput, Inputs, Tactile, TactileInput};
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     force_flags, units, EStop, GloveForceCommand, HandCommand, HandState, Tactile as TactileMsg,
 };
@@ -14,6 +15,8 @@ use teleop_msgs::{
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NodeConfig {
+    /// The hand profile (`config/hands/<hand>.toml`), relative to the configuration file.
+    pub hand_profile: Option<PathBuf>,
     /// Tactile data older than this is stale (forces ramp to zero).
     pub tactile_timeout_ms: u64,
     /// Hand state older than this is stale.
@@ -29,6 +32,7 @@ pub struct NodeConfig {
 impl Default for NodeConfig {
     fn default() -> Self {
         Self {
+            hand_profile: None,
             tactile_timeout_ms: 100,
             hand_timeout_ms: 100,
             tick_ms: 10,
@@ -38,17 +42,36 @@ impl Default for NodeConfig {
     }
 }
 
-/// Loads and checks the configuration (defaults without a file); errors name the file.
-pub fn load(path: Option<&Path>) -> anyhow::Result<NodeConfig> {
-    let Some(path) = path else {
-        return Ok(NodeConfig::default());
+/// Loads and checks the configuration (defaults without a file) and the hand profile (`profile`
+/// when given, else the file the configuration names); errors name the file.
+pub fn load(
+    path: Option<&Path>,
+    profile: Option<HandProfile>,
+) -> anyhow::Result<(NodeConfig, HandProfile)> {
+    let (config, origin, base) = match path {
+        Some(path) => {
+            let config: NodeConfig = teleop_runtime::load_toml(path)?;
+            config
+                .feedback
+                .validate()
+                .map_err(|e| e.with_origin(&path.display().to_string()))?;
+            let base = path.parent().map(PathBuf::from).unwrap_or_default();
+            (config, path.display().to_string(), base)
+        }
+        None => (
+            NodeConfig::default(),
+            "defaults".to_string(),
+            PathBuf::new(),
+        ),
     };
-    let config: NodeConfig = teleop_runtime::load_toml(path)?;
-    config
-        .feedback
-        .validate()
-        .map_err(|e| e.with_origin(&path.display().to_string()))?;
-    Ok(config)
+    let profile = match (profile, &config.hand_profile) {
+        (Some(p), _) => p,
+        (None, Some(file)) => HandProfile::load(&base.join(file))?,
+        (None, None) => anyhow::bail!(
+            "{origin}: no hand profile: set `hand_profile` (e.g. \"hands/revo2.toml\") or pass --profile"
+        ),
+    };
+    Ok((config, profile))
 }
 
 /// One input of the engine.
@@ -84,6 +107,7 @@ pub struct Output {
 /// Force feedback with its input state.
 pub struct FeedbackEngine {
     config: NodeConfig,
+    profile: HandProfile,
     law: ForceFeedback,
     tactile: Option<(TactileMsg, u64)>,
     state: Option<(HandState, u64)>,
@@ -93,11 +117,12 @@ pub struct FeedbackEngine {
 }
 
 impl FeedbackEngine {
-    /// An engine with this configuration.
-    pub fn new(config: &NodeConfig) -> anyhow::Result<Self> {
+    /// An engine for the hand `profile` with this configuration.
+    pub fn new(config: &NodeConfig, profile: &HandProfile) -> anyhow::Result<Self> {
         Ok(Self {
             config: config.clone(),
-            law: ForceFeedback::new(config.feedback.clone())?,
+            profile: profile.clone(),
+            law: ForceFeedback::new(config.feedback.clone(), profile)?,
             tactile: None,
             state: None,
             command: None,
@@ -185,7 +210,7 @@ impl FeedbackEngine {
                 if origin == 0 {
                     origin = msg.header.origin_ns;
                 }
-                Some(hand_from_msgs(msg, self.command.as_ref()))
+                Some(hand_from_msgs(msg, self.command.as_ref(), &self.profile))
             }
             _ => None,
         };
@@ -216,29 +241,29 @@ pub fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
     input
 }
 
-/// Joint state plus the commanded positions; without a usable command the measured positions
-/// stand in (no position error).
-pub fn hand_from_msgs(state: &HandState, command: Option<&HandCommand>) -> HandInput {
+/// Joint state plus the commanded positions, normalised with the profile's open and closed
+/// angles when they come in radians; without a usable command the measured positions stand in
+/// (no position error). Joints the profile does not have are left out.
+pub fn hand_from_msgs(
+    state: &HandState,
+    command: Option<&HandCommand>,
+    profile: &HandProfile,
+) -> HandInput {
     let mut input = HandInput::default();
-    let normalised = state.units == units::NORMALISED;
-    for (i, joint) in state
-        .active_joints()
-        .iter()
-        .enumerate()
-        .take(input.measured.len())
-    {
-        input.measured[i] = if normalised { joint.position } else { 0.0 };
+    let normalise = |value: f32, unit: u8, joint: usize| match unit {
+        units::NORMALISED => value,
+        _ => profile.joints[joint].normalised(value),
+    };
+    let count = profile.joints.len().min(input.measured.len());
+    for (i, joint) in state.active_joints().iter().enumerate().take(count) {
+        input.measured[i] = normalise(joint.position, state.units, i);
         input.commanded[i] = input.measured[i];
         input.current_ma[i] = joint.current_ma;
+        input.effort_nm[i] = joint.effort;
     }
-    if let Some(cmd) = command.filter(|c| normalised && c.units == units::NORMALISED) {
-        for (i, joint) in cmd
-            .active_joints()
-            .iter()
-            .enumerate()
-            .take(input.commanded.len())
-        {
-            input.commanded[i] = joint.target;
+    if let Some(cmd) = command.filter(|c| c.hand_model == state.hand_model) {
+        for (i, joint) in cmd.active_joints().iter().enumerate().take(count) {
+            input.commanded[i] = normalise(joint.target, cmd.units, i);
         }
     }
     input
@@ -248,6 +273,10 @@ pub fn hand_from_msgs(state: &HandState, command: Option<&HandCommand>) -> HandI
 mod tests {
     use super::*;
     use teleop_feedback::ContactSource;
+
+    fn revo2() -> HandProfile {
+        HandProfile::builtin("revo2").unwrap()
+    }
     use teleop_msgs::contact_source;
 
     #[test]
@@ -261,6 +290,7 @@ mod tests {
         assert_eq!(ContactSource::Current as u8, contact_source::CURRENT);
         assert_eq!(ContactSource::Ramping as u8, contact_source::RAMPING);
         assert_eq!(ContactSource::EStop as u8, contact_source::ESTOP);
+        assert_eq!(ContactSource::Effort as u8, contact_source::EFFORT);
     }
 
     #[test]
@@ -291,18 +321,18 @@ mod tests {
             ..Default::default()
         };
         cmd.joints[2].target = 0.9;
-        let h = hand_from_msgs(&state, Some(&cmd));
+        let h = hand_from_msgs(&state, Some(&cmd), &revo2());
         assert_eq!(
             (h.measured[2], h.commanded[2], h.current_ma[2]),
             (0.4, 0.9, 350.0)
         );
-        let h = hand_from_msgs(&state, None);
+        let h = hand_from_msgs(&state, None, &revo2());
         assert_eq!(h.commanded[2], 0.4, "no command: no position error");
     }
 
     #[test]
     fn engine_steps_on_tactile_and_ticks_and_goes_stale_by_receive_time() {
-        let mut e = FeedbackEngine::new(&NodeConfig::default()).unwrap();
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
         let mut t = TactileMsg {
             fingertip_count: 5,
             ..Default::default()

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use node_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
 use teleop_runtime::{
     init_logging, now_ns, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
@@ -22,6 +23,9 @@ struct Args {
     /// Node configuration (TOML); defaults are used without it.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
+    #[arg(long)]
+    profile: Option<PathBuf>,
     /// iceoryx2 node name.
     #[arg(long, default_value = "feedback")]
     name: String,
@@ -30,11 +34,20 @@ struct Args {
 fn main() -> ExitCode {
     init_logging();
     let args = Args::parse();
-    let result = load(args.config.as_deref()).and_then(|config| {
-        let engine = FeedbackEngine::new(&config)?;
-        let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-        run(&runtime, &config, engine)
-    });
+    let profile = args
+        .profile
+        .as_deref()
+        .map(HandProfile::load)
+        .transpose()
+        .map_err(anyhow::Error::from);
+    let result = profile
+        .and_then(|p| load(args.config.as_deref(), p))
+        .and_then(|(config, profile)| {
+            tracing::info!(hand = %profile.name, "hand profile loaded");
+            let engine = FeedbackEngine::new(&config, &profile)?;
+            let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+            run(&runtime, &config, engine)
+        });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -5,13 +5,20 @@
 
 use std::path::{Path, PathBuf};
 
-use teleop_msgs::{command_flags, control_mode, hand_model, units, GloveState, HandCommand};
+use teleop_hand_profile::{CommandUnits, HandProfile};
+use teleop_msgs::{command_flags, control_mode, units, GloveState, HandCommand, MAX_JOINTS};
 use teleop_retarget::{Calibration, GloveInput, JointTargets, RetargetConfig, Retargeter};
+
+// The retargeter sizes its joint arrays with the profile crate's bound; the contract must carry
+// as many.
+const _: () = assert!(teleop_hand_profile::MAX_JOINTS == MAX_JOINTS);
 
 /// The node's configuration file.
 #[derive(Debug, Clone, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct NodeConfig {
+    /// The hand profile (`config/hands/<hand>.toml`), relative to the configuration file.
+    pub hand_profile: Option<PathBuf>,
     /// Calibration profile, relative to the configuration file.
     pub calibration: Option<PathBuf>,
     /// A glove silent for this long is stale.
@@ -25,6 +32,7 @@ pub struct NodeConfig {
 impl Default for NodeConfig {
     fn default() -> Self {
         Self {
+            hand_profile: None,
             calibration: None,
             glove_timeout_ms: 100,
             health_period_ms: 500,
@@ -33,23 +41,57 @@ impl Default for NodeConfig {
     }
 }
 
-/// Loads the configuration (defaults without a file) and the calibration profile (from
-/// `calibration`, else the one the file names, else the full range). Errors name the file.
+/// Everything the node runs with.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The configuration.
+    pub config: NodeConfig,
+    /// The operator's calibration.
+    pub calibration: Calibration,
+    /// Where the calibration came from (`None`: the full range).
+    pub calibration_path: Option<PathBuf>,
+    /// The hand.
+    pub profile: HandProfile,
+}
+
+/// Loads the configuration (defaults without a file), the hand profile (`profile` when given,
+/// else the file the configuration names) and the calibration profile (from `calibration`, else
+/// the one the file names, else the full range). Errors name the file, and for the retargeting
+/// table's joints the line.
 pub fn load(
     config: Option<&Path>,
     calibration: Option<&Path>,
-) -> anyhow::Result<(NodeConfig, Calibration, Option<PathBuf>)> {
-    let (cfg, base) = match config {
+    profile: Option<HandProfile>,
+) -> anyhow::Result<Loaded> {
+    let (cfg, base, text) = match config {
         Some(path) => (
             teleop_runtime::load_toml::<NodeConfig>(path)?,
             path.parent().map(PathBuf::from).unwrap_or_default(),
+            std::fs::read_to_string(path).unwrap_or_default(),
         ),
-        None => (NodeConfig::default(), PathBuf::new()),
+        None => (NodeConfig::default(), PathBuf::new(), String::new()),
     };
     let origin = config.map_or("defaults".to_string(), |p| p.display().to_string());
     cfg.retarget
         .validate()
         .map_err(|e| e.with_origin(&origin))?;
+    let hand = match (profile, &cfg.hand_profile) {
+        (Some(p), _) => p,
+        (None, Some(path)) => HandProfile::load(&base.join(path))?,
+        (None, None) => anyhow::bail!(
+            "{origin}: no hand profile: set `hand_profile` (e.g. \"hands/revo2.toml\") or pass --profile"
+        ),
+    };
+    if let Err(e) = cfg.retarget.check_joints(&hand) {
+        let line = match &e {
+            teleop_retarget::ConfigError::Invalid { field, .. } => text
+                .lines()
+                .position(|l| l.contains(field.as_str()))
+                .map_or(String::new(), |i| format!(":{}", i + 1)),
+            teleop_retarget::ConfigError::Parse { .. } => String::new(),
+        };
+        return Err(e.with_origin(&format!("{origin}{line}")).into());
+    }
     let path = calibration
         .map(PathBuf::from)
         .or_else(|| cfg.calibration.as_ref().map(|p| base.join(p)));
@@ -61,7 +103,12 @@ pub fn load(
         }
         None => Calibration::default(),
     };
-    Ok((cfg, cal, path))
+    Ok(Loaded {
+        config: cfg,
+        calibration: cal,
+        calibration_path: path,
+        profile: hand,
+    })
 }
 
 /// What one input did.
@@ -80,15 +127,21 @@ pub struct Output {
 /// Glove samples in, hand commands out, holding on stale input.
 pub struct RetargetEngine {
     retargeter: Retargeter,
+    command: CommandShape,
     stale: bool,
     last_origin: u64,
 }
 
 impl RetargetEngine {
-    /// An engine with this configuration and calibration.
-    pub fn new(config: &NodeConfig, calibration: Calibration) -> anyhow::Result<Self> {
+    /// An engine for the hand `profile` with this configuration and calibration.
+    pub fn new(
+        config: &NodeConfig,
+        calibration: Calibration,
+        profile: &HandProfile,
+    ) -> anyhow::Result<Self> {
         Ok(Self {
-            retargeter: Retargeter::new(config.retarget.clone(), calibration)?,
+            retargeter: Retargeter::new(config.retarget.clone(), calibration, profile)?,
+            command: CommandShape::of(profile),
             stale: true,
             last_origin: 0,
         })
@@ -107,7 +160,7 @@ impl RetargetEngine {
         let became_fresh = self.stale;
         self.stale = false;
         Output {
-            command: Some(hand_command(&targets, self.last_origin)),
+            command: Some(self.command.command(&targets, self.last_origin)),
             became_stale: false,
             became_fresh,
             clamped: targets.clamped,
@@ -123,7 +176,7 @@ impl RetargetEngine {
             command: self
                 .retargeter
                 .hold()
-                .map(|t| hand_command(&t, self.last_origin)),
+                .map(|t| self.command.command(&t, self.last_origin)),
             became_stale,
             became_fresh: false,
             clamped: 0,
@@ -131,49 +184,112 @@ impl RetargetEngine {
     }
 }
 
-/// The hand command for `targets`, descending from the glove sample stamped `origin_ns`.
-pub fn hand_command(targets: &JointTargets, origin_ns: u64) -> HandCommand {
-    let mut cmd = HandCommand {
-        hand_model: hand_model::REVO2,
-        joint_count: targets.position.len() as u8,
-        control_mode: control_mode::POSITION,
-        units: units::NORMALISED,
-        ..Default::default()
-    };
-    cmd.header.origin_ns = origin_ns;
-    for (joint, &target) in cmd.joints.iter_mut().zip(&targets.position) {
-        joint.target = target;
-        joint.speed_limit = targets.max_speed;
+/// What a hand command looks like for one profile: its model id, and per joint how a
+/// normalised target becomes the command's unit (identity, or the joint's open..closed angles).
+#[derive(Debug, Clone, Copy)]
+pub struct CommandShape {
+    model: u8,
+    units: u8,
+    /// Per joint `(angle at 0, angle at 1)`; `None` for normalised commands.
+    spans: Option<[(f32, f32); MAX_JOINTS]>,
+}
+
+impl CommandShape {
+    /// The shape of `profile`'s commands.
+    pub fn of(profile: &HandProfile) -> Self {
+        let spans = match profile.command_units {
+            CommandUnits::Normalised => None,
+            CommandUnits::Radians => {
+                let mut spans = [(0.0, 0.0); MAX_JOINTS];
+                for (s, j) in spans.iter_mut().zip(&profile.joints) {
+                    *s = (j.open, j.closed);
+                }
+                Some(spans)
+            }
+        };
+        Self {
+            model: profile.model_id,
+            units: match profile.command_units {
+                CommandUnits::Normalised => units::NORMALISED,
+                CommandUnits::Radians => units::PHYSICAL,
+            },
+            spans,
+        }
     }
+
+    /// The hand command for `targets`, descending from the glove sample stamped `origin_ns`.
+    /// In radians, a target is `open + (closed - open) × normalised` and the speed limit
+    /// `max_speed × |closed - open|`.
+    pub fn command(&self, targets: &JointTargets, origin_ns: u64) -> HandCommand {
+        let mut cmd = HandCommand {
+            hand_model: self.model,
+            joint_count: targets.positions().len() as u8,
+            control_mode: control_mode::POSITION,
+            units: self.units,
+            ..Default::default()
+        };
+        cmd.header.origin_ns = origin_ns;
+        for (j, (joint, &target)) in cmd.joints.iter_mut().zip(targets.positions()).enumerate() {
+            match &self.spans {
+                None => {
+                    joint.target = target;
+                    joint.speed_limit = targets.max_speed;
+                }
+                Some(spans) => {
+                    let (open, closed) = spans[j];
+                    joint.target = open + (closed - open) * target;
+                    joint.speed_limit = targets.max_speed * (closed - open).abs();
+                }
+            }
+        }
+        cmd.flags = flags_of(targets);
+        cmd
+    }
+}
+
+fn flags_of(targets: &JointTargets) -> u8 {
+    let mut flags = 0;
     if targets.held {
-        cmd.flags |= command_flags::HELD;
+        flags |= command_flags::HELD;
     }
     if targets.clamped > 0 {
-        cmd.flags |= command_flags::CLAMPED;
+        flags |= command_flags::CLAMPED;
     }
     if targets.slew_limited > 0 {
-        cmd.flags |= command_flags::SLEW_LIMITED;
+        flags |= command_flags::SLEW_LIMITED;
     }
-    cmd
+    flags
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn hand_command_carries_targets_in_revo2_order_with_flags() {
-        let targets = JointTargets {
-            position: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6],
+    fn revo2() -> HandProfile {
+        HandProfile::builtin("revo2").unwrap()
+    }
+
+    fn targets(values: &[f32]) -> JointTargets {
+        let mut position = [0.0; MAX_JOINTS];
+        position[..values.len()].copy_from_slice(values);
+        JointTargets {
+            position,
+            count: values.len(),
             max_speed: 3.0,
             held: true,
             clamped: 1,
             slew_limited: 0,
-        };
-        let cmd = hand_command(&targets, 77);
+        }
+    }
+
+    #[test]
+    fn hand_command_carries_targets_in_the_profile_order_with_flags() {
+        let targets = targets(&[0.1, 0.2, 0.3, 0.4, 0.5, 0.6]);
+        let cmd = CommandShape::of(&revo2()).command(&targets, 77);
         assert_eq!(cmd.header.origin_ns, 77);
         assert_eq!(cmd.joint_count, 6);
-        assert_eq!(cmd.hand_model, hand_model::REVO2);
+        assert_eq!(cmd.hand_model, teleop_msgs::hand_model::REVO2);
+        assert_eq!(cmd.units, units::NORMALISED);
         let t: Vec<f32> = cmd.active_joints().iter().map(|j| j.target).collect();
         assert_eq!(t, vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6]);
         assert!(cmd.active_joints().iter().all(|j| j.speed_limit == 3.0));
@@ -181,8 +297,29 @@ mod tests {
     }
 
     #[test]
+    fn radian_profiles_get_angles_and_angular_speed_limits() {
+        let shadow = HandProfile::builtin("shadow").unwrap();
+        let mut values = [0.0; 24];
+        values[2] = 1.0; // FFJ3 closed: 90 degrees
+        values[3] = 0.5; // FFJ4 half way from -20 to 20 degrees: 0
+        let cmd = CommandShape::of(&shadow).command(&targets(&values), 1);
+        assert_eq!(cmd.hand_model, teleop_msgs::hand_model::SHADOW);
+        assert_eq!(cmd.units, units::PHYSICAL);
+        assert_eq!(cmd.joint_count, 24);
+        assert!((cmd.joints[2].target - core::f32::consts::FRAC_PI_2).abs() < 1e-5);
+        assert!(cmd.joints[3].target.abs() < 1e-5);
+        assert!((cmd.joints[2].speed_limit - 3.0 * core::f32::consts::FRAC_PI_2).abs() < 1e-4);
+        // Model ids in the profiles are the contract's.
+        assert_eq!(
+            HandProfile::builtin("allegro").unwrap().model_id,
+            teleop_msgs::hand_model::ALLEGRO
+        );
+    }
+
+    #[test]
     fn engine_holds_on_timeout_and_link_down_and_reports_transitions() {
-        let mut e = RetargetEngine::new(&NodeConfig::default(), Calibration::default()).unwrap();
+        let mut e =
+            RetargetEngine::new(&NodeConfig::default(), Calibration::default(), &revo2()).unwrap();
         assert_eq!(
             e.on_timeout().command,
             None,

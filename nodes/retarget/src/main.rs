@@ -1,6 +1,7 @@
 //! `teleop-retarget`: the retargeting process. Subscribes to `glove/state`, runs the
-//! [`RetargetEngine`] on every sample and publishes `hand/command` for the Revo2 (normalised
-//! position targets with the slew limit as speed limit). A stale glove (no sample within
+//! [`RetargetEngine`] on every sample and publishes `hand/command` for the hand its profile
+//! describes (position targets, normalised or in radians as the profile says, with the slew limit
+//! as speed limit). A stale glove (no sample within
 //! `glove_timeout_ms`, or the glove reports its link down) makes it repeat the last command
 //! flagged as held: the hand holds, never drifts.
 //!
@@ -11,14 +12,18 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use node_retarget::{load, NodeConfig, Output, RetargetEngine};
+use node_retarget::{load, Loaded, NodeConfig, Output, RetargetEngine};
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{GloveState, HandCommand};
 use teleop_runtime::{
     init_logging, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
 };
 
 #[derive(Parser)]
-#[command(version, about = "Glove state -> hand command (Revo2)")]
+#[command(
+    version,
+    about = "Glove state -> hand command, for the hand a profile describes"
+)]
 struct Args {
     /// Node configuration (TOML); defaults are used without it.
     #[arg(long)]
@@ -26,6 +31,9 @@ struct Args {
     /// Operator calibration profile (TOML); overrides the one named in the configuration.
     #[arg(long)]
     calibration: Option<PathBuf>,
+    /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
+    #[arg(long)]
+    profile: Option<PathBuf>,
     /// iceoryx2 node name.
     #[arg(long, default_value = "retarget")]
     name: String,
@@ -34,17 +42,34 @@ struct Args {
 fn main() -> ExitCode {
     init_logging();
     let args = Args::parse();
-    let result = load(args.config.as_deref(), args.calibration.as_deref()).and_then(
-        |(config, cal, path)| {
-            match &path {
+    let profile = args
+        .profile
+        .as_deref()
+        .map(HandProfile::load)
+        .transpose()
+        .map_err(anyhow::Error::from);
+    let result = profile
+        .and_then(|p| load(args.config.as_deref(), args.calibration.as_deref(), p))
+        .and_then(|loaded| {
+            let Loaded {
+                config,
+                calibration,
+                calibration_path,
+                profile,
+            } = loaded;
+            match &calibration_path {
                 Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
                 None => tracing::info!("no calibration profile: using the full 0..1000 range"),
             }
-            let engine = RetargetEngine::new(&config, cal)?;
+            tracing::info!(
+                hand = %profile.name,
+                joints = profile.joints.len(),
+                "hand profile loaded"
+            );
+            let engine = RetargetEngine::new(&config, calibration, &profile)?;
             let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
             run(&runtime, &config, engine)
-        },
-    );
+        });
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -83,6 +83,14 @@ pub struct EstimateConfig {
     pub current_threshold_ma: f32,
     /// Glove units per mA above the threshold. Default 1.0.
     pub current_gain_per_ma: f32,
+    /// Estimate contact from the magnitude of the joint effort (hands that
+    /// measure or command torque). Default true.
+    pub use_effort: bool,
+    /// Joint effort magnitude (N m) below which there is no contact.
+    /// Default 0.05.
+    pub effort_threshold_nm: f32,
+    /// Glove units per N m above the threshold. Default 2000.
+    pub effort_gain_per_nm: f32,
 }
 
 impl Default for EstimateConfig {
@@ -94,6 +102,9 @@ impl Default for EstimateConfig {
             use_current: true,
             current_threshold_ma: 300.0,
             current_gain_per_ma: 1.0,
+            use_effort: true,
+            effort_threshold_nm: 0.05,
+            effort_gain_per_nm: 2000.0,
         }
     }
 }
@@ -223,6 +234,8 @@ impl FeedbackConfig {
         check_non_negative("estimate.position_gain", e.position_gain)?;
         check_non_negative("estimate.current_threshold_ma", e.current_threshold_ma)?;
         check_non_negative("estimate.current_gain_per_ma", e.current_gain_per_ma)?;
+        check_non_negative("estimate.effort_threshold_nm", e.effort_threshold_nm)?;
+        check_non_negative("estimate.effort_gain_per_nm", e.effort_gain_per_nm)?;
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
                 return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));

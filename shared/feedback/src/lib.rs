@@ -1,13 +1,16 @@
-//! Force-feedback law of the teleoperation pipeline: BrainCo Revo2 fingertip
+//! Force-feedback law of the teleoperation pipeline: a robot hand's fingertip
 //! tactile forces (or, as a fallback, contact estimated from the hand's joint
 //! state) become per-finger force commands for the EH55BF1 exoskeleton glove.
+//! Which fingertip and which joints drive each glove finger comes from the
+//! hand's profile (`teleop-hand-profile`); no hand is named in this crate.
 //!
 //! # What this crate owns
 //!
 //! Only the pure control law ([`ForceFeedback::step`]) and its configuration
-//! ([`FeedbackConfig`]): finger mapping from hand to glove order, contact
-//! thresholds and gains, the joint-state contact estimate, smoothing, rate
-//! limiting, saturation, the stale-input ramp and the e-stop. It does no I/O,
+//! ([`FeedbackConfig`]): contact thresholds and gains, the joint-state contact
+//! estimate (position error, motor current, joint effort), smoothing, rate
+//! limiting, saturation, the stale-input ramp and the e-stop, applied through
+//! the profile's per-glove-finger [`FeedbackSource`]s. It does no I/O,
 //! reads no clock and does no IPC: the caller hands in configuration text
 //! (with its origin for error messages) and timestamped inputs, and gets a
 //! force command back.
@@ -24,11 +27,11 @@
 //!   `-1000..=1000` (about 3 N at 1000), **positive pushes the operator's hand
 //!   open**, i.e. resists closing on an object. This law only outputs
 //!   `0..=max_force`.
-//! * Revo2 tactile (hand) order `[thumb, index, middle, ring, pinky]`,
-//!   normal force in newtons.
-//! * Revo2 joint order `[thumb_flex, thumb_abduct, index, middle, ring,
-//!   pinky]`, positions normalised 0 = open .. 1 = closed, current in mA.
-//! * Mapping: see [`GLOVE_TO_TACTILE`] and [`GLOVE_TO_JOINT`].
+//! * Tactile: the profile's fingertip order, normal force in newtons.
+//! * Joints: the profile's joint order, positions normalised (0 = the joint's
+//!   open angle .. 1 = its closed angle), current in mA, effort in N m.
+//! * A glove finger whose source is empty (a finger the hand does not have,
+//!   like the Allegro's missing little finger) always gets zero force.
 //!
 //! # Configuration
 //!
@@ -53,6 +56,9 @@
 //! use_current = true
 //! current_threshold_ma = 300.0     # mA, on |current|
 //! current_gain_per_ma = 1.0        # glove units per mA
+//! use_effort = true
+//! effort_threshold_nm = 0.05       # N m, on |effort|
+//! effort_gain_per_nm = 2000.0      # glove units per N m
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
 //! assert_eq!(config, FeedbackConfig::default());
@@ -73,47 +79,33 @@ mod config;
 mod tests;
 
 pub use config::{ConfigError, EstimateConfig, FeedbackConfig, GLOVE_FULL_SCALE, IN_MEMORY_ORIGIN};
+pub use teleop_hand_profile::{FeedbackSource, HandProfile, MAX_FINGERTIPS, MAX_JOINTS};
 
 /// Number of glove fingers (`[little, ring, middle, index, thumb]`).
 pub const GLOVE_FINGERS: usize = 5;
 
-/// Number of Revo2 tactile fingertips (`[thumb, index, middle, ring, pinky]`).
-pub const HAND_FINGERTIPS: usize = 5;
-
-/// Number of Revo2 joints
-/// (`[thumb_flex, thumb_abduct, index, middle, ring, pinky]`).
-pub const HAND_JOINTS: usize = 6;
-
-/// For each glove finger (glove order), the Revo2 tactile fingertip index
-/// that drives it: little <- pinky, ring <- ring, middle <- middle,
-/// index <- index, thumb <- thumb.
-pub const GLOVE_TO_TACTILE: [usize; GLOVE_FINGERS] = [4, 3, 2, 1, 0];
-
-/// For each glove finger (glove order), the Revo2 joint index used for the
-/// contact estimate: little <- pinky, ring <- ring, middle <- middle,
-/// index <- index, thumb <- thumb_flex.
-pub const GLOVE_TO_JOINT: [usize; GLOVE_FINGERS] = [5, 4, 3, 2, 0];
-
-/// One tactile sample, hand order `[thumb, index, middle, ring, pinky]`.
+/// One tactile sample, in the profile's fingertip order.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TactileInput {
-    /// Fingertip normal force in newtons (device range 0..25 N).
-    pub normal_n: [f32; HAND_FINGERTIPS],
+    /// Fingertip normal force in newtons.
+    pub normal_n: [f32; MAX_FINGERTIPS],
     /// False when the device flagged the fingertip's value as invalid,
-    /// not updated or timed out.
-    pub valid: [bool; HAND_FINGERTIPS],
+    /// not updated or timed out (or the fingertip is not in the sample).
+    pub valid: [bool; MAX_FINGERTIPS],
 }
 
-/// One hand joint-state sample, Revo2 order
-/// `[thumb_flex, thumb_abduct, index, middle, ring, pinky]`.
+/// One hand joint-state sample, in the profile's joint order (unused entries
+/// are ignored).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct HandInput {
     /// Commanded positions, normalised 0 = open .. 1 = closed.
-    pub commanded: [f32; HAND_JOINTS],
+    pub commanded: [f32; MAX_JOINTS],
     /// Measured positions, normalised 0 = open .. 1 = closed.
-    pub measured: [f32; HAND_JOINTS],
-    /// Motor currents in mA (signed; the magnitude is used).
-    pub current_ma: [f32; HAND_JOINTS],
+    pub measured: [f32; MAX_JOINTS],
+    /// Motor currents in mA (signed; the magnitude is used; NaN = unknown).
+    pub current_ma: [f32; MAX_JOINTS],
+    /// Joint efforts in N m (signed; the magnitude is used; NaN = unknown).
+    pub effort_nm: [f32; MAX_JOINTS],
 }
 
 /// State of the tactile input at this step.
@@ -159,6 +151,8 @@ pub enum ContactSource {
     Ramping = 4,
     /// Emergency stop: force forced to zero.
     EStop = 5,
+    /// Joint effort magnitude above the threshold.
+    Effort = 6,
 }
 
 /// Result of one step.
@@ -191,6 +185,8 @@ enum Demand {
 #[derive(Debug, Clone)]
 pub struct ForceFeedback {
     config: FeedbackConfig,
+    /// Per glove finger, what drives it (from the hand profile).
+    sources: [FeedbackSource; GLOVE_FINGERS],
     /// Low-pass filter state per glove finger, in `[0, max_force]`.
     filtered: [f32; GLOVE_FINGERS],
     /// Rate-limited output per glove finger, in `[0, max_force]`.
@@ -220,11 +216,20 @@ fn non_negative(x: f32) -> f32 {
 }
 
 impl ForceFeedback {
-    /// Creates the law after validating `config`; all forces start at zero.
-    pub fn new(config: FeedbackConfig) -> Result<Self, ConfigError> {
+    /// Creates the law for `profile`'s feedback sources after validating
+    /// `config`; all forces start at zero.
+    pub fn new(config: FeedbackConfig, profile: &HandProfile) -> Result<Self, ConfigError> {
         config.validate()?;
+        let mut sources = profile.feedback.clone();
+        // Indices beyond the contract's arrays cannot occur in a checked
+        // profile; drop them rather than index out of bounds.
+        for s in &mut sources {
+            s.tactile = s.tactile.filter(|&t| t < MAX_FINGERTIPS);
+            s.joints.retain(|&j| j < MAX_JOINTS);
+        }
         Ok(Self {
             config,
+            sources,
             filtered: [0.0; GLOVE_FINGERS],
             output: [0.0; GLOVE_FINGERS],
             last_t_ns: None,
@@ -255,8 +260,21 @@ impl ForceFeedback {
         dt as f32
     }
 
-    /// Demand from the joint-state estimate for one glove finger.
-    fn estimate(&self, hand: &HandInput, joint: usize) -> Demand {
+    /// Demand from the joint-state estimate: the largest over `joints`.
+    fn estimate(&self, hand: &HandInput, joints: &[usize]) -> Demand {
+        let mut best = (0.0_f32, ContactSource::None);
+        for &joint in joints {
+            let d = self.estimate_joint(hand, joint);
+            if d.0 > best.0 {
+                best = d;
+            }
+        }
+        Demand::Value(best.0, best.1)
+    }
+
+    /// The estimate of one joint: the largest of its position error, current
+    /// and effort terms.
+    fn estimate_joint(&self, hand: &HandInput, joint: usize) -> (f32, ContactSource) {
         let e = &self.config.estimate;
         let mut best = (0.0_f32, ContactSource::None);
         let (commanded, measured) = (hand.commanded[joint], hand.measured[joint]);
@@ -275,12 +293,32 @@ impl ForceFeedback {
                 best = (d, ContactSource::Current);
             }
         }
-        Demand::Value(best.0, best.1)
+        let effort = hand.effort_nm[joint];
+        if e.use_effort && effort.is_finite() {
+            let above = non_negative(effort.abs() - e.effort_threshold_nm);
+            let d = non_negative(e.effort_gain_per_nm * above);
+            if d > best.0 {
+                best = (d, ContactSource::Effort);
+            }
+        }
+        best
     }
 
     /// Chooses the raw demand of glove finger `finger`.
     fn demand(&self, inputs: &Inputs, finger: usize) -> Demand {
-        let tip = GLOVE_TO_TACTILE[finger];
+        let source = &self.sources[finger];
+        if source.is_none() {
+            // The hand has no such finger: nothing to feel.
+            return Demand::Value(0.0, ContactSource::None);
+        }
+        let estimate = || match &inputs.hand {
+            Some(hand) if !source.joints.is_empty() => self.estimate(hand, &source.joints),
+            Some(_) => Demand::Value(0.0, ContactSource::None),
+            None => Demand::Ramp,
+        };
+        let Some(tip) = source.tactile else {
+            return estimate();
+        };
         match &inputs.tactile {
             Tactile::Stale => Demand::Ramp,
             Tactile::Fresh(t) if t.valid[tip] && t.normal_n[tip].is_finite() => {
@@ -293,20 +331,19 @@ impl ForceFeedback {
                 }
             }
             // Absent, or fresh but invalid (or non-finite) for this finger.
-            Tactile::Fresh(_) | Tactile::Absent => match &inputs.hand {
-                Some(hand) => self.estimate(hand, GLOVE_TO_JOINT[finger]),
-                None => Demand::Ramp,
-            },
+            Tactile::Fresh(_) | Tactile::Absent => estimate(),
         }
     }
 
     /// Runs one step of the law.
     ///
     /// Per glove finger: e-stop zeroes everything at once (and resets the
-    /// state); otherwise the demand comes from the fingertip's tactile force
-    /// if fresh and valid, else from the joint-state estimate (tactile absent
-    /// or invalid, hand state present); with stale tactile, or no hand state
-    /// when it is needed, the force ramps to zero at
+    /// state); a finger with no source gets no force; otherwise the demand
+    /// comes from its fingertip's tactile force if fresh and valid, else from
+    /// the joint-state estimate of its joints (tactile absent or invalid, or no
+    /// fingertip; hand state present); with stale tactile (for a finger with a
+    /// fingertip), or no hand state when it is needed, the force ramps to
+    /// zero at
     /// `max_force / stale_ramp_s` per second. A demand is scaled by
     /// `finger_gain`, saturated to `[0, max_force]`, low-pass filtered
     /// (`smoothing_tau_s`) and rate limited (`rate_limit_per_s`).

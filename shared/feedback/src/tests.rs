@@ -7,16 +7,37 @@ use super::*;
 /// 1 ms in nanoseconds (1 kHz loop).
 const MS: u64 = 1_000_000;
 
-fn law(config: FeedbackConfig) -> ForceFeedback {
-    ForceFeedback::new(config).expect("valid config")
+fn revo2() -> HandProfile {
+    HandProfile::builtin("revo2").expect("shipped profile")
 }
 
+/// The law for the Revo2 profile: glove little <- pinky (fingertip 4, joint 5), ring <- ring
+/// (3, 4), middle <- middle (2, 3), index <- index (1, 2), thumb <- thumb (0, thumb_flex 0).
+fn law(config: FeedbackConfig) -> ForceFeedback {
+    ForceFeedback::new(config, &revo2()).expect("valid config")
+}
+
+/// Revo2 fingertip of each glove finger (glove order).
+const GLOVE_TO_TACTILE: [usize; GLOVE_FINGERS] = [4, 3, 2, 1, 0];
+
 /// Fresh tactile, all fingertips valid, hand order.
-fn fresh(normal_n: [f32; HAND_FINGERTIPS]) -> Tactile {
+fn fresh(normal_n: [f32; MAX_FINGERTIPS]) -> Tactile {
     Tactile::Fresh(TactileInput {
         normal_n,
-        valid: [true; HAND_FINGERTIPS],
+        valid: [true; MAX_FINGERTIPS],
     })
+}
+
+/// A Revo2 joint-state input (six joints; effort unknown).
+fn hand6(commanded: [f32; 6], measured: [f32; 6], current_ma: [f32; 6]) -> HandInput {
+    let mut hand = HandInput {
+        effort_nm: [f32::NAN; MAX_JOINTS],
+        ..HandInput::default()
+    };
+    hand.commanded[..6].copy_from_slice(&commanded);
+    hand.measured[..6].copy_from_slice(&measured);
+    hand.current_ma[..6].copy_from_slice(&current_ma);
+    hand
 }
 
 fn inputs(t_ns: u64, tactile: Tactile, hand: Option<HandInput>) -> Inputs {
@@ -187,7 +208,7 @@ fn new_rejects_invalid_config_with_in_memory_origin() {
         stale_ramp_s: -1.0,
         ..FeedbackConfig::default()
     };
-    let err = ForceFeedback::new(bad).expect_err("invalid");
+    let err = ForceFeedback::new(bad, &revo2()).expect_err("invalid");
     assert_eq!(err.origin(), IN_MEMORY_ORIGIN);
     assert!(err.to_string().contains("`stale_ramp_s`"), "{err}");
     // Boundary values are accepted.
@@ -240,13 +261,13 @@ fn finger_mapping_estimate() {
     config.estimate.position_error_threshold = 0.0;
     config.estimate.position_gain = 10_000.0;
     let mut ff = law(config);
-    let hand = HandInput {
-        // Revo2 order [thumb_flex, thumb_abduct, index, middle, ring, pinky];
-        // the abduction error must not reach any glove finger.
-        commanded: [0.51, 0.9, 0.52, 0.53, 0.54, 0.55],
-        measured: [0.5, 0.0, 0.5, 0.5, 0.5, 0.5],
-        current_ma: [0.0; 6],
-    };
+    // Revo2 order [thumb_flex, thumb_abduct, index, middle, ring, pinky];
+    // the abduction error must not reach any glove finger.
+    let hand = hand6(
+        [0.51, 0.9, 0.52, 0.53, 0.54, 0.55],
+        [0.5, 0.0, 0.5, 0.5, 0.5, 0.5],
+        [0.0; 6],
+    );
     let mut t = 0;
     let out = run(&mut ff, &mut t, 3, |t| {
         inputs(t, Tactile::Absent, Some(hand))
@@ -414,11 +435,7 @@ fn absent_tactile_without_hand_ramps_to_zero() {
     let mut ff = law(config);
     let mut t = 0;
     // Contact from the position estimate: 4000 * (0.5 - 0.05) saturates.
-    let pressing = HandInput {
-        commanded: [1.0; 6],
-        measured: [0.5; 6],
-        current_ma: [0.0; 6],
-    };
+    let pressing = hand6([1.0; 6], [0.5; 6], [0.0; 6]);
     let out = run(&mut ff, &mut t, 500, |t| {
         inputs(t, Tactile::Absent, Some(pressing))
     });
@@ -512,7 +529,7 @@ fn non_finite_tactile_counts_as_invalid() {
     config.estimate.use_position_error = false;
     let mut ff = law(config);
     let mut hand = quiet_hand();
-    hand.current_ma = [400.0, 0.0, f32::NAN, f32::INFINITY, 400.0, 400.0];
+    hand.current_ma[..6].copy_from_slice(&[400.0, 0.0, f32::NAN, f32::INFINITY, 400.0, 400.0]);
     let tactile = fresh([f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1.3, 1.3]);
     let mut t = 0;
     let out = run(&mut ff, &mut t, 3, |t| inputs(t, tactile, Some(hand)));
@@ -648,14 +665,18 @@ fn estimate_config() -> BoxedStrategy<EstimateConfig> {
         any::<bool>(),
         non_neg(0.0, 2000.0),
         non_neg(0.0, 5.0),
+        (any::<bool>(), non_neg(0.0, 2.0), non_neg(0.0, 10_000.0)),
     )
-        .prop_map(|(up, pt, pg, uc, ct, cg)| EstimateConfig {
+        .prop_map(|(up, pt, pg, uc, ct, cg, (ue, et, eg))| EstimateConfig {
             use_position_error: up,
             position_error_threshold: pt,
             position_gain: pg,
             use_current: uc,
             current_threshold_ma: ct,
             current_gain_per_ma: cg,
+            use_effort: ue,
+            effort_threshold_nm: et,
+            effort_gain_per_nm: eg,
         })
         .boxed()
 }
@@ -725,21 +746,37 @@ fn any_tactile() -> BoxedStrategy<Tactile> {
     .boxed()
 }
 
+/// Joint state for up to 24 joints (any profile), with wild values everywhere.
 fn any_hand() -> BoxedStrategy<Option<HandInput>> {
+    let joints = |lo, hi| {
+        prop::collection::vec(wild(lo, hi), MAX_JOINTS).prop_map(|v| {
+            let mut a = [0.0; MAX_JOINTS];
+            a.copy_from_slice(&v);
+            a
+        })
+    };
     prop::option::weighted(
         0.8,
         (
-            proptest::array::uniform6(wild(-0.2, 1.2)),
-            proptest::array::uniform6(wild(-0.2, 1.2)),
-            proptest::array::uniform6(wild(-3000.0, 3000.0)),
+            joints(-0.2, 1.2),
+            joints(-0.2, 1.2),
+            joints(-3000.0, 3000.0),
+            joints(-10.0, 10.0),
         )
-            .prop_map(|(commanded, measured, current_ma)| HandInput {
+            .prop_map(|(commanded, measured, current_ma, effort_nm)| HandInput {
                 commanded,
                 measured,
                 current_ma,
+                effort_nm,
             }),
     )
     .boxed()
+}
+
+fn any_profile() -> BoxedStrategy<HandProfile> {
+    prop::sample::select(vec!["revo2", "allegro", "shadow"])
+        .prop_map(|name| HandProfile::builtin(name).expect("shipped profile"))
+        .boxed()
 }
 
 /// One step's inputs without the timestamp.
@@ -760,11 +797,12 @@ proptest! {
     #[test]
     fn prop_forces_always_within_limits(
         config in any_config(),
+        profile in any_profile(),
         t0 in any::<u64>(),
         steps in prop::collection::vec(any_step(), 1..200),
     ) {
         let max = config.max_force;
-        let mut ff = law(config);
+        let mut ff = ForceFeedback::new(config, &profile).expect("valid config");
         let mut t = t0;
         for (c, tactile, hand, estop) in steps {
             t = apply(t, c);
@@ -773,6 +811,11 @@ proptest! {
                 prop_assert!((0..=max).contains(&f), "force {f} outside 0..={max}: {out:?}");
             }
             prop_assert!(usize::from(out.clamped) <= GLOVE_FINGERS);
+            for (f, source) in profile.feedback.iter().enumerate() {
+                if source.is_none() && !estop {
+                    prop_assert_eq!(out.force[f], 0, "finger {} has no source", f);
+                }
+            }
             if estop {
                 prop_assert_eq!(out.force, [0; GLOVE_FINGERS]);
                 prop_assert_eq!(out.source, [ContactSource::EStop; GLOVE_FINGERS]);

@@ -274,7 +274,7 @@ fn joints_of(
                 format!("lower ({lower}) must be below upper ({upper})"),
             );
         }
-        let mut angle = |v: &Option<Spanned<f32>>, what: &str, default: f32| {
+        let angle = |v: &Option<Spanned<f32>>, what: &str, default: f32| {
             let Some(v) = v else { return Ok(default) };
             let x = *v.get_ref();
             if !(lower..=upper).contains(&x) {

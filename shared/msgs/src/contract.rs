@@ -100,6 +100,8 @@ pub mod contact_source {
     pub const RAMPING: u8 = 4;
     /// Held at zero by the emergency stop.
     pub const ESTOP: u8 = 5;
+    /// Estimated from the joint effort (torque).
+    pub const EFFORT: u8 = 6;
 }
 
 /// Link kinds (`HandState::link_kind`): how the node reaches the hand. They give

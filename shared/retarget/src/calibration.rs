@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN};
-use crate::{GLOVE_CHANNELS, REVO2_JOINTS};
+use crate::GLOVE_CHANNELS;
 
 /// Largest raw value the glove is specified to report.
 pub const GLOVE_RAW_MAX: u16 = 1000;
@@ -14,17 +14,7 @@ pub const MIN_CALIBRATION_SPAN: u16 = 50;
 
 /// Names of the glove channels, glove order (also the TOML section names of a
 /// calibration profile).
-pub const GLOVE_CHANNEL_NAMES: [&str; GLOVE_CHANNELS] = [
-    "little",
-    "ring",
-    "middle",
-    "index",
-    "thumb",
-    "thumb_rotation",
-];
-
-/// For each Revo2 joint (Revo2 order), the glove channel (glove index) that drives it.
-pub const GLOVE_CHANNEL_FOR_JOINT: [usize; REVO2_JOINTS] = [4, 5, 3, 2, 1, 0];
+pub const GLOVE_CHANNEL_NAMES: [&str; GLOVE_CHANNELS] = teleop_hand_profile::GLOVE_CHANNELS;
 
 /// Index of the thumb rotation channel in the glove order.
 const THUMB_ROTATION: usize = 5;
@@ -253,13 +243,12 @@ impl Calibration {
         Ok(cal)
     }
 
-    /// Normalises a raw glove vector (glove order, any `u16`) into Revo2
-    /// order: flexion `(open - raw) / (open - closed)` for the fingers and
-    /// `(outer - raw) / (outer - inner)` for thumb abduction, each clamped to
-    /// `[0, 1]` (0 = open / thumb out, 1 = closed / thumb in).
-    pub fn normalise(&self, raw: &[u16; GLOVE_CHANNELS]) -> [f32; REVO2_JOINTS] {
-        std::array::from_fn(|joint| {
-            let ch = GLOVE_CHANNEL_FOR_JOINT[joint];
+    /// The closure of each glove channel (glove order, any raw `u16`):
+    /// flexion `(open - raw) / (open - closed)` for the fingers and
+    /// `(outer - raw) / (outer - inner)` for the thumb rotation, each clamped
+    /// to `[0, 1]` (0 = open / thumb out, 1 = closed / thumb in).
+    pub fn closure(&self, raw: &[u16; GLOVE_CHANNELS]) -> [f32; GLOVE_CHANNELS] {
+        std::array::from_fn(|ch| {
             if ch == THUMB_ROTATION {
                 let r = self.thumb_rotation;
                 fraction(raw[ch], r.outer, r.inner)
@@ -306,30 +295,27 @@ outer = 970
     fn default_maps_open_to_zero_and_fist_to_one() {
         let cal = Calibration::default();
         cal.validate().unwrap();
-        assert_eq!(cal.normalise(&[1000; 6])[2..], [0.0; 4]);
-        assert_eq!(cal.normalise(&[0; 6])[2..], [1.0; 4]);
-        // thumb flex
-        assert_eq!(cal.normalise(&[1000; 6])[0], 0.0);
-        assert_eq!(cal.normalise(&[0; 6])[0], 1.0);
-        // thumb rotation: 1000 = outermost = abduct 0 (thumb out)
-        assert_eq!(cal.normalise(&[1000; 6])[1], 0.0);
-        assert_eq!(cal.normalise(&[0; 6])[1], 1.0);
+        assert_eq!(cal.closure(&[1000; 6])[..5], [0.0; 5]);
+        assert_eq!(cal.closure(&[0; 6])[..5], [1.0; 5]);
+        // thumb rotation: 1000 = outermost = closure 0 (thumb out)
+        assert_eq!(cal.closure(&[1000; 6])[5], 0.0);
+        assert_eq!(cal.closure(&[0; 6])[5], 1.0);
     }
 
     #[test]
     fn out_of_range_raw_is_clamped() {
         let cal = Calibration::default();
-        assert_eq!(cal.normalise(&[u16::MAX; 6]), [0.0; 6]);
-        assert_eq!(cal.normalise(&[1001; 6]), [0.0; 6]);
+        assert_eq!(cal.closure(&[u16::MAX; 6]), [0.0; 6]);
+        assert_eq!(cal.closure(&[1001; 6]), [0.0; 6]);
     }
 
     #[test]
-    fn joint_order_and_rotation_sign() {
+    fn channel_order_and_rotation_sign() {
         let cal = Calibration::default();
         // glove order: little, ring, middle, index, thumb, thumb_rotation
         let raw = [900, 800, 700, 600, 500, 100];
-        let n = cal.normalise(&raw);
-        let expect = [0.5, 0.9, 0.4, 0.3, 0.2, 0.1]; // thumb_flex, abduct, index, middle, ring, pinky
+        let n = cal.closure(&raw);
+        let expect = [0.1, 0.2, 0.3, 0.4, 0.5, 0.9];
         for (a, b) in n.iter().zip(expect) {
             assert!((a - b).abs() < 1e-6, "{n:?} vs {expect:?}");
         }
@@ -459,8 +445,8 @@ outer = 970
             closed: 900,
         };
         cal.validate().unwrap();
-        let n = cal.normalise(&[0, 0, 0, 900, 0, 0]);
-        assert_eq!(n[2], 1.0);
+        let n = cal.closure(&[0, 0, 0, 900, 0, 0]);
+        assert_eq!(n[3], 1.0);
     }
 
     #[test]

@@ -1,9 +1,11 @@
 //! Retargeting parameters: filter, deadband, slew limit, per-joint curves and limits.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
+use teleop_hand_profile::HandProfile;
 
 use crate::error::{ConfigError, RETARGET_ORIGIN};
-use crate::{REVO2_JOINTS, REVO2_JOINT_NAMES};
 
 /// Largest accepted [`RetargetConfig::deadband`].
 pub const MAX_DEADBAND: f32 = 0.2;
@@ -206,9 +208,9 @@ impl Default for JointConfig {
 /// Retargeting parameters (a TOML table; every field has a sensible default;
 /// unknown keys are rejected).
 ///
-/// In TOML, `joints` is a table keyed by Revo2 joint name (see
-/// [`REVO2_JOINT_NAMES`]); joints left out get [`JointConfig::default`]. See
-/// the crate documentation for an example.
+/// In TOML, `joints` is a table keyed by the hand profile's joint names
+/// (checked by [`RetargetConfig::check_joints`]); joints left out get
+/// [`JointConfig::default`]. See the crate documentation for an example.
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RetargetConfig {
@@ -219,9 +221,8 @@ pub struct RetargetConfig {
     pub deadband: f32,
     /// Slew limit per joint in normalised units per second. Default 3.0.
     pub max_speed: f32,
-    /// Per-joint configuration, Revo2 order.
-    #[serde(with = "joints_by_name")]
-    pub joints: [JointConfig; REVO2_JOINTS],
+    /// Per-joint configuration by joint name.
+    pub joints: BTreeMap<String, JointConfig>,
 }
 
 impl Default for RetargetConfig {
@@ -230,7 +231,7 @@ impl Default for RetargetConfig {
             filter: OneEuroParams::default(),
             deadband: 0.005,
             max_speed: 3.0,
-            joints: std::array::from_fn(|_| JointConfig::default()),
+            joints: BTreeMap::new(),
         }
     }
 }
@@ -283,7 +284,7 @@ impl RetargetConfig {
             ));
         }
         positive("max_speed", self.max_speed)?;
-        for (name, j) in REVO2_JOINT_NAMES.iter().zip(&self.joints) {
+        for (name, j) in &self.joints {
             let field = format!("joints.{name}");
             for (what, v) in [("min", j.min), ("max", j.max)] {
                 if !(0.0..=1.0).contains(&v) {
@@ -305,53 +306,29 @@ impl RetargetConfig {
         }
         Ok(())
     }
-}
 
-/// (De)serialises `[JointConfig; 6]` as a table keyed by joint name.
-mod joints_by_name {
-    use super::JointConfig;
-    use crate::REVO2_JOINTS;
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-    #[derive(Default, Serialize, Deserialize)]
-    #[serde(deny_unknown_fields, default)]
-    struct Joints {
-        thumb_flex: JointConfig,
-        thumb_abduct: JointConfig,
-        index: JointConfig,
-        middle: JointConfig,
-        ring: JointConfig,
-        pinky: JointConfig,
-    }
-
-    pub(super) fn serialize<S: Serializer>(
-        joints: &[JointConfig; REVO2_JOINTS],
-        s: S,
-    ) -> Result<S::Ok, S::Error> {
-        let [thumb_flex, thumb_abduct, index, middle, ring, pinky] = joints.clone();
-        Joints {
-            thumb_flex,
-            thumb_abduct,
-            index,
-            middle,
-            ring,
-            pinky,
+    /// Checks that every key of `joints` names a joint of `profile`; the error
+    /// names the field (`joints.<name>`) and lists the profile's joints.
+    pub fn check_joints(&self, profile: &HandProfile) -> Result<(), ConfigError> {
+        for name in self.joints.keys() {
+            if profile.joint_index(name).is_none() {
+                return Err(ConfigError::invalid(
+                    RETARGET_ORIGIN,
+                    format!("joints.{name}"),
+                    format!(
+                        "hand profile `{}` has no joint `{name}` (joints: {})",
+                        profile.name,
+                        profile.joint_names().collect::<Vec<_>>().join(", ")
+                    ),
+                ));
+            }
         }
-        .serialize(s)
+        Ok(())
     }
 
-    pub(super) fn deserialize<'de, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<[JointConfig; REVO2_JOINTS], D::Error> {
-        let j = Joints::deserialize(d)?;
-        Ok([
-            j.thumb_flex,
-            j.thumb_abduct,
-            j.index,
-            j.middle,
-            j.ring,
-            j.pinky,
-        ])
+    /// The configuration of the joint called `name` (the default when not set).
+    pub fn joint(&self, name: &str) -> JointConfig {
+        self.joints.get(name).cloned().unwrap_or_default()
     }
 }
 
@@ -391,18 +368,18 @@ curve = { kind = "piecewise", points = [[0, 0], [0.5, 0.3], [1, 1]] }
         assert_eq!(cfg.filter.min_cutoff_hz, 2.0);
         assert_eq!(cfg.filter.beta, 0.3);
         assert_eq!(cfg.filter.d_cutoff_hz, 1.0);
-        assert_eq!(cfg.joints[2].curve, Curve::Gamma { gamma: 0.8 });
-        assert_eq!(cfg.joints[2].max, 0.9);
-        assert_eq!(cfg.joints[2].min, 0.0);
-        assert_eq!(cfg.joints[1].min, 0.1);
+        assert_eq!(cfg.joint("index").curve, Curve::Gamma { gamma: 0.8 });
+        assert_eq!(cfg.joint("index").max, 0.9);
+        assert_eq!(cfg.joint("index").min, 0.0);
+        assert_eq!(cfg.joint("thumb_abduct").min, 0.1);
         assert_eq!(
-            cfg.joints[1].curve,
+            cfg.joint("thumb_abduct").curve,
             Curve::Piecewise {
                 points: vec![[0.0, 0.0], [0.5, 0.3], [1.0, 1.0]]
             }
         );
-        assert_eq!(cfg.joints[0], JointConfig::default());
-        assert_eq!(cfg.joints[5], JointConfig::default());
+        assert_eq!(cfg.joint("thumb_flex"), JointConfig::default());
+        assert_eq!(cfg.joint("pinky"), JointConfig::default());
 
         // serde round trip
         let back = toml::to_string(&cfg).unwrap();
@@ -496,14 +473,29 @@ curve = { kind = "piecewise", points = [[0, 0], [0.5, 0.3], [1, 1]] }
     }
 
     #[test]
+    fn joints_must_exist_in_the_profile() {
+        let cfg = RetargetConfig::from_toml_str("[joints.thumb]\nmin = 0.1\n", "r.toml").unwrap();
+        let revo2 = HandProfile::builtin("revo2").unwrap();
+        let m = cfg.check_joints(&revo2).unwrap_err().to_string();
+        assert!(
+            m.starts_with(
+                "retarget config: joints.thumb: hand profile `revo2` has no joint `thumb`"
+            ),
+            "{m}"
+        );
+        let cfg = RetargetConfig::from_toml_str("[joints.index_1]\nmax = 0.5\n", "r.toml").unwrap();
+        assert!(cfg.check_joints(&revo2).is_err());
+        cfg.check_joints(&HandProfile::builtin("allegro").unwrap())
+            .unwrap();
+    }
+
+    #[test]
     fn unknown_keys_are_errors() {
         let m = err_of("dead_band = 0.1\n");
         assert!(
             m.starts_with("r.toml: ") && m.contains("unknown field `dead_band`"),
             "{m}"
         );
-        let m = err_of("[joints.thumb]\nmin = 0.1\n");
-        assert!(m.contains("unknown field `thumb`"), "{m}");
         let m = err_of("[joints.index]\nmaximum = 0.1\n");
         assert!(m.contains("unknown field `maximum`"), "{m}");
         let m = err_of("[filter]\ncutoff = 1\n");

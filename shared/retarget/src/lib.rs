@@ -1,17 +1,21 @@
-//! Pure retargeting from the EH55BF1 exoskeleton glove to the BrainCo Revo2 hand.
+//! Pure retargeting from the EH55BF1 exoskeleton glove to any robot hand a
+//! [`HandProfile`] describes (the Revo2, the Allegro Hand, the Shadow Hand).
 //!
 //! # What this crate owns
 //!
-//! Everything between a raw glove sample and a normalised Revo2 joint target:
-//! the operator [`Calibration`] profile, per-joint response [`Curve`]s, One
-//! Euro filtering, deadband, position limits and slew limiting
-//! ([`RetargetConfig`], [`Retargeter`]).
+//! Everything between a raw glove sample and normalised joint targets in the
+//! hand's joint order: the operator [`Calibration`] profile, the profile's
+//! glove → joint map (channels, gains, offset), per-joint response
+//! [`Curve`]s, One Euro filtering, deadband, position limits, slew limiting
+//! and coupled joints ([`RetargetConfig`], [`Retargeter`]). Joint sets are
+//! sized at run time up to [`MAX_JOINTS`]; a step allocates nothing.
 //!
 //! It does **no I/O and no IPC**: no files, no clocks, no threads. It takes
 //! strings (TOML text plus an origin label for messages) and timestamps
 //! supplied by the caller. It must not depend on iceoryx2, on the message
 //! crate (`teleop-msgs`) or on any runtime/transport crate; the nodes convert
-//! between their messages and [`GloveInput`] / [`JointTargets`].
+//! between their messages and [`GloveInput`] / [`JointTargets`]. The hand
+//! comes from `teleop-hand-profile`; no hand is named in this crate.
 //!
 //! # Conventions
 //!
@@ -21,17 +25,17 @@
 //! fully open; for `thumb_rotation` 0 = innermost (toward the palm) and 1000 =
 //! outermost.
 //!
-//! Revo2 order (output): [`REVO2_JOINT_NAMES`] =
-//! `[thumb_flex, thumb_abduct, index, middle, ring, pinky]`, normalised to
-//! `[0, 1]` with 0 = open / straight / thumb out and 1 = closed / flexed /
-//! thumb in. [`GLOVE_CHANNEL_FOR_JOINT`] gives the glove channel driving each
-//! joint.
+//! Output: the profile's joint order, normalised to `[0, 1]` with 0 = the
+//! joint's `open` angle and 1 = its `closed` angle (the node turns these into
+//! radians when the profile's `command_units` asks for it).
 //!
-//! # Pipeline (per joint, in [`Retargeter::step`])
+//! # Pipeline (per driven joint, in [`Retargeter::step`])
 //!
-//! 1. normalise with the [`Calibration`]: `(open - raw) / (open - closed)`
-//!    (thumb abduction: `(outer - raw) / (outer - inner)`), clamped to `[0, 1]`;
-//! 2. the joint's [`Curve`];
+//! 1. each glove channel's closure from the [`Calibration`]:
+//!    `(open - raw) / (open - closed)` (thumb rotation:
+//!    `(outer - raw) / (outer - inner)`), clamped to `[0, 1]`;
+//! 2. the profile's map: `offset + Σ gain × closure`, then the joint's
+//!    [`Curve`] (which clamps to `[0, 1]`);
 //! 3. One Euro filter (`dt` from consecutive stamps, capped at
 //!    [`MAX_STEP_DT_S`]; non-increasing stamps count as no time elapsed);
 //! 4. deadband: changes smaller than `deadband` are ignored;
@@ -39,8 +43,10 @@
 //! 6. slew limit to `max_speed * dt` from the previous output (counted in
 //!    [`JointTargets::slew_limited`]).
 //!
-//! The first step (and the first after [`Retargeter::reset`]) jumps straight
-//! to the value. Outputs are finite and within limits for any input.
+//! A coupled joint (the Shadow Hand's J1) is then set to `ratio ×` its
+//! leader's angle, clamped to its own limits. The first step (and the first
+//! after [`Retargeter::reset`]) jumps straight to the value. Outputs are
+//! finite and within limits for any input.
 //!
 //! # Calibration profile (TOML)
 //!
@@ -82,8 +88,8 @@
 //! # Retargeting configuration (TOML)
 //!
 //! Every key is optional (the defaults are shown below); unknown keys are
-//! rejected. `joints` is a table keyed by Revo2 joint name; joints left out
-//! use the defaults (linear curve, limits `[0, 1]`):
+//! rejected. `joints` is a table keyed by the profile's joint names; joints
+//! left out use the defaults (linear curve, limits `[0, 1]`):
 //!
 //! ```
 //! let text = r#"
@@ -104,9 +110,11 @@
 //! curve = { kind = "piecewise", points = [[0, 0], [0.5, 0.3], [1, 1]] }
 //! "#;
 //! let cfg = teleop_retarget::RetargetConfig::from_toml_str(text, "retarget.toml")?;
-//! assert_eq!(cfg.joints[2].curve, teleop_retarget::Curve::Gamma { gamma: 0.8 });
+//! assert_eq!(cfg.joint("index").curve, teleop_retarget::Curve::Gamma { gamma: 0.8 });
 //!
-//! let mut rt = teleop_retarget::Retargeter::new(cfg, teleop_retarget::Calibration::default())?;
+//! let revo2 = teleop_retarget::HandProfile::builtin("revo2").expect("shipped profile");
+//! let calibration = teleop_retarget::Calibration::default();
+//! let mut rt = teleop_retarget::Retargeter::new(cfg, calibration, &revo2)?;
 //! assert!(rt.hold().is_none());
 //! let out = rt.step(&teleop_retarget::GloveInput { t_ns: 0, raw: [1000; 6] });
 //! assert_eq!(out.position[2], 0.0); // index open
@@ -126,26 +134,13 @@ mod filter;
 mod retargeter;
 
 pub use calibration::{
-    Calibration, FingerCalibration, RotationCalibration, GLOVE_CHANNEL_FOR_JOINT,
-    GLOVE_CHANNEL_NAMES, GLOVE_RAW_MAX, MIN_CALIBRATION_SPAN,
+    Calibration, FingerCalibration, RotationCalibration, GLOVE_CHANNEL_NAMES, GLOVE_RAW_MAX,
+    MIN_CALIBRATION_SPAN,
 };
 pub use config::{Curve, JointConfig, OneEuroParams, RetargetConfig, MAX_DEADBAND};
 pub use error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN, RETARGET_ORIGIN};
 pub use retargeter::{GloveInput, JointTargets, Retargeter, MAX_STEP_DT_S};
+pub use teleop_hand_profile::{HandProfile, MAX_JOINTS};
 
 /// Number of glove channels (little, ring, middle, index, thumb, thumb_rotation).
 pub const GLOVE_CHANNELS: usize = 6;
-
-/// Number of Revo2 joints.
-pub const REVO2_JOINTS: usize = 6;
-
-/// Revo2 joint names, Revo2 order (also the keys of the `joints` table in a
-/// [`RetargetConfig`]).
-pub const REVO2_JOINT_NAMES: [&str; REVO2_JOINTS] = [
-    "thumb_flex",
-    "thumb_abduct",
-    "index",
-    "middle",
-    "ring",
-    "pinky",
-];

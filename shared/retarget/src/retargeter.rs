@@ -1,10 +1,12 @@
 //! The per-sample retargeting pipeline.
 
+use teleop_hand_profile::{HandProfile, MAX_JOINTS};
+
 use crate::calibration::Calibration;
-use crate::config::RetargetConfig;
+use crate::config::{JointConfig, RetargetConfig};
 use crate::error::ConfigError;
 use crate::filter::OneEuro;
-use crate::{GLOVE_CHANNELS, REVO2_JOINTS};
+use crate::GLOVE_CHANNELS;
 
 /// Longest time step (seconds) a single [`Retargeter::step`] accounts for.
 ///
@@ -24,12 +26,15 @@ pub struct GloveInput {
     pub raw: [u16; GLOVE_CHANNELS],
 }
 
-/// Joint targets for the Revo2 hand.
+/// Joint targets for the hand, in the profile's joint order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointTargets {
-    /// Revo2 order, normalised (0 = open / thumb out, 1 = closed / thumb in),
-    /// always finite and within each joint's `[min, max]`.
-    pub position: [f32; REVO2_JOINTS],
+    /// Normalised targets (0 = the joint's open angle, 1 = its closed angle),
+    /// always finite and within each joint's `[min, max]`; the first `count`
+    /// entries are used, the rest are 0.
+    pub position: [f32; MAX_JOINTS],
+    /// How many joints the hand has.
+    pub count: usize,
     /// The configured slew limit (normalised/s), for the driver's speed field.
     pub max_speed: f32,
     /// True when this is a held command because the input is stale.
@@ -41,15 +46,72 @@ pub struct JointTargets {
     pub slew_limited: u8,
 }
 
-/// Turns glove samples into Revo2 joint targets: calibration → curve → One
-/// Euro filter → deadband → limits → slew limit, per joint.
+impl JointTargets {
+    /// The used targets.
+    pub fn positions(&self) -> &[f32] {
+        &self.position[..self.count.min(MAX_JOINTS)]
+    }
+}
+
+/// How one joint is driven, resolved from the profile and the configuration.
+#[derive(Debug, Clone, PartialEq)]
+enum Drive {
+    /// From the glove: `offset + Σ gain × closure(channel)`.
+    Glove {
+        /// `(channel, gain)`; at most one entry per glove channel is useful.
+        channels: [(usize, f32); GLOVE_CHANNELS],
+        /// Entries of `channels` in use.
+        used: usize,
+        /// Added to the sum.
+        offset: f32,
+    },
+    /// Follows joint `to`: `angle = ratio × angle(to)` (radians), clamped.
+    Coupled {
+        /// The driven joint.
+        to: usize,
+        /// Radians per radian.
+        ratio: f32,
+    },
+}
+
+/// One joint of the retargeter: its drive, shaping, limits and the angles
+/// its normalised range spans.
+#[derive(Debug, Clone, PartialEq)]
+struct JointPlan {
+    drive: Drive,
+    config: JointConfig,
+    open: f32,
+    closed: f32,
+    lower: f32,
+    upper: f32,
+}
+
+impl JointPlan {
+    /// Normalised value of the angle `ratio × angle(leader)`, clamped to
+    /// this joint's limits (in radians, then in normalised units).
+    fn follow(&self, leader: &JointPlan, leader_n: f32, ratio: f32) -> f32 {
+        let angle = ratio * (leader.open + (leader.closed - leader.open) * leader_n);
+        let angle = if angle.is_nan() {
+            self.open
+        } else {
+            angle.clamp(self.lower, self.upper)
+        };
+        (angle - self.open) / (self.closed - self.open)
+    }
+}
+
+/// Turns glove samples into joint targets for the hand a [`HandProfile`]
+/// describes: glove map (calibrated channel closures, gains, offset) → curve
+/// → One Euro filter → deadband → limits → slew limit, per driven joint;
+/// coupled joints follow their joint.
 #[derive(Debug, Clone)]
 pub struct Retargeter {
     config: RetargetConfig,
     calibration: Calibration,
-    filters: [OneEuro; REVO2_JOINTS],
+    plans: Vec<JointPlan>,
+    filters: [OneEuro; MAX_JOINTS],
     /// Last filtered value accepted through the deadband, per joint.
-    anchor: [f32; REVO2_JOINTS],
+    anchor: [f32; MAX_JOINTS],
     /// Stamp of the previous step; `None` before the first step / after reset.
     last_t_ns: Option<u64>,
     /// Last output (kept across [`Retargeter::reset`] so `hold` keeps working).
@@ -57,15 +119,53 @@ pub struct Retargeter {
 }
 
 impl Retargeter {
-    /// Validates both the configuration and the calibration.
-    pub fn new(config: RetargetConfig, calibration: Calibration) -> Result<Self, ConfigError> {
+    /// Validates the configuration (also against the profile's joint names)
+    /// and the calibration.
+    pub fn new(
+        config: RetargetConfig,
+        calibration: Calibration,
+        profile: &HandProfile,
+    ) -> Result<Self, ConfigError> {
         config.validate()?;
+        config.check_joints(profile)?;
         calibration.validate()?;
+        let plans = profile
+            .joints
+            .iter()
+            .take(MAX_JOINTS)
+            .map(|j| {
+                let drive = match j.coupling {
+                    Some(c) => Drive::Coupled {
+                        to: c.to,
+                        ratio: c.ratio,
+                    },
+                    None => {
+                        let mut channels = [(0, 0.0); GLOVE_CHANNELS];
+                        let used = j.glove.channels.len().min(GLOVE_CHANNELS);
+                        channels[..used].copy_from_slice(&j.glove.channels[..used]);
+                        Drive::Glove {
+                            channels,
+                            used,
+                            offset: j.glove.offset,
+                        }
+                    }
+                };
+                JointPlan {
+                    drive,
+                    config: config.joint(&j.name),
+                    open: j.open,
+                    closed: j.closed,
+                    lower: j.lower,
+                    upper: j.upper,
+                }
+            })
+            .collect();
         Ok(Retargeter {
             config,
             calibration,
-            filters: [OneEuro::default(); REVO2_JOINTS],
-            anchor: [0.0; REVO2_JOINTS],
+            plans,
+            filters: [OneEuro::default(); MAX_JOINTS],
+            anchor: [0.0; MAX_JOINTS],
             last_t_ns: None,
             last: None,
         })
@@ -81,7 +181,7 @@ impl Retargeter {
         &self.calibration
     }
 
-    /// Processes one glove sample.
+    /// Processes one glove sample. Allocates nothing.
     ///
     /// `dt` is the time since the previous sample's stamp, capped at
     /// [`MAX_STEP_DT_S`]; a stamp that is not later than the previous one
@@ -95,6 +195,9 @@ impl Retargeter {
     /// value stays the target. In steady state the last accepted value is the
     /// previous output; while the slew limit is still catching up, measuring
     /// against it lets the move finish instead of stopping one deadband short.
+    ///
+    /// A coupled joint is computed after all driven joints, from its leader's
+    /// output, and then clamped to its own `[min, max]`.
     pub fn step(&mut self, input: &GloveInput) -> JointTargets {
         let dt = match self.last_t_ns {
             Some(prev) if input.t_ns > prev => {
@@ -111,16 +214,29 @@ impl Retargeter {
             self.last.map(|t| t.position)
         };
 
-        let normalised = self.calibration.normalise(&input.raw);
+        let closure = self.calibration.closure(&input.raw);
         let max_step = self.config.max_speed * dt;
-        let mut position = [0.0_f32; REVO2_JOINTS];
+        let mut position = [0.0_f32; MAX_JOINTS];
         let mut clamped = 0_u8;
         let mut slew_limited = 0_u8;
 
-        for (j, out) in position.iter_mut().enumerate() {
-            let jc = &self.config.joints[j];
-            let shaped = jc.curve.apply(normalised[j]);
+        for (j, plan) in self.plans.iter().enumerate() {
+            let Drive::Glove {
+                channels,
+                used,
+                offset,
+            } = &plan.drive
+            else {
+                continue;
+            };
+            let mut raw = *offset;
+            for &(ch, gain) in &channels[..*used] {
+                raw += gain * closure[ch];
+            }
+            let jc = &plan.config;
+            let shaped = jc.curve.apply(raw);
             let filtered = self.filters[j].filter(shaped, dt, &self.config.filter);
+            let out = &mut position[j];
 
             let Some(prev) = previous.map(|p| p[j]) else {
                 // Fresh start: jump to the (clamped) value.
@@ -156,8 +272,18 @@ impl Retargeter {
             };
         }
 
+        for (j, plan) in self.plans.iter().enumerate() {
+            if let Drive::Coupled { to, ratio } = plan.drive {
+                let followed = plan.follow(&self.plans[to], position[to], ratio);
+                let (v, c) = clamp_count(followed, plan.config.min, plan.config.max);
+                clamped += u8::from(c);
+                position[j] = v;
+            }
+        }
+
         let targets = JointTargets {
             position,
+            count: self.plans.len(),
             max_speed: self.config.max_speed,
             held: false,
             clamped,
@@ -185,7 +311,7 @@ impl Retargeter {
     /// bounds the physical motion). [`hold`](Self::hold) keeps returning the
     /// last output until then.
     pub fn reset(&mut self) {
-        self.filters = [OneEuro::default(); REVO2_JOINTS];
+        self.filters = [OneEuro::default(); MAX_JOINTS];
         self.last_t_ns = None;
     }
 }
@@ -209,24 +335,28 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
+    fn revo2() -> HandProfile {
+        HandProfile::builtin("revo2").unwrap()
+    }
+
     fn input(t_ns: u64, raw: [u16; 6]) -> GloveInput {
         GloveInput { t_ns, raw }
     }
 
     fn default_rt() -> Retargeter {
-        Retargeter::new(RetargetConfig::default(), Calibration::default()).unwrap()
+        Retargeter::new(RetargetConfig::default(), Calibration::default(), &revo2()).unwrap()
     }
 
     #[test]
     fn first_step_jumps_with_default_calibration() {
         let mut rt = default_rt();
         let t = rt.step(&input(5, [1000; 6]));
-        assert_eq!(t.position, [0.0; 6]);
+        assert_eq!(t.positions(), [0.0; 6]);
         assert!(!t.held);
         assert_eq!(t.max_speed, 3.0);
         let mut rt = default_rt();
         let t = rt.step(&input(5, [0; 6]));
-        assert_eq!(t.position, [1.0; 6]);
+        assert_eq!(t.positions(), [1.0; 6]);
         assert_eq!(t.slew_limited, 0);
     }
 
@@ -237,7 +367,7 @@ mod tests {
         let t = rt.step(&input(0, [900, 800, 700, 600, 500, 100]));
         // Revo2: thumb_flex, thumb_abduct, index, middle, ring, pinky
         let expect = [0.5, 0.9, 0.4, 0.3, 0.2, 0.1];
-        for (a, b) in t.position.iter().zip(expect) {
+        for (a, b) in t.positions().iter().zip(expect) {
             assert!((a - b).abs() < 1e-6, "{:?}", t.position);
         }
         // thumb rotated to the outermost position -> abduct 0 (thumb out)
@@ -249,11 +379,11 @@ mod tests {
     #[test]
     fn curves_apply_per_joint() {
         let mut cfg = RetargetConfig::default();
-        cfg.joints[2].curve = Curve::Gamma { gamma: 2.0 };
-        cfg.joints[3].curve = Curve::Piecewise {
+        cfg.joints.entry("index".into()).or_default().curve = Curve::Gamma { gamma: 2.0 };
+        cfg.joints.entry("middle".into()).or_default().curve = Curve::Piecewise {
             points: vec![[0.0, 0.0], [0.5, 0.3], [1.0, 1.0]],
         };
-        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap();
         let t = rt.step(&input(0, [500; 6]));
         assert!((t.position[2] - 0.25).abs() < 1e-6);
         assert!((t.position[3] - 0.3).abs() < 1e-6);
@@ -263,9 +393,9 @@ mod tests {
     #[test]
     fn limits_clamp_and_count() {
         let mut cfg = RetargetConfig::default();
-        cfg.joints[5].min = 0.2;
-        cfg.joints[4].max = 0.7;
-        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        cfg.joints.entry("pinky".into()).or_default().min = 0.2;
+        cfg.joints.entry("ring".into()).or_default().max = 0.7;
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap();
         let t = rt.step(&input(0, [1000, 0, 500, 500, 500, 500]));
         assert_eq!(t.position[5], 0.2);
         assert_eq!(t.position[4], 0.7);
@@ -283,7 +413,7 @@ mod tests {
             },
             ..RetargetConfig::default()
         };
-        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap();
         let t0 = rt.step(&input(0, [500; 6]));
         let mut t = 0;
         for _ in 0..100 {
@@ -298,7 +428,7 @@ mod tests {
             rt.step(&input(t, [400; 6]));
         }
         let out = rt.step(&input(t + MS, [400; 6]));
-        for p in out.position {
+        for &p in out.positions() {
             // accepted once it crossed the deadband: within one deadband of 0.6
             assert!((0.55..=0.6 + 1e-6).contains(&p), "{:?}", out.position);
         }
@@ -315,9 +445,9 @@ mod tests {
             },
             ..RetargetConfig::default()
         };
-        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap();
         let mut prev = rt.step(&input(0, [1000; 6])).position;
-        assert_eq!(prev, [0.0; 6]);
+        assert_eq!(prev, [0.0; 24]);
         let mut t = 0;
         let mut reached_at = None;
         let mut saw_limit = false;
@@ -325,11 +455,11 @@ mod tests {
             t += MS;
             let out = rt.step(&input(t, [0; 6]));
             saw_limit |= out.slew_limited == 6;
-            for (a, b) in out.position.iter().zip(prev) {
+            for (a, b) in out.positions().iter().zip(prev) {
                 assert!(a - b <= 2.0 * 0.001 + 1e-6, "moved {} in 1 ms", a - b);
             }
             prev = out.position;
-            if reached_at.is_none() && out.position.iter().all(|&p| p >= 1.0 - 0.005) {
+            if reached_at.is_none() && out.positions().iter().all(|&p| p >= 1.0 - 0.005) {
                 reached_at = Some(t);
             }
         }
@@ -347,10 +477,10 @@ mod tests {
     fn large_gap_is_capped() {
         let mut cfg = RetargetConfig::default();
         cfg.filter.min_cutoff_hz = 1.0e4;
-        let mut rt = Retargeter::new(cfg, Calibration::default()).unwrap();
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap();
         rt.step(&input(0, [1000; 6]));
         let out = rt.step(&input(10_000 * MS, [0; 6]));
-        for p in out.position {
+        for &p in out.positions() {
             assert!((p - 3.0 * MAX_STEP_DT_S).abs() < 1e-4, "{p}");
         }
     }
@@ -393,7 +523,7 @@ mod tests {
         rt.reset();
         assert_eq!(rt.hold().unwrap().position, t.position);
         let n = rt.step(&input(0, [0; 6]));
-        assert_eq!(n.position, [1.0; 6]);
+        assert_eq!(n.positions(), [1.0; 6]);
         assert_eq!(n.slew_limited, 0);
     }
 
@@ -403,14 +533,14 @@ mod tests {
             max_speed: -1.0,
             ..RetargetConfig::default()
         };
-        let err = Retargeter::new(cfg, Calibration::default()).unwrap_err();
+        let err = Retargeter::new(cfg, Calibration::default(), &revo2()).unwrap_err();
         assert!(
             err.to_string().starts_with("retarget config: max_speed: "),
             "{err}"
         );
         let mut cal = Calibration::default();
         cal.fingers[0].closed = 990;
-        let err = Retargeter::new(RetargetConfig::default(), cal).unwrap_err();
+        let err = Retargeter::new(RetargetConfig::default(), cal, &revo2()).unwrap_err();
         assert!(
             err.to_string().starts_with("calibration: [little]: "),
             "{err}"
