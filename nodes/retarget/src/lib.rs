@@ -348,6 +348,43 @@ mod tests {
     }
 
     #[test]
+    fn a_joint_the_profile_lacks_is_refused_with_file_line_and_field() {
+        let dir = std::env::temp_dir().join(format!("retarget-load-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("hands")).unwrap();
+        let profile = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../config/hands/allegro.toml"
+        );
+        std::fs::copy(profile, dir.join("hands/allegro.toml")).unwrap();
+        let config = dir.join("retarget.toml");
+        let text = "hand_profile = \"hands/allegro.toml\"\n\n[retarget]\nmax_speed = 2.0\n\n\
+                    [retarget.joints.index_1]\nmax = 0.9\n\n[retarget.joints.pinky]\nmax = 0.5\n";
+        std::fs::write(&config, text).unwrap();
+        let err = load(Some(&config), None, None).unwrap_err().to_string();
+        let want = format!(
+            "{}:9: joints.pinky: hand profile `allegro` has no joint",
+            config.display()
+        );
+        assert!(err.starts_with(&want), "{err}");
+        // Without the bad table the same file loads, with the profile it names.
+        std::fs::write(
+            &config,
+            text.replace("[retarget.joints.pinky]\nmax = 0.5\n", ""),
+        )
+        .unwrap();
+        let loaded = load(Some(&config), None, None).unwrap();
+        assert_eq!(loaded.profile.name, "allegro");
+        // No profile at all is an error that says how to give one.
+        std::fs::write(&config, "glove_timeout_ms = 50\n").unwrap();
+        let err = load(Some(&config), None, None).unwrap_err().to_string();
+        assert!(
+            err.contains("no hand profile") && err.contains("--profile"),
+            "{err}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn config_file_errors_name_the_field() {
         let err = teleop_runtime::parse_toml::<NodeConfig>("glove_timeout = 5\n", "r.toml")
             .unwrap_err()
