@@ -1,27 +1,29 @@
-//! The Revo2 process: the hand's EtherCAT cycle on `ethercrab`'s real MainDevice state machine.
+//! The Revo2 process: the hand as the first driver of `teleop-ecat-master`, whose MainDevice
+//! (ethercrab), cycle, recovery and reconnect it runs.
 //!
-//! - [`pump`]: carries ethercrab's frames over a `teleop-ecat-link` link (socket to the emulator,
-//!   or a raw socket on an interface) and survives link loss;
-//! - [`bus`]: bring-up to OP (identity check, configuration in PRE-OP with read-back, PDO
-//!   assignment with an SDO-polling fallback for tactile data) and AL error acknowledge;
+//! - [`bus`]: the Revo2 on the bus: identity check, configuration in PRE-OP with read-back, PDO
+//!   assignment with an SDO-polling fallback for tactile data, string reads;
+//! - [`driver`]: `impl Driver for Revo2`: pack, unpack, hold, the tactile SDO side channel;
 //! - [`convert`]: pure conversions between hand commands/state/tactile messages and the Revo2
 //!   process data;
-//! - [`node`]: the cycle (absolute deadlines, stale command -> hold, working-counter checks,
-//!   recovery, reconnect) and publishing;
-//! - [`mailbox`]: raw mailbox access on ethercrab's `Command` API (any device): the FoE
-//!   mailbox port of `teleop-foe` and the normal SDO download ethercrab lacks;
+//! - [`node`]: the node's ports as the master's host (commands in; hand state, tactile, health,
+//!   device info out);
 //! - [`flash`]: the Revo2 firmware upgrade (section 6): file checks, upgrade settings, BOOT on
 //!   the bootstrap mailbox, FoE transfer, restart, version read-back.
 //!
-//! The Revo2's dictionary and process-data layout live in `teleop-revo2-protocol`.
+//! The Revo2's dictionary and process-data layout live in `teleop-revo2-protocol`; the bus, the
+//! frame pump and the raw mailbox in `teleop-ecat-master`. Must not depend on the emulator
+//! (outside tests).
 
 pub mod bus;
 pub mod config;
 pub mod convert;
+pub mod driver;
 pub mod flash;
-pub mod mailbox;
 pub mod node;
-pub mod pump;
+
+pub use teleop_ecat_master::mailbox;
 
 pub use config::{Revo2Config, Transport};
+pub use driver::Revo2;
 pub use node::run;

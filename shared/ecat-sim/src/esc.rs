@@ -29,6 +29,10 @@ const WATCHDOG_PDI: u16 = 1000;
 /// DL status: PDI operational, PDI watchdog ok, link and communication on port 0, loops of
 /// ports 1..3 closed.
 const DL_STATUS: u16 = 0x0001 | 0x0002 | 0x0010 | 0x0200 | 0x0400 | 0x1000 | 0x4000;
+/// DL status: loop of port 1 closed (in [`DL_STATUS`]).
+const DL_LOOP_PORT1_CLOSED: u16 = 0x0400;
+/// DL status: link and communication on port 1 (a SubDevice behind this one).
+const DL_PORT1_LINKED: u16 = 0x0020 | 0x0800;
 /// SM control bit 6: watchdog trigger enable.
 const SM_WATCHDOG_ENABLE: u8 = 0x40;
 
@@ -233,7 +237,12 @@ impl<A: Application> SubDevice<A> {
         sd.set_u16(reg::FEATURES, 0x0001);
         sd.mem[usize::from(reg::DL_CONTROL)] = 0x01;
         sd.mem[usize::from(reg::DL_CONTROL) + 2] = 0x07;
-        sd.set_u16(reg::DL_STATUS, DL_STATUS);
+        let dl_status = if sd.config.port1_linked {
+            (DL_STATUS & !DL_LOOP_PORT1_CLOSED) | DL_PORT1_LINKED
+        } else {
+            DL_STATUS
+        };
+        sd.set_u16(reg::DL_STATUS, dl_status);
         sd.set_u16(reg::AL_CONTROL, AlState::Init.bits().into());
         sd.set_u16(reg::WATCHDOG_DIVIDER, WATCHDOG_DIVIDER);
         sd.set_u16(reg::WATCHDOG_PDI, WATCHDOG_PDI);

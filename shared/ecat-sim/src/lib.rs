@@ -42,7 +42,8 @@
 //! firmware update is the application's), SDO Information, CoE complete access (aborted with 0x0601_0000),
 //! CoE emergencies (never sent), bit-granular FMMU mappings (FMMUs map whole bytes), explicit
 //! device identification (AL control bit 5), EEPROM emulation by the PDI, ESC write protection,
-//! and more than one port (port 0 has the link, port 1 is closed).
+//! and ports 2 and 3 (port 0 has the link; port 1 is closed unless
+//! [`EscConfig::port1_linked`] says a SubDevice follows).
 //!
 //! # Known MainDevice limits this emulator exposes
 //!
@@ -437,6 +438,10 @@ pub struct EscConfig {
     pub watchdog: Duration,
     /// Mailbox protocols (SII word 0x1C): see [`mailbox_protocols`].
     pub mailbox_protocols: u16,
+    /// Another SubDevice is linked behind this one on port 1 (DL status: link and
+    /// communication on port 1, its loop open), as on a bus of several SubDevices whose frames
+    /// the caller passes through each in turn. `false`: the last SubDevice (port 1 closed).
+    pub port1_linked: bool,
 }
 
 impl Default for EscConfig {
@@ -459,6 +464,7 @@ impl Default for EscConfig {
             inputs_address: 0x1400,
             watchdog: Duration::from_millis(100),
             mailbox_protocols: mailbox_protocols::COE,
+            port1_linked: false,
         }
     }
 }

@@ -1,0 +1,151 @@
+//! What a device brings to the master: the [`Driver`] trait, and the [`Image`] its process data
+//! is packed into and unpacked from.
+
+use std::future::Future;
+use std::ops::Range;
+use std::time::Duration;
+
+use ethercrab::MainDevice;
+
+use crate::bus::{Found, OpGroup, PreOpGroup, MAX_PDI, MAX_SUBDEVICES};
+
+/// One direction of the process data of every SubDevice on the bus (all outputs, or all
+/// inputs), in bus order; a SubDevice without process data in that direction has an empty
+/// part. The master copies it to and from ethercrab's process image, so a driver never holds
+/// ethercrab's image lock.
+#[derive(Debug, Clone)]
+pub struct Image {
+    bytes: [u8; MAX_PDI],
+    ranges: [Range<usize>; MAX_SUBDEVICES],
+    count: usize,
+}
+
+impl Image {
+    /// An image with parts of these lengths, in bus order. Lengths past [`MAX_SUBDEVICES`] or
+    /// [`MAX_PDI`] bytes in all are cut (ethercrab's group cannot hold more).
+    pub fn with_lengths(lengths: impl IntoIterator<Item = usize>) -> Self {
+        let mut image = Self {
+            bytes: [0; MAX_PDI],
+            ranges: Default::default(),
+            count: 0,
+        };
+        let mut at = 0;
+        for (range, len) in image.ranges.iter_mut().zip(lengths) {
+            let end = (at + len).min(MAX_PDI);
+            *range = at..end;
+            at = end;
+            image.count += 1;
+        }
+        image
+    }
+
+    /// How many SubDevices the image has a part for.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// True without any part.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The part of SubDevice `index` (empty for a SubDevice that is not on the bus).
+    pub fn subdevice(&self, index: usize) -> &[u8] {
+        match self.ranges[..self.count].get(index) {
+            Some(r) => &self.bytes[r.clone()],
+            None => &[],
+        }
+    }
+
+    /// The part of SubDevice `index`, to write (empty for a SubDevice that is not on the bus).
+    pub fn subdevice_mut(&mut self, index: usize) -> &mut [u8] {
+        match self.ranges[..self.count].get(index) {
+            Some(r) => &mut self.bytes[r.clone()],
+            None => &mut [],
+        }
+    }
+}
+
+/// A device on the bus, as the master drives it: which SubDevices it is, how it is configured
+/// in PRE-OP, and how commands and inputs map to its process data. Everything else (the cycle,
+/// deadlines, working counter and AL-state checks, recovery, reconnect, stale command -> hold,
+/// counters) is the master's: see [`crate::run`].
+///
+/// `pack`, `unpack` and `hold` run inside the cycle: no allocation, no blocking, no logging
+/// that can block.
+pub trait Driver {
+    /// What the device is told each cycle (e.g. a hand command).
+    type Command;
+    /// What the device's inputs decode to.
+    type Inputs;
+    /// What the side channel reads (see [`poll_period`](Self::poll_period)).
+    type Polled: Copy + Send;
+
+    /// The device's name in logs and errors ("Revo2").
+    fn name(&self) -> &str;
+
+    /// Checks that the bus holds this device: `found` is every SubDevice, in bus order (empty
+    /// when the bus has none). A foreign identity is refused with an error naming what was
+    /// found (vendor, product, name) and what was expected.
+    fn identify(&self, found: &[Found]) -> anyhow::Result<()>;
+
+    /// Configures the device in PRE-OP (SDO writes, PDO assignment and mapping) through the
+    /// group's SubDevice handles, and keeps what it learns. The master then goes to OP, where
+    /// ethercrab sizes the process data from the PDO assignment.
+    fn configure(
+        &mut self,
+        md: &MainDevice<'static>,
+        group: &PreOpGroup,
+    ) -> impl Future<Output = anyhow::Result<()>>;
+
+    /// Writes `command` into the outputs and returns how many of its values were clamped;
+    /// `None` when the command is not for this device (the master then treats it as stale).
+    fn pack(&mut self, command: &Self::Command, outputs: &mut Image) -> Option<u32>;
+
+    /// Decodes the inputs of a cycle whose working counter was right; `polled` is the side
+    /// channel's latest reading when it runs and has read something. `None`: the inputs are
+    /// unusable (counted with the wrong working counters).
+    fn unpack(&mut self, inputs: &Image, polled: Option<&Self::Polled>) -> Option<Self::Inputs>;
+
+    /// Writes the outputs that hold the device where `last` says it is: sent when the command
+    /// goes stale, and for a few cycles before the master leaves OP.
+    fn hold(&self, last: &Self::Inputs, outputs: &mut Image);
+
+    /// How often the side channel runs, or `None` (the default) for none. The side channel is
+    /// [`poll`](Self::poll), called on a thread of its own while the device is in OP, so that a
+    /// slow or failing mailbox never delays the cycle (e.g. data read by SDO because the device
+    /// cannot put it in its process data).
+    fn poll_period(&self) -> Option<Duration> {
+        None
+    }
+
+    /// One reading of the side channel (only called when [`poll_period`](Self::poll_period) is
+    /// `Some`). May block on the mailbox; a panic inside ethercrab is caught and logged.
+    fn poll(md: &MainDevice<'static>, group: &OpGroup) -> anyhow::Result<Self::Polled>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parts_follow_each_other_and_unknown_subdevices_are_empty() {
+        let mut image = Image::with_lengths([0, 3, 2]);
+        assert_eq!(image.len(), 3);
+        assert!(image.subdevice(0).is_empty());
+        image.subdevice_mut(1).copy_from_slice(&[1, 2, 3]);
+        image.subdevice_mut(2).copy_from_slice(&[4, 5]);
+        assert_eq!(image.subdevice(1), &[1, 2, 3]);
+        assert_eq!(image.subdevice(2), &[4, 5]);
+        assert!(image.subdevice(3).is_empty() && image.subdevice_mut(9).is_empty());
+    }
+
+    #[test]
+    fn lengths_beyond_the_group_are_cut() {
+        let image = Image::with_lengths([MAX_PDI - 1, 10, 1, 1, 1]);
+        assert_eq!(image.len(), MAX_SUBDEVICES);
+        assert_eq!(image.subdevice(0).len(), MAX_PDI - 1);
+        assert_eq!(image.subdevice(1).len(), 1);
+        assert!(image.subdevice(2).is_empty());
+    }
+}
