@@ -1,0 +1,110 @@
+//! `teleop reprocess` retargets with the hand the recording was made with: the profile embedded
+//! in its metadata, or for recordings made before profiles the shipped profile of its hand model.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+
+use teleop_e2e::Sandbox;
+use teleop_msgs::{hand_model, units, GloveState, HandCommand, Message};
+use teleop_recording::{read_messages, Filter, RecordedMessage, Recorder, WriterOptions};
+
+fn sample() -> std::path::PathBuf {
+    Sandbox::repo().join("recordings/grasp.sample.mcap")
+}
+
+/// The hand commands of a reprocessed file.
+fn commands(path: &std::path::Path) -> Vec<HandCommand> {
+    read_messages(path, &Filter::topics([HandCommand::TOPIC]))
+        .unwrap()
+        .map(|m| m.unwrap().decode::<HandCommand>().unwrap())
+        .collect()
+}
+
+#[test]
+fn the_profile_embedded_in_a_recording_drives_reprocessing() {
+    let sandbox = Sandbox::new();
+    // An operator recording (the sample's glove samples) made with the Allegro profile.
+    let profile = Sandbox::repo().join("config/hands/allegro.toml");
+    let input = sandbox.dir.path().join("allegro-session.mcap");
+    let metadata = vec![(
+        "hand_profile".to_string(),
+        BTreeMap::from([
+            ("file".to_string(), profile.display().to_string()),
+            (
+                "text".to_string(),
+                std::fs::read_to_string(&profile).unwrap(),
+            ),
+        ]),
+    )];
+    let mut rec = Recorder::create(&input, WriterOptions::default(), &metadata).unwrap();
+    let glove = rec.add_message_type::<GloveState>().unwrap();
+    let mut n = 0;
+    for m in read_messages(&sample(), &Filter::topics([GloveState::TOPIC])).unwrap() {
+        let m = m.unwrap();
+        let s: GloveState = m.decode().unwrap();
+        rec.write(glove, &RecordedMessage::from_sample(&s, m.log_time_ns))
+            .unwrap();
+        n += 1;
+    }
+    rec.finish().unwrap();
+
+    let out = sandbox.dir.path().join("out.mcap");
+    let r = sandbox.run_teleop(&[
+        "reprocess",
+        input.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("hand profile `allegro` from the recording's metadata"),
+        "{stderr}"
+    );
+    let cmds = commands(&out);
+    assert_eq!(cmds.len(), n);
+    for c in &cmds {
+        assert_eq!(c.hand_model, hand_model::ALLEGRO);
+        assert_eq!(c.joint_count, 16);
+        assert_eq!(c.units, units::PHYSICAL);
+    }
+
+    // The Revo2 retargeting configuration names Revo2 joints: refused for this hand, by name.
+    let r = sandbox.run_teleop(&[
+        "reprocess",
+        input.to_str().unwrap(),
+        "--out",
+        sandbox.dir.path().join("refused.mcap").to_str().unwrap(),
+        "--retarget-config",
+        Sandbox::repo()
+            .join("config/retarget.toml")
+            .to_str()
+            .unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    assert!(
+        stderr.contains("retarget.toml:") && stderr.contains("has no joint"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_recording_without_a_profile_uses_the_shipped_profile_of_its_hand() {
+    let sandbox = Sandbox::new();
+    let out = sandbox.dir.path().join("out.mcap");
+    let r = sandbox.run_teleop(&[
+        "reprocess",
+        sample().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(r.status.success(), "{stderr}");
+    assert!(stderr.contains("hand profile `revo2` (shipped"), "{stderr}");
+    let cmds = commands(&out);
+    assert!(cmds.len() > 1000);
+    assert!(cmds
+        .iter()
+        .all(|c| c.hand_model == hand_model::REVO2 && c.joint_count == 6));
+}
