@@ -40,10 +40,13 @@ pub enum RecordingError {
         expected: String,
     },
     /// A topic of the message contract is recorded with the contract's schema name but another
-    /// schema text: the file was written by another version of the contract.
+    /// schema text, neither the current contract version's nor one this build converts: the
+    /// file was written by another version of the contract.
     #[error(
-        "{}: topic `{topic}` is recorded with another version of `{schema}`: {}",
+        "{}: topic `{topic}` is recorded with an unknown version of `{schema}` (this build reads \
+         contract version {} and converts version 1): {}",
         .path.display(),
+        teleop_msgs::CONTRACT_VERSION,
         first_difference(.expected, .found)
     )]
     WrongSchemaVersion {

@@ -3,6 +3,7 @@
 //! channels against the message contract.
 
 use std::{
+    borrow::Cow,
     fs::File,
     io::{BufReader, ErrorKind, Read, Seek, SeekFrom},
     path::{Path, PathBuf},
@@ -18,7 +19,7 @@ use mcap::{
 };
 use teleop_msgs::{Message, TopicVisitor, CDR_LE_HEADER};
 
-use crate::RecordingError;
+use crate::{legacy::Legacy, RecordingError};
 
 /// Schema encoding of every contract schema.
 pub(crate) const SCHEMA_ENCODING: &str = "ros2msg";
@@ -333,6 +334,9 @@ pub(crate) fn contract_type(topic: &str) -> Option<ContractType> {
 pub(crate) enum ChannelKind {
     /// A contract topic: CDR little-endian header, then exactly `size` bytes.
     Contract { size: usize },
+    /// A contract topic recorded with an earlier contract version's layout: CDR little-endian
+    /// header, then exactly that layout's size, converted to the current payload on read.
+    Converted(Legacy),
     /// A topic outside the contract: the 4-byte CDR header is removed when the channel is `cdr`,
     /// other encodings are passed through.
     Foreign { cdr: bool },
@@ -346,14 +350,17 @@ pub(crate) struct RecordedSchema<'a> {
 }
 
 /// Schema texts compared line by line, ignoring comments, blank lines and surrounding blanks.
-fn normalised(text: &str) -> Vec<&str> {
+pub(crate) fn normalised(text: &str) -> Vec<&str> {
     text.lines()
         .map(|line| line.split('#').next().unwrap_or("").trim())
         .filter(|line| !line.is_empty())
         .collect()
 }
 
-/// Checks a channel of `topic` against the contract.
+/// Checks a channel of `topic` against the contract: the current schema text gives
+/// [`ChannelKind::Contract`], the schema text of an earlier contract version that this build
+/// converts gives [`ChannelKind::Converted`], any other text is
+/// [`RecordingError::WrongSchemaVersion`].
 pub(crate) fn check_channel(
     path: &Path,
     topic: &str,
@@ -382,55 +389,70 @@ pub(crate) fn check_channel(
         });
     }
     let text = String::from_utf8_lossy(data);
-    if normalised(&text) != normalised(&contract.schema) {
-        return Err(RecordingError::WrongSchemaVersion {
-            path: path.to_path_buf(),
-            topic: topic.to_string(),
-            schema: name.to_string(),
-            expected: contract.schema,
-            found: text.into_owned(),
+    let found = normalised(&text);
+    if found == normalised(&contract.schema) {
+        return Ok(ChannelKind::Contract {
+            size: contract.size,
         });
     }
-    Ok(ChannelKind::Contract {
-        size: contract.size,
+    if let Some(legacy) = Legacy::recognise(contract.schema_name, &found) {
+        return Ok(ChannelKind::Converted(legacy));
+    }
+    Err(RecordingError::WrongSchemaVersion {
+        path: path.to_path_buf(),
+        topic: topic.to_string(),
+        schema: name.to_string(),
+        expected: contract.schema,
+        found: text.into_owned(),
     })
 }
 
-/// The payload of a message: without its CDR header, checked against the contract.
+/// The payload of a message: without its CDR header, checked against the contract, and
+/// converted to the current contract when recorded with an earlier one.
 pub(crate) fn payload<'a>(
     path: &Path,
     topic: &str,
     kind: ChannelKind,
     data: &'a [u8],
-) -> Result<&'a [u8], RecordingError> {
+) -> Result<Cow<'a, [u8]>, RecordingError> {
     let bad = |detail: String| RecordingError::BadMessage {
         path: path.to_path_buf(),
         topic: topic.to_string(),
         detail,
     };
-    match kind {
-        ChannelKind::Contract { size } => {
-            let Some(body) = data.strip_prefix(&CDR_LE_HEADER[..]) else {
-                return Err(bad(format!(
-                    "the message does not start with the CDR little-endian header {:02x?}",
-                    CDR_LE_HEADER
-                )));
+    // `version`: the earlier contract version the channel was recorded with, if any.
+    let contract_body = |size: usize, version: Option<u32>| {
+        let Some(body) = data.strip_prefix(&CDR_LE_HEADER[..]) else {
+            return Err(bad(format!(
+                "the message does not start with the CDR little-endian header {:02x?}",
+                CDR_LE_HEADER
+            )));
+        };
+        if body.len() != size {
+            let whose = match version {
+                Some(v) => format!("the type of contract version {v}"),
+                None => "the contract's type".to_string(),
             };
-            if body.len() != size {
-                return Err(bad(format!(
-                    "the payload has {} bytes, the contract's type has {size}",
-                    body.len()
-                )));
-            }
-            Ok(body)
+            return Err(bad(format!(
+                "the payload has {} bytes, {whose} has {size}",
+                body.len()
+            )));
+        }
+        Ok(body)
+    };
+    match kind {
+        ChannelKind::Contract { size } => contract_body(size, None).map(Cow::Borrowed),
+        ChannelKind::Converted(legacy) => {
+            let body = contract_body(legacy.size(), Some(legacy.version()))?;
+            Ok(Cow::Owned(legacy.convert(body)))
         }
         ChannelKind::Foreign { cdr: true } => match data.get(4..) {
-            Some(body) => Ok(body),
+            Some(body) => Ok(Cow::Borrowed(body)),
             None => Err(bad(format!(
                 "a CDR message of {} bytes has no room for the 4-byte CDR header",
                 data.len()
             ))),
         },
-        ChannelKind::Foreign { cdr: false } => Ok(data),
+        ChannelKind::Foreign { cdr: false } => Ok(Cow::Borrowed(data)),
     }
 }

@@ -17,6 +17,13 @@
 //!   checked against the message contract.
 //! - [`repair`] copies what a killed recorder left into a finished file.
 //!
+//! Contract versions: every file starts with a [`CONTRACT_METADATA`] record naming the message
+//! contract version it was written with, and each topic's schema text fixes its layout. Readers
+//! accept the current schema texts and those of earlier versions that [`legacy`] converts
+//! (contract version 1's `HandState` and `Tactile`, e.g. `recordings/grasp.sample.mcap`): such
+//! messages are read as the current payloads. Any other schema text of a contract topic is
+//! refused as [`RecordingError::WrongSchemaVersion`], naming the file, topic and schema.
+//!
 //! ```
 //! use std::collections::BTreeMap;
 //! use teleop_msgs::GloveState;
@@ -54,6 +61,7 @@
 
 mod error;
 mod file;
+pub mod legacy;
 mod read;
 mod repair;
 mod write;
@@ -63,5 +71,5 @@ pub use read::{info, read_messages, Filter, Messages, OwnedMessage, RecordingInf
 pub use repair::{repair, RepairReport};
 pub use write::{
     part_path, RecordedMessage, Recorder, RecordingSummary, TopicCount, TopicId, WriterOptions,
-    DROPS_METADATA,
+    CONTRACT_METADATA, DROPS_METADATA,
 };

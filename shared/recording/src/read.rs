@@ -116,7 +116,8 @@ pub struct OwnedMessage {
     /// The sample's sequence number (low 32 bits).
     pub sequence: u32,
     /// The payload: for `cdr` channels without the 4-byte CDR header (for contract topics,
-    /// exactly the `repr(C)` bytes of the type); other encodings as recorded.
+    /// exactly the `repr(C)` bytes of the current contract's type, converted when the file was
+    /// recorded with an earlier contract version); other encodings as recorded.
     pub payload: Vec<u8>,
 }
 
@@ -431,11 +432,14 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
 /// first message.
 ///
 /// Channels of contract topics are checked against the contract: a different schema name or
-/// encoding is [`RecordingError::UnknownSchema`], a different schema text
-/// [`RecordingError::WrongSchemaVersion`]; each message must carry the CDR little-endian
-/// header and the type's exact size. For finished files the channels selected by the filter
-/// are checked before this returns. Topics outside the contract are yielded as recorded (CDR
-/// header removed for `cdr` channels): callers decide. The iterator ends after its first error.
+/// encoding is [`RecordingError::UnknownSchema`]; the schema text of an earlier contract
+/// version that this build converts (version 1's `HandState` and `Tactile`) is read and each
+/// message converted to the current payload; any other schema text is
+/// [`RecordingError::WrongSchemaVersion`]. Each message must carry the CDR little-endian
+/// header and the exact size of its recorded type. For finished files the channels selected by
+/// the filter are checked before this returns. Topics outside the contract are yielded as
+/// recorded (CDR header removed for `cdr` channels): callers decide. The iterator ends after
+/// its first error.
 pub fn read_messages(path: &Path, filter: &Filter) -> Result<Messages, RecordingError> {
     if let (Some(start), Some(end)) = (filter.start, filter.end) {
         if end < start {
@@ -477,7 +481,7 @@ impl Selected {
             log_time_ns: header.log_time,
             publish_time_ns: header.publish_time,
             sequence: header.sequence,
-            payload: body.to_vec(),
+            payload: body.into_owned(),
         })
     }
 }

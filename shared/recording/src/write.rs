@@ -16,13 +16,19 @@ use teleop_msgs::{Message, CDR_LE_HEADER};
 
 use crate::{
     file::{
-        check_channel, ChannelKind, RecordedSchema, MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING,
+        check_channel, contract_type, ChannelKind, RecordedSchema, MESSAGE_ENCODING, PROFILE,
+        SCHEMA_ENCODING,
     },
     RecordingError,
 };
 
 /// Name of the metadata record with the per-topic drop counts, written when a file is finished.
 pub const DROPS_METADATA: &str = "drops";
+
+/// Name of the metadata record that starts every file: `version` = the message contract
+/// version ([`teleop_msgs::CONTRACT_VERSION`]) of the recorder that wrote it. Files of contract
+/// version 1 have none. Readers go by each topic's schema text, which fixes its layout.
+pub const CONTRACT_METADATA: &str = "contract";
 
 /// One message to record: where it came from and when.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -231,21 +237,34 @@ pub fn part_path(base: &Path, part: u32) -> PathBuf {
 
 impl Recorder {
     /// Creates the file (and its parent folder; an existing file is not overwritten) and writes
-    /// `metadata` records at its start. The same records start every file after a rotation.
-    /// Typical names: `launch` (`file`, `text`), `devices`, `calibration`, `software`
-    /// (`version`).
+    /// the [`CONTRACT_METADATA`] record, then `metadata` records, at its start (a `contract`
+    /// record in `metadata`, e.g. copied from another recording, is replaced). The same records
+    /// start every file after a rotation. Typical names: `launch` (`file`, `text`), `devices`,
+    /// `calibration`, `software` (`version`).
     pub fn create(
         path: &Path,
         options: WriterOptions,
         metadata: &[(String, BTreeMap<String, String>)],
     ) -> Result<Self, RecordingError> {
-        let (writer, size_probe) = start_file(path, &options, metadata, true)?;
+        let contract = BTreeMap::from([(
+            "version".to_string(),
+            teleop_msgs::CONTRACT_VERSION.to_string(),
+        )]);
+        let metadata: Vec<_> = std::iter::once((CONTRACT_METADATA.to_string(), contract))
+            .chain(
+                metadata
+                    .iter()
+                    .filter(|(name, _)| name != CONTRACT_METADATA)
+                    .cloned(),
+            )
+            .collect();
+        let (writer, size_probe) = start_file(path, &options, &metadata, true)?;
         Ok(Self {
             base: path.to_path_buf(),
             current: path.to_path_buf(),
             part: 0,
             options,
-            metadata: metadata.to_vec(),
+            metadata,
             writer,
             size_probe,
             file_bytes: 0,
@@ -302,6 +321,16 @@ impl Recorder {
         let size = match kind {
             ChannelKind::Contract { size } => Some(size),
             ChannelKind::Foreign { .. } => None,
+            // Earlier contract versions are read, never written.
+            ChannelKind::Converted(_) => {
+                return Err(RecordingError::WrongSchemaVersion {
+                    path: self.current.clone(),
+                    topic: topic.to_string(),
+                    schema: schema_name.to_string(),
+                    expected: contract_type(topic).map(|c| c.schema).unwrap_or_default(),
+                    found: schema_text.to_string(),
+                })
+            }
         };
         let channel = register(
             &mut self.writer,
@@ -437,6 +466,12 @@ impl Recorder {
         name: &str,
         fields: BTreeMap<String, String>,
     ) -> Result<(), RecordingError> {
+        if name == CONTRACT_METADATA {
+            return Err(RecordingError::invalid_use(
+                &self.current,
+                format!("the `{CONTRACT_METADATA}` record is written by the recorder itself"),
+            ));
+        }
         self.writer
             .write_metadata(&Metadata {
                 name: name.to_string(),

@@ -113,7 +113,7 @@ pub fn value(bytes: &[u8], leaf: &Leaf) -> Value {
 
 /// Writes a distinctive, finite value into every leaf: no two leaves (and no two seeds) share
 /// a value where the type has room, floats are exact in binary, signed fields get negatives.
-fn fill(bytes: &mut [u8], leaves: &[Leaf], seed: u64) {
+pub fn fill(bytes: &mut [u8], leaves: &[Leaf], seed: u64) {
     for (i, leaf) in leaves.iter().enumerate() {
         let n = (i as u64 + 1) * 7 + seed * 1009;
         let b = &mut bytes[leaf.offset..];
