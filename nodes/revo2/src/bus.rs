@@ -4,9 +4,7 @@
 
 use ethercrab::MainDevice;
 use teleop_ecat_master::Found;
-pub use teleop_ecat_master::{
-    connector, Bus, CurrentBus, OpGroup, PreOpGroup, MAX_PDI, MAX_SUBDEVICES,
-};
+pub use teleop_ecat_master::{connector, Bus, OpGroup, PreOpGroup};
 use teleop_revo2_protocol::{
     obj, UnitMode, JOINT_ONLY_TX_ASSIGNMENT, PRODUCT_CODE, REVISION, VENDOR_ID,
 };

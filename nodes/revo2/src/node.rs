@@ -124,7 +124,6 @@ impl Host<Revo2> for Ports {
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Fresh => {}
             Event::Stale => self.health.count_timeout(),
             Event::Clamped(n) => self.health.count_clamps(u64::from(n)),
             Event::Recovered | Event::Lost => self.health.count_error(),

@@ -43,8 +43,6 @@ pub struct Counters {
 /// What the master tells its host about the cycle, to count (it logs them itself).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Event {
-    /// Commands are fresh again: the device follows them.
-    Fresh,
     /// The command went stale: the device holds.
     Stale,
     /// A fresh command was packed with this many values clamped.
@@ -253,7 +251,6 @@ fn cycle<D: Driver, H: Host<D>>(
                     Some(clamps) => {
                         if stale {
                             tracing::info!("hand commands fresh: following them");
-                            host.event(Event::Fresh);
                         }
                         stale = false;
                         holding = false;

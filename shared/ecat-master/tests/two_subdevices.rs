@@ -436,7 +436,7 @@ impl Host<Gripper> for TestHost {
         match event {
             Event::Stale => self.seen().stale += 1,
             Event::Lost => self.seen().lost += 1,
-            Event::Fresh | Event::Clamped(_) | Event::Recovered => {}
+            Event::Clamped(_) | Event::Recovered => {}
         }
     }
 
