@@ -387,6 +387,7 @@ struct Seen {
     connected: u32,
     link_down: u32,
     stale: u32,
+    recovered: u32,
     lost: u32,
     last: Option<(PalmInputs, Exchange)>,
 }
@@ -436,7 +437,8 @@ impl Host<Gripper> for TestHost {
         match event {
             Event::Stale => self.seen().stale += 1,
             Event::Lost => self.seen().lost += 1,
-            Event::Clamped(_) | Event::Recovered => {}
+            Event::Recovered => self.seen().recovered += 1,
+            Event::Clamped(_) => {}
         }
     }
 
@@ -460,7 +462,7 @@ fn wait(host: &TestHost, what: &str, ok: impl Fn(&Seen) -> bool) {
 }
 
 #[test]
-fn commands_are_followed_a_stale_one_holds_and_a_lost_link_is_brought_up_again() {
+fn commands_followed_stale_holds_al_error_recovered_lost_link_brought_up_again() {
     let rig = Rig::new(PALM);
     let (bridge, palm) = (rig.bridge.clone(), rig.palm.clone());
     let host = TestHost::default();
@@ -503,6 +505,26 @@ fn commands_are_followed_a_stale_one_holds_and_a_lost_link_is_brought_up_again()
     });
     assert_eq!(host.seen().stale, 1);
     assert_eq!(lock(&palm).app().outputs, Some((1000, HOLD)));
+
+    // The palm's watchdog drops it to SAFE-OP: acknowledged, OP again, and the command followed.
+    host.command(Some(300));
+    wait(&host, "following again", |s| {
+        s.last.is_some_and(|(i, e)| i.position == 300 && !e.holding)
+    });
+    lock(&palm).trip_watchdog();
+    wait(&host, "the palm recovered", |s| {
+        s.recovered == 1
+            && s.last
+                .is_some_and(|(i, e)| i.position == 300 && e.counters.recoveries == 1)
+    });
+    assert_eq!(lock(&palm).al_state(), (AlState::Op, false, 0));
+    // A wrong working counter (the palm miscounts) is counted and its inputs ignored.
+    let before = host.seen().last.unwrap().1.counters.wkc_errors;
+    lock(&palm).faults().wrong_wkc_probability = 0.3;
+    wait(&host, "wrong working counters counted", |s| {
+        s.last.is_some_and(|(_, e)| e.counters.wkc_errors > before)
+    });
+    lock(&palm).faults().wrong_wkc_probability = 0.0;
 
     // Fresh again, then the palm stops answering (every frame is lost behind the bridge): the
     // link is reported down, and the bus brought up again once the palm is back.
