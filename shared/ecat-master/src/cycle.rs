@@ -13,7 +13,7 @@ use ethercrab::MainDevice;
 use futures_lite::future::block_on;
 use teleop_runtime::now_ns;
 
-use crate::bus::{expected_wkc, recover_op, scan, Bus, OpGroup, PreOpGroup};
+use crate::bus::{expected_wkc, recover_op, scan, Bus, Found, OpGroup, PreOpGroup};
 use crate::driver::{Driver, Image};
 
 /// Cycles the device gets its hold outputs for before the master leaves OP on stop.
@@ -95,7 +95,7 @@ pub trait Host<D: Driver> {
 /// Finds the device on the bus (identity check by `identify`) and leaves it in PRE-OP.
 pub async fn discover(
     md: &MainDevice<'static>,
-    identify: impl FnOnce(&[crate::Found]) -> anyhow::Result<()>,
+    identify: impl FnOnce(&[Found]) -> anyhow::Result<()>,
 ) -> anyhow::Result<PreOpGroup> {
     let (group, found) = scan(md).await?;
     identify(&found)?;

@@ -120,8 +120,12 @@ pub trait Driver {
     }
 
     /// One reading of the side channel (only called when [`poll_period`](Self::poll_period) is
-    /// `Some`). May block on the mailbox; a panic inside ethercrab is caught and logged.
-    fn poll(md: &MainDevice<'static>, group: &OpGroup) -> anyhow::Result<Self::Polled>;
+    /// `Some`). May block on the mailbox; a panic inside ethercrab is caught and logged. A
+    /// driver without a side channel keeps the default, which says so.
+    fn poll(md: &MainDevice<'static>, group: &OpGroup) -> anyhow::Result<Self::Polled> {
+        let _ = (md, group);
+        anyhow::bail!("this driver has no side channel")
+    }
 }
 
 #[cfg(test)]
