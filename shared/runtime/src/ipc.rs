@@ -3,6 +3,10 @@
 use iceoryx2::config::Config;
 use iceoryx2::node::{Node, NodeBuilder};
 use iceoryx2::prelude::{FileName, NodeName, Path, SemanticString, ServiceName};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 use teleop_msgs::{Message, SERVICE_PREFIX};
 
 use crate::ports::{Publisher, Subscriber};
@@ -41,6 +45,21 @@ pub enum RuntimeError {
         name: String,
         /// iceoryx2's error.
         detail: String,
+    },
+    /// A topic's service exists with another payload type: a process built with another
+    /// version of the message contract (`teleop_msgs::CONTRACT_VERSION`) created it.
+    #[error(
+        "contract version mismatch on service {service}: this process uses `{ours}`, the \
+         service was created with `{theirs}`; build every pipeline process from the same \
+         message contract"
+    )]
+    ContractMismatch {
+        /// The iceoryx2 service name, e.g. `teleop/hand/state`.
+        service: String,
+        /// This process's payload type name and size.
+        ours: String,
+        /// The service's payload type name and size (`unknown` when it could not be read).
+        theirs: String,
     },
 }
 
@@ -262,7 +281,7 @@ impl NodeRuntime {
             .max_subscribers(MAX_SUBSCRIBERS)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| RuntimeError::ipc("opening publish-subscribe service", M::TOPIC, e))
+            .map_err(|e| pubsub_error::<M>(&self.node, service, M::TOPIC, e))
     }
 
     fn event(
@@ -289,4 +308,46 @@ pub(crate) fn service_name<M: Message>() -> Result<ServiceName, RuntimeError> {
         value: name.clone(),
         reason: format!("{e:?}"),
     })
+}
+
+/// Why `M`'s publish-subscribe service could not be opened: a contract version mismatch when it
+/// exists with another payload type (iceoryx2 compares type names, which carry the contract
+/// version, and sizes), else iceoryx2's error.
+fn pubsub_error<M: Message>(
+    node: &Node<Service>,
+    service: &ServiceName,
+    topic: &str,
+    error: PublishSubscribeOpenOrCreateError,
+) -> RuntimeError {
+    if !matches!(
+        error,
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::IncompatibleTypes
+        )
+    ) {
+        return RuntimeError::ipc("opening publish-subscribe service", topic, error);
+    }
+    let theirs = <Service as iceoryx2::service::Service>::details(
+        service,
+        node.config(),
+        iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+    )
+    .ok()
+    .flatten()
+    .and_then(|details| match details.static_details.messaging_pattern() {
+        StaticPattern::PublishSubscribe(config) => {
+            let payload = config.message_type_details().payload;
+            Some(format!(
+                "{} ({} bytes)",
+                payload.type_name(),
+                payload.size()
+            ))
+        }
+        _ => None,
+    });
+    RuntimeError::ContractMismatch {
+        service: service.as_str().to_string(),
+        ours: format!("{} ({} bytes)", M::TYPE_NAME, core::mem::size_of::<M>()),
+        theirs: theirs.unwrap_or_else(|| "unknown".to_string()),
+    }
 }
