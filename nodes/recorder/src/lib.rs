@@ -4,10 +4,16 @@
 //! chunks closed at least every 100 ms). Used by the `teleop-recorder` process and by
 //! `teleop record`.
 //!
+//! Without namespaces it records the plain topics into channels of the same names. Given
+//! namespaces (`left`, `right`) it records each one's topics into channels named with their
+//! namespace (`left/hand/command`); device identities go into `<namespace>/device.<kind>`
+//! metadata records.
+//!
 //! The recorder never slows a producer down: iceoryx2 overwrites the oldest queued sample when a
 //! subscriber falls behind; those losses show as gaps in the samples' sequence numbers, which are
 //! counted per topic, logged while recording, written into the file and printed at the end.
 
+use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
@@ -19,7 +25,8 @@ use teleop_recording::{
     RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
 };
 use teleop_runtime::{
-    now_ns, EventLoop, Flow, Input, NodeRuntime, Service, StopReason, Subscriber, Wake,
+    now_ns, qualified, EventLoop, Flow, Input, Namespace, NodeRuntime, Service, StopReason,
+    Subscriber, Wake,
 };
 
 /// What to record and where.
@@ -27,8 +34,10 @@ use teleop_runtime::{
 pub struct RecordOptions {
     /// The file (rotated parts get `_1`, `_2`, ... before `.mcap`).
     pub out: PathBuf,
-    /// Topics to record (all when `None`).
+    /// Topics to record (all when `None`), by their plain names (`hand/command`).
     pub topics: Option<Vec<String>>,
+    /// Namespaces whose topics are recorded; empty: the topics without a namespace.
+    pub namespaces: Vec<Namespace>,
     /// Chunking and rotation.
     pub writer: WriterOptions,
     /// Metadata records written at the start of every file.
@@ -92,9 +101,10 @@ pub fn file_metadata(path: &Path) -> Option<BTreeMap<String, String>> {
     ]))
 }
 
-/// One recorded topic.
+/// One recorded topic of one namespace.
 trait Tap {
-    fn topic(&self) -> &'static str;
+    /// The channel: the topic's qualified name.
+    fn channel(&self) -> &str;
     fn listener(&self) -> &Listener<Service>;
     /// Writes every queued sample; returns how many.
     fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>>;
@@ -104,11 +114,12 @@ trait Tap {
 struct TopicTap<M: Message> {
     sub: Subscriber<M>,
     id: TopicId,
+    channel: String,
 }
 
 impl<M: Message> Tap for TopicTap<M> {
-    fn topic(&self) -> &'static str {
-        M::TOPIC
+    fn channel(&self) -> &str {
+        &self.channel
     }
     fn listener(&self) -> &Listener<Service> {
         self.sub.listener()
@@ -117,7 +128,11 @@ impl<M: Message> Tap for TopicTap<M> {
         let mut result = Ok(());
         let n = self.sub.drain(|m| {
             if result.is_ok() {
-                result = rec.write(self.id, &RecordedMessage::from_sample(m, now_ns()));
+                let msg = RecordedMessage {
+                    topic: &self.channel,
+                    ..RecordedMessage::from_sample(m, now_ns())
+                };
+                result = rec.write(self.id, &msg);
             }
         });
         result.map(|()| n).map_err(Box::new)
@@ -130,15 +145,18 @@ impl<M: Message> Tap for TopicTap<M> {
 struct MakeTap<'a> {
     runtime: &'a NodeRuntime,
     rec: &'a mut Recorder,
+    namespace: Option<&'a Namespace>,
 }
 
 impl TopicVisitor for MakeTap<'_> {
     type Output = anyhow::Result<Box<dyn Tap>>;
     fn visit<M: Message>(self) -> Self::Output {
-        let id = self.rec.add_message_type::<M>()?;
+        let channel = qualified(self.namespace, M::TOPIC);
+        let id = self.rec.add_topic(&channel, M::SCHEMA_NAME, &M::schema())?;
         Ok(Box::new(TopicTap::<M> {
-            sub: self.runtime.subscriber()?,
+            sub: self.runtime.subscriber_in(self.namespace)?,
             id,
+            channel,
         }))
     }
 }
@@ -151,48 +169,49 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         Some(list) => list.iter().map(String::as_str).collect(),
         None => topics().iter().map(|t| t.name).collect(),
     };
+    let namespaces: Vec<Option<&Namespace>> = if options.namespaces.is_empty() {
+        vec![None]
+    } else {
+        options.namespaces.iter().map(Some).collect()
+    };
     let mut taps: Vec<Box<dyn Tap>> = Vec::new();
-    for name in names {
-        let tap = visit_topic(
-            name,
-            MakeTap {
-                runtime,
-                rec: &mut rec,
-            },
-        )
-        .ok_or_else(|| {
-            let all: Vec<_> = topics().iter().map(|t| t.name).collect();
-            anyhow::anyhow!("unknown topic {name:?}; topics are: {}", all.join(", "))
-        })??;
-        taps.push(tap);
+    for &namespace in &namespaces {
+        for &name in &names {
+            let tap = visit_topic(
+                name,
+                MakeTap {
+                    runtime,
+                    rec: &mut rec,
+                    namespace,
+                },
+            )
+            .ok_or_else(|| {
+                let all: Vec<_> = topics().iter().map(|t| t.name).collect();
+                anyhow::anyhow!("unknown topic {name:?}; topics are: {}", all.join(", "))
+            })??;
+            taps.push(tap);
+        }
     }
-    // Device identities also go into metadata records ("device.glove", "device.revo2").
-    let devices = runtime.subscriber::<DeviceInfo>()?;
-    let mut known: Vec<DeviceInfo> = Vec::new();
+    // Device identities also go into metadata records ("device.glove", "device.revo2"; in a
+    // namespace "left/device.glove").
+    let mut devices = Vec::new();
+    for &namespace in &namespaces {
+        devices.push(Devices {
+            sub: runtime.subscriber_in::<DeviceInfo>(namespace)?,
+            prefix: namespace.map_or(String::new(), |ns| format!("{ns}/")),
+            known: RefCell::default(),
+        });
+    }
     tracing::info!(file = %options.out.display(), topics = taps.len(), "recording");
     let start = std::time::Instant::now();
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
     let mut failure: Option<anyhow::Error> = None;
     let mut inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
-    inputs.push(Input::new(devices.listener()));
-    let device_input = inputs.len() - 1;
+    inputs.extend(devices.iter().map(|d| Input::new(d.sub.listener())));
     let stop = EventLoop::new(Duration::from_millis(20)).run(&inputs, |wake| {
         let result = match wake {
-            Wake::Input(i) if i == device_input => {
-                let mut result = Ok(());
-                devices.drain(|d| {
-                    if result.is_ok() && !known.iter().any(|k| same_identity(k, d)) {
-                        known.retain(|k| !same_device(k, d));
-                        known.push(*d);
-                        result = rec.add_metadata(
-                            &format!("device.{}", kind_name(d.kind)),
-                            device_fields(d),
-                        );
-                    }
-                });
-                result.map_err(Box::new)
-            }
+            Wake::Input(i) if i >= taps.len() => devices[i - taps.len()].drain(&mut rec),
             Wake::Input(i) => taps[i].drain(&mut rec).map(|_| ()),
             Wake::Timeout(_) | Wake::Tick => rec.flush_if_due(now_ns()).map_err(Box::new),
         };
@@ -206,7 +225,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
                 let now = tap.dropped();
                 if now > *seen {
                     tracing::warn!(
-                        topic = tap.topic(),
+                        topic = tap.channel(),
                         lost = now - *seen,
                         total = now,
                         "samples lost before the recorder got them"
@@ -224,7 +243,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     // What is still queued belongs in the file too.
     for tap in &taps {
         tap.drain(&mut rec)?;
-        rec.note_drops(tap.topic(), tap.dropped());
+        rec.note_drops(tap.channel(), tap.dropped());
     }
     let summary = rec.finish()?;
     if let Some(e) = failure {
@@ -232,6 +251,34 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     }
     tracing::info!(reason = ?stop_reason(stop), messages = summary.messages, "recording finished");
     Ok(summary)
+}
+
+/// The device identities of one namespace, each written once as metadata.
+struct Devices {
+    sub: Subscriber<DeviceInfo>,
+    /// Before the record name: "" or "<namespace>/".
+    prefix: String,
+    /// Borrowed mutably while the event loop holds the subscriber's listener.
+    known: RefCell<Vec<DeviceInfo>>,
+}
+
+impl Devices {
+    fn drain(&self, rec: &mut Recorder) -> Result<(), Box<RecordingError>> {
+        let mut result = Ok(());
+        let mut known = self.known.borrow_mut();
+        let prefix = &self.prefix;
+        self.sub.drain(|d| {
+            if result.is_ok() && !known.iter().any(|k| same_identity(k, d)) {
+                known.retain(|k| !same_device(k, d));
+                known.push(*d);
+                result = rec.add_metadata(
+                    &format!("{prefix}device.{}", kind_name(d.kind)),
+                    device_fields(d),
+                );
+            }
+        });
+        result.map_err(Box::new)
+    }
 }
 
 fn same_device(a: &DeviceInfo, b: &DeviceInfo) -> bool {
@@ -288,12 +335,12 @@ pub fn report(summary: &RecordingSummary) -> String {
         out.push_str(&format!("recorded {}\n", f.display()));
     }
     out.push_str(&format!(
-        "{:<22} {:>9} {:>7}\n",
+        "{:<28} {:>9} {:>7}\n",
         "TOPIC", "MESSAGES", "DROPS"
     ));
     for t in &summary.topics {
         out.push_str(&format!(
-            "{:<22} {:>9} {:>7}\n",
+            "{:<28} {:>9} {:>7}\n",
             t.topic, t.messages, t.drops
         ));
     }

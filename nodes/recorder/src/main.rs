@@ -9,7 +9,7 @@ use teleop_recorder::{
     default_path, file_metadata, record, report, standard_metadata, RecordOptions,
 };
 use teleop_recording::WriterOptions;
-use teleop_runtime::{init_logging, IpcSettings, NodeRuntime};
+use teleop_runtime::{init_logging, IpcSettings, Namespace, NodeRuntime};
 
 #[derive(Parser)]
 #[command(version, about = "Record the pipeline's topics into MCAP")]
@@ -23,6 +23,10 @@ struct Args {
     /// Record only these topics.
     #[arg(long, num_args = 1..)]
     topics: Option<Vec<String>>,
+    /// Record the topics of this namespace (repeatable) into channels named `NS/<topic>`;
+    /// without it, the topics without a namespace.
+    #[arg(long = "namespace", value_name = "NS")]
+    namespaces: Vec<Namespace>,
     /// Start a new file after this many megabytes.
     #[arg(long)]
     rotate_mb: Option<u64>,
@@ -65,6 +69,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
     let options = RecordOptions {
         out: args.out.clone().unwrap_or_else(|| default_path(&args.dir)),
         topics: args.topics.clone(),
+        namespaces: args.namespaces.clone(),
         writer: WriterOptions {
             rotate_bytes: args.rotate_mb.map(|mb| mb * 1_000_000),
             rotate_after: args.rotate_s.map(std::time::Duration::from_secs),

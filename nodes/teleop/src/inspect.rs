@@ -1,4 +1,9 @@
 //! `teleop nodes | topics | echo | stats | estop`: look into and steer a running pipeline.
+//!
+//! Each takes `--namespace NS` (repeatable) to look at some sides only; without it `topics`,
+//! `stats` and `estop` cover the topics without a namespace and every namespace in use
+//! ([`discover_namespaces`]), and `nodes` lists every node. `echo` reads one topic, of the
+//! namespace given or named in the topic (`left/hand/command`).
 
 use std::cell::RefCell;
 use std::process::ExitCode;
@@ -9,13 +14,30 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
 use teleop_msgs::{visit_topic, EStop, Message, TopicVisitor};
 use teleop_runtime::{
-    now_ns, EventLoop, Flow, Input, IpcSettings, NodeRuntime, Service, StopReason, Subscriber, Wake,
+    discover_namespaces, now_ns, qualified, split, EventLoop, Flow, Input, IpcSettings, Namespace,
+    NodeRuntime, Service, StopReason, Subscriber, Wake,
 };
 
 /// Name of the short-lived iceoryx2 node the inspection commands create.
 const CLI_NODE: &str = "teleop-cli";
 
-pub fn nodes(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
+/// The namespaces a command covers: those given, or the topics without a namespace (`None`)
+/// and every namespace in use.
+fn covered(ipc: &IpcSettings, given: &[Namespace]) -> anyhow::Result<Vec<Option<Namespace>>> {
+    if !given.is_empty() {
+        return Ok(given.iter().cloned().map(Some).collect());
+    }
+    let mut all = vec![None];
+    all.extend(discover_namespaces(ipc)?.into_iter().map(Some));
+    Ok(all)
+}
+
+/// A namespace for people: its name, or `(none)` for the topics without a namespace.
+fn shown(namespace: Option<&Namespace>) -> &str {
+    namespace.map_or("(none)", Namespace::as_str)
+}
+
+pub fn nodes(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
     let config = ipc.config()?;
     let mut rows = Vec::new();
     Node::<Service>::list(&config, |state| {
@@ -39,6 +61,13 @@ pub fn nodes(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
         CallbackProgression::Continue
     })
     .map_err(|e| anyhow::anyhow!("cannot list iceoryx2 nodes: {e:?}"))?;
+    if !namespaces.is_empty() {
+        rows.retain(|(name, ..)| {
+            namespaces
+                .iter()
+                .any(|ns| name.starts_with(&format!("{ns}/")))
+        });
+    }
     rows.sort();
     println!("{:<20} {:<8} {:>8}  EXECUTABLE", "NODE", "STATE", "PID");
     for (name, status, pid, exe) in &rows {
@@ -50,28 +79,34 @@ pub fn nodes(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn topics(ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
+pub fn topics(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
-    struct Ports<'a>(&'a NodeRuntime);
+    struct Ports<'a>(&'a NodeRuntime, Option<&'a Namespace>);
     impl TopicVisitor for Ports<'_> {
         type Output = Option<(usize, usize)>;
         fn visit<M: Message>(self) -> Self::Output {
-            self.0.topic_ports::<M>()
+            self.0.topic_ports_in::<M>(self.1)
         }
     }
     println!(
-        "{:<22} {:<36} {:>6} {:>5} {:>5}",
+        "{:<28} {:<36} {:>6} {:>5} {:>5}",
         "TOPIC", "PAYLOAD", "BYTES", "PUBS", "SUBS"
     );
-    for topic in teleop_msgs::topics() {
-        let ports = visit_topic(topic.name, Ports(&runtime)).flatten();
-        let (pubs, subs) = ports.map_or(("-".into(), "-".into()), |(p, s)| {
-            (p.to_string(), s.to_string())
-        });
-        println!(
-            "{:<22} {:<36} {:>6} {:>5} {:>5}",
-            topic.name, topic.schema_name, topic.size, pubs, subs
-        );
+    for ns in covered(ipc, namespaces)? {
+        for topic in teleop_msgs::topics() {
+            let ports = visit_topic(topic.name, Ports(&runtime, ns.as_ref())).flatten();
+            let (pubs, subs) = ports.map_or(("-".into(), "-".into()), |(p, s)| {
+                (p.to_string(), s.to_string())
+            });
+            println!(
+                "{:<28} {:<36} {:>6} {:>5} {:>5}",
+                qualified(ns.as_ref(), topic.name),
+                topic.schema_name,
+                topic.size,
+                pubs,
+                subs
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -81,16 +116,30 @@ fn unknown_topic(topic: &str) -> anyhow::Error {
     anyhow::anyhow!("unknown topic {topic:?}; topics are: {}", names.join(", "))
 }
 
-pub fn echo(ipc: &IpcSettings, topic: &str, count: Option<u64>) -> anyhow::Result<ExitCode> {
+pub fn echo(
+    ipc: &IpcSettings,
+    topic: &str,
+    namespace: Option<&Namespace>,
+    count: Option<u64>,
+) -> anyhow::Result<ExitCode> {
+    let (named, info) = split(topic).ok_or_else(|| unknown_topic(topic))?;
+    let namespace = match (named, namespace) {
+        (Some(a), Some(b)) if a != *b => {
+            anyhow::bail!("topic {topic:?} is in namespace \"{a}\", but --namespace says \"{b}\"")
+        }
+        (Some(a), _) => Some(a),
+        (None, b) => b.cloned(),
+    };
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     struct Echo<'a> {
         runtime: &'a NodeRuntime,
+        namespace: Option<&'a Namespace>,
         count: Option<u64>,
     }
     impl TopicVisitor for Echo<'_> {
         type Output = anyhow::Result<()>;
         fn visit<M: Message>(self) -> anyhow::Result<()> {
-            let sub = self.runtime.subscriber::<M>()?;
+            let sub = self.runtime.subscriber_in::<M>(self.namespace)?;
             let printed = core::cell::Cell::new(0u64);
             let limit = self.count.unwrap_or(u64::MAX);
             let print = |m: &M| {
@@ -116,9 +165,10 @@ pub fn echo(ipc: &IpcSettings, topic: &str, count: Option<u64>) -> anyhow::Resul
         }
     }
     visit_topic(
-        topic,
+        info.name,
         Echo {
             runtime: &runtime,
+            namespace: namespace.as_ref(),
             count,
         },
     )
@@ -135,6 +185,8 @@ trait Probe {
 
 struct TopicProbe<M: Message> {
     sub: Subscriber<M>,
+    /// The qualified topic name.
+    name: String,
     /// (stamp - origin, receive - stamp) in ns per sample.
     samples: RefCell<Vec<(u64, u64)>>,
     dropped_before: u64,
@@ -173,8 +225,8 @@ impl<M: Message> Probe for TopicProbe<M> {
             format!("{:>8.3} {:>8.3} {:>8.3}", at(0.5), at(0.99), at(1.0))
         };
         format!(
-            "{:<22} {:>8.1} {:>7} {:>6}  {}  {}",
-            M::TOPIC,
+            "{:<28} {:>8.1} {:>7} {:>6}  {}  {}",
+            self.name,
             rate,
             n,
             self.sub.dropped().saturating_sub(self.dropped_before),
@@ -184,18 +236,23 @@ impl<M: Message> Probe for TopicProbe<M> {
     }
 }
 
-pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
+pub fn stats(
+    ipc: &IpcSettings,
+    window: Duration,
+    namespaces: &[Namespace],
+) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
-    struct Make<'a>(&'a NodeRuntime);
+    struct Make<'a>(&'a NodeRuntime, Option<&'a Namespace>);
     impl TopicVisitor for Make<'_> {
         type Output = anyhow::Result<Box<dyn Probe>>;
         fn visit<M: Message>(self) -> Self::Output {
-            let sub = self.0.subscriber::<M>()?;
+            let sub = self.0.subscriber_in::<M>(self.1)?;
             // Skip the history sample: it may be old.
             sub.drain(|_| {});
             let dropped_before = sub.dropped();
             Ok(Box::new(TopicProbe {
                 sub,
+                name: qualified(self.1, M::TOPIC),
                 samples: RefCell::new(Vec::with_capacity(4096)),
                 dropped_before,
                 since_ns: now_ns(),
@@ -203,8 +260,13 @@ pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
         }
     }
     let mut probes = Vec::new();
-    for t in teleop_msgs::topics() {
-        probes.push(visit_topic(t.name, Make(&runtime)).ok_or_else(|| unknown_topic(t.name))??);
+    for ns in covered(ipc, namespaces)? {
+        for t in teleop_msgs::topics() {
+            probes.push(
+                visit_topic(t.name, Make(&runtime, ns.as_ref()))
+                    .ok_or_else(|| unknown_topic(t.name))??,
+            );
+        }
     }
     let inputs: Vec<Input> = probes.iter().map(|p| Input::new(p.listener())).collect();
     let start = Instant::now();
@@ -224,7 +286,7 @@ pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
         measured.as_secs_f64()
     );
     println!(
-        "{:<22} {:>8} {:>7} {:>6}  {:>8} {:>8} {:>8}  {:>8} {:>8} {:>8}",
+        "{:<28} {:>8} {:>7} {:>6}  {:>8} {:>8} {:>8}  {:>8} {:>8} {:>8}",
         "TOPIC",
         "RATE_HZ",
         "SAMPLES",
@@ -245,9 +307,19 @@ pub fn stats(ipc: &IpcSettings, window: Duration) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn estop(ipc: &IpcSettings, engage: bool) -> anyhow::Result<ExitCode> {
+/// Engages or releases the e-stop of the namespaces given, or else of the topics without a
+/// namespace and of every namespace in use: one operator's e-stop stops every side.
+pub fn estop(
+    ipc: &IpcSettings,
+    engage: bool,
+    namespaces: &[Namespace],
+) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
-    let mut publisher = runtime.publisher::<EStop>()?;
+    let covered = covered(ipc, namespaces)?;
+    let mut publishers = Vec::with_capacity(covered.len());
+    for ns in &covered {
+        publishers.push(runtime.publisher_in::<EStop>(ns.as_ref())?);
+    }
     let msg = EStop {
         engaged: u8::from(engage),
         ..Default::default()
@@ -256,16 +328,20 @@ pub fn estop(ipc: &IpcSettings, engage: bool) -> anyhow::Result<ExitCode> {
     // before this process (and with it the publisher's history) goes away. The force-feedback
     // node latches the state until the opposite command.
     for _ in 0..10 {
-        publisher.publish(&msg)?;
+        for publisher in &mut publishers {
+            publisher.publish(&msg)?;
+        }
         std::thread::sleep(Duration::from_millis(30));
     }
+    let sides: Vec<&str> = covered.iter().map(|ns| shown(ns.as_ref())).collect();
     println!(
-        "e-stop {}",
+        "e-stop {} (namespaces: {})",
         if engage {
             "ENGAGED: glove forces held at zero until `teleop estop --release`"
         } else {
             "released"
-        }
+        },
+        sides.join(", ")
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -1,6 +1,7 @@
 //! `teleop`: the one command users run. `teleop launch` starts the pipeline described in
 //! `launch.toml` as separate processes; `nodes`, `topics`, `echo`, `stats` and `estop` inspect and
-//! steer a running pipeline; `calibrate` records an operator calibration profile.
+//! steer a running pipeline (every side of it, or the namespaces given with `--namespace`);
+//! `calibrate` records an operator calibration profile.
 //!
 //! Owns the command line and the supervisor; it runs no control loop itself. Must not contain
 //! device protocols or control logic (those live in `shared/`).
@@ -17,7 +18,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
-use teleop_runtime::{init_logging, IpcSettings, ENV_IPC_PREFIX, ENV_IPC_ROOT};
+use teleop_runtime::{init_logging, IpcSettings, Namespace, ENV_IPC_PREFIX, ENV_IPC_ROOT};
 
 #[derive(Parser)]
 #[command(
@@ -50,9 +51,17 @@ enum Command {
         check: bool,
     },
     /// List the pipeline's processes (iceoryx2 nodes): name, alive or dead, pid.
-    Nodes,
+    Nodes {
+        /// Only this namespace (repeatable); without it, every namespace found.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
+    },
     /// List the topics with their payload, size, and publishers/subscribers.
-    Topics,
+    Topics {
+        /// Only this namespace (repeatable); without it, every namespace found.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
+    },
     /// Print decoded samples of a topic as they arrive.
     Echo {
         /// Topic name, e.g. `glove/state` (see `teleop topics`).
@@ -60,18 +69,28 @@ enum Command {
         /// Stop after this many samples.
         #[arg(long, short = 'n')]
         count: Option<u64>,
+        /// The topic's namespace (or name it in the topic: `left/hand/command`).
+        #[arg(long, value_name = "NS")]
+        namespace: Option<Namespace>,
     },
     /// Per-topic rate, drops and latency (from the sample headers) over a window.
     Stats {
         /// Measurement window in seconds.
         #[arg(long, default_value_t = 2.0)]
         seconds: f64,
+        /// Only this namespace (repeatable); without it, every namespace found.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
     },
-    /// Engage (or release) the emergency stop: all glove forces go to zero.
+    /// Engage (or release) the emergency stop: all glove forces go to zero, on every side.
     Estop {
         /// Release instead of engage.
         #[arg(long)]
         release: bool,
+        /// Only this namespace (repeatable); without it, the topics without a namespace and
+        /// every namespace found.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
     },
     /// Talk to the EH55BF1 glove directly (with the glove node stopped).
     Glove {
@@ -98,6 +117,10 @@ enum Command {
         /// Stop after this many seconds.
         #[arg(long)]
         duration: Option<f64>,
+        /// Record this namespace's topics into channels `NS/<topic>` (repeatable); without it,
+        /// the topics without a namespace.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
     },
     /// Republish a recording's samples on their topics with the recorded timing.
     Replay {
@@ -121,6 +144,13 @@ enum Command {
         /// Seconds from the start of the recording to end at.
         #[arg(long)]
         end: Option<f64>,
+        /// Replay only this namespace's channels (repeatable); without it, every channel.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
+        /// Publish a namespace's channels in another: `left=right`, `=left` (the channels
+        /// without a namespace into `left`), `left=` (into the topics without a namespace).
+        #[arg(long, value_name = "FROM=TO", value_parser = recordings::parse_remap)]
+        remap: Vec<recordings::Remap>,
     },
     /// Inspect or repair recordings.
     Recordings {
@@ -194,6 +224,7 @@ fn main() -> ExitCode {
     let ipc = IpcSettings {
         root: cli.ipc_root.clone().filter(|s| !s.is_empty()),
         prefix: cli.ipc_prefix.clone().filter(|s| !s.is_empty()),
+        namespace: None,
     };
     let result = match cli.command {
         Command::Launch {
@@ -201,17 +232,28 @@ fn main() -> ExitCode {
             duration,
             check,
         } => run_launch(&file, &ipc, duration, check),
-        Command::Nodes => inspect::nodes(&ipc),
-        Command::Topics => inspect::topics(&ipc),
-        Command::Echo { topic, count } => inspect::echo(&ipc, &topic, count),
-        Command::Stats { seconds } => inspect::stats(&ipc, secs(seconds)),
-        Command::Estop { release } => inspect::estop(&ipc, !release),
+        Command::Nodes { namespaces } => inspect::nodes(&ipc, &namespaces),
+        Command::Topics { namespaces } => inspect::topics(&ipc, &namespaces),
+        Command::Echo {
+            topic,
+            count,
+            namespace,
+        } => inspect::echo(&ipc, &topic, namespace.as_ref(), count),
+        Command::Stats {
+            seconds,
+            namespaces,
+        } => inspect::stats(&ipc, secs(seconds), &namespaces),
+        Command::Estop {
+            release,
+            namespaces,
+        } => inspect::estop(&ipc, !release, &namespaces),
         Command::Glove { target, command } => glove::run(&target, &command),
         Command::Record {
             out,
             topics,
             duration,
-        } => recordings::record_cmd(&ipc, out, topics, duration.map(secs)),
+            namespaces,
+        } => recordings::record_cmd(&ipc, out, topics, namespaces, duration.map(secs)),
         Command::Replay {
             file,
             speed,
@@ -220,6 +262,8 @@ fn main() -> ExitCode {
             topics,
             start,
             end,
+            namespaces,
+            remap,
         } => recordings::replay_cmd(
             &ipc,
             &file,
@@ -229,6 +273,8 @@ fn main() -> ExitCode {
                 topics,
                 start,
                 end,
+                namespaces,
+                remap,
             },
         ),
         Command::Recordings { command } => match command {

@@ -17,18 +17,20 @@ use teleop_recording::{
     info as recording_info, read_messages, repair as repair_file, Filter, OwnedMessage,
     RecordedMessage, Recorder, WriterOptions,
 };
-use teleop_runtime::{IpcSettings, NodeRuntime, Publisher};
+use teleop_runtime::{split, IpcSettings, Namespace, NodeRuntime, Publisher};
 
 pub fn record_cmd(
     ipc: &IpcSettings,
     out: Option<PathBuf>,
     topics: Option<Vec<String>>,
+    namespaces: Vec<Namespace>,
     duration: Option<Duration>,
 ) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new("teleop-record", ipc)?;
     let options = RecordOptions {
         out: out.unwrap_or_else(|| default_path(Path::new("recordings"))),
         topics,
+        namespaces,
         writer: WriterOptions::default(),
         metadata: standard_metadata(),
         duration,
@@ -52,12 +54,12 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
     println!("duration   {:.3} s", info.duration.as_secs_f64());
     println!("messages   {}", info.messages);
     println!(
-        "{:<22} {:<36} {:>9} {:>9} {:>7}",
+        "{:<28} {:<36} {:>9} {:>9} {:>7}",
         "TOPIC", "SCHEMA", "MESSAGES", "RATE_HZ", "DROPS"
     );
     for t in &info.topics {
         println!(
-            "{:<22} {:<36} {:>9} {:>9.1} {:>7}",
+            "{:<28} {:<36} {:>9} {:>9.1} {:>7}",
             t.topic,
             t.schema_name,
             t.messages,
@@ -113,13 +115,37 @@ impl<M: Message> Replay for TopicReplay<M> {
     }
 }
 
-struct MakeReplay<'a>(&'a NodeRuntime);
+struct MakeReplay<'a>(&'a NodeRuntime, Option<&'a Namespace>);
 
 impl TopicVisitor for MakeReplay<'_> {
     type Output = anyhow::Result<Box<dyn Replay>>;
     fn visit<M: Message>(self) -> Self::Output {
-        Ok(Box::new(TopicReplay::<M>(self.0.publisher()?)))
+        Ok(Box::new(TopicReplay::<M>(self.0.publisher_in(self.1)?)))
     }
+}
+
+/// `--remap FROM=TO`: channels of namespace `from` are published in `to` (`None`: the topics
+/// without a namespace).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Remap {
+    pub from: Option<Namespace>,
+    pub to: Option<Namespace>,
+}
+
+/// Parses `FROM=TO`, where either side may be empty for the topics without a namespace.
+pub fn parse_remap(s: &str) -> Result<Remap, String> {
+    let (from, to) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?}: expected FROM=TO, e.g. left=right or =left"))?;
+    let side = |n: &str| {
+        (!n.is_empty())
+            .then(|| Namespace::new(n).map_err(|e| e.to_string()))
+            .transpose()
+    };
+    Ok(Remap {
+        from: side(from)?,
+        to: side(to)?,
+    })
 }
 
 /// Replay settings.
@@ -129,6 +155,26 @@ pub struct ReplayOptions {
     pub topics: Option<Vec<String>>,
     pub start: Option<f64>,
     pub end: Option<f64>,
+    /// Only channels of these namespaces (all when empty).
+    pub namespaces: Vec<Namespace>,
+    pub remap: Vec<Remap>,
+}
+
+impl ReplayOptions {
+    /// Where a channel is published: its topic's namespace (remapped) and plain topic name;
+    /// `None` for a channel outside the contract or outside the chosen namespaces.
+    fn target(&self, channel: &str) -> Option<(Option<Namespace>, &'static str)> {
+        let (ns, topic) = split(channel)?;
+        if !self.namespaces.is_empty() && !ns.as_ref().is_some_and(|n| self.namespaces.contains(n))
+        {
+            return None;
+        }
+        let ns = match self.remap.iter().find(|r| r.from == ns) {
+            Some(r) => r.to.clone(),
+            None => ns,
+        };
+        Some((ns, topic.name))
+    }
 }
 
 pub fn replay_cmd(
@@ -163,16 +209,20 @@ pub fn replay_cmd(
                 teleop_runtime::sleep_until(start + at.div_f64(speed));
             }
             let replay = publishers.entry(msg.topic.clone()).or_insert_with(|| {
-                match visit_topic(&msg.topic, MakeReplay(&runtime)) {
+                let Some((ns, topic)) = opts.target(&msg.topic) else {
+                    tracing::warn!(
+                        topic = %msg.topic,
+                        "not a topic of the contract or not in the chosen namespaces: skipped"
+                    );
+                    return None;
+                };
+                match visit_topic(topic, MakeReplay(&runtime, ns.as_ref())) {
                     Some(Ok(p)) => Some(p),
                     Some(Err(e)) => {
                         tracing::warn!("cannot publish {}: {e:#}", msg.topic);
                         None
                     }
-                    None => {
-                        tracing::warn!(topic = %msg.topic, "not a topic of the contract: skipped");
-                        None
-                    }
+                    None => None,
                 }
             });
             if let Some(r) = replay {
@@ -435,4 +485,70 @@ fn compare_force(c: &mut Comparison, new: &GloveForceCommand, old: Option<&Glove
         c.differing += 1;
     }
     c.max_difference = c.max_difference.max(d);
+}
+
+#[cfg(test)]
+mod namespace_tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    fn ns(n: &str) -> Option<Namespace> {
+        Some(Namespace::new(n).unwrap())
+    }
+
+    fn options(namespaces: &[&str], remap: &[&str]) -> ReplayOptions {
+        ReplayOptions {
+            speed: None,
+            looped: false,
+            topics: None,
+            start: None,
+            end: None,
+            namespaces: namespaces.iter().map(|n| ns(n).unwrap()).collect(),
+            remap: remap.iter().map(|r| parse_remap(r).unwrap()).collect(),
+        }
+    }
+
+    #[test]
+    fn remap_arguments() {
+        assert_eq!(
+            parse_remap("left=right").unwrap(),
+            Remap {
+                from: ns("left"),
+                to: ns("right")
+            }
+        );
+        assert_eq!(
+            parse_remap("=left").unwrap(),
+            Remap {
+                from: None,
+                to: ns("left")
+            }
+        );
+        assert!(parse_remap("left").unwrap_err().contains("FROM=TO"));
+        assert!(parse_remap("Left=right").unwrap_err().contains("'L'"));
+    }
+
+    #[test]
+    fn channels_go_back_to_their_namespace_unless_remapped() {
+        let all = options(&[], &[]);
+        assert_eq!(all.target("hand/command"), Some((None, "hand/command")));
+        assert_eq!(
+            all.target("left/hand/command"),
+            Some((ns("left"), "hand/command"))
+        );
+        assert_eq!(all.target("left/not_a_topic"), None);
+
+        let only_right = options(&["right"], &["right=left", "=right"]);
+        assert_eq!(only_right.target("left/glove/state"), None);
+        assert_eq!(only_right.target("glove/state"), None);
+        assert_eq!(
+            only_right.target("right/glove/state"),
+            Some((ns("left"), "glove/state"))
+        );
+        let root_to_left = options(&[], &["=left"]);
+        assert_eq!(
+            root_to_left.target("glove/state"),
+            Some((ns("left"), "glove/state"))
+        );
+    }
 }

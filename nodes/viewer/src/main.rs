@@ -129,6 +129,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
             let settings = IpcSettings {
                 root: args.ipc_root.clone().filter(|s| !s.is_empty()),
                 prefix: args.ipc_prefix.clone().filter(|s| !s.is_empty()),
+                namespace: None,
             };
             let runtime = NodeRuntime::new(&args.name, &settings)?;
             let rec = open_stream(args, "live")?;

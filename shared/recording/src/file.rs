@@ -324,9 +324,11 @@ impl TopicVisitor for Describe {
     }
 }
 
-/// The contract's type for `topic`, if the topic is part of the contract.
+/// The contract's type for `topic`, if the topic is part of the contract, with or without a
+/// namespace (`left/glove/state` is a `glove/state` channel).
 pub(crate) fn contract_type(topic: &str) -> Option<ContractType> {
-    teleop_msgs::visit_topic(topic, Describe)
+    let (_, contract) = teleop_namespace::split(topic)?;
+    teleop_msgs::visit_topic(contract.name, Describe)
 }
 
 /// How a channel's messages are turned into payloads.

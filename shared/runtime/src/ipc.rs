@@ -8,6 +8,7 @@ use iceoryx2::service::builder::publish_subscribe::{
 };
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 use teleop_msgs::{Message, SERVICE_PREFIX};
+use teleop_namespace::{qualified, Namespace};
 
 use crate::ports::{Publisher, Subscriber};
 use crate::Service;
@@ -16,6 +17,8 @@ use crate::Service;
 pub const ENV_IPC_ROOT: &str = "TELEOP_IPC_ROOT";
 /// Environment variable with the iceoryx2 prefix for shared-memory and lock files.
 pub const ENV_IPC_PREFIX: &str = "TELEOP_IPC_PREFIX";
+/// Environment variable with the process's topic namespace (e.g. `left`; unset or empty: none).
+pub const ENV_NAMESPACE: &str = "TELEOP_NAMESPACE";
 
 /// Samples a subscriber can queue before the oldest is overwritten (and counted as dropped).
 pub(crate) const SUBSCRIBER_BUFFER: usize = 256;
@@ -73,25 +76,46 @@ impl RuntimeError {
     }
 }
 
-/// Where the pipeline's iceoryx2 resources live. Processes see each other only with equal
-/// settings; `teleop launch` passes its own to every child through [`ENV_IPC_ROOT`] and
-/// [`ENV_IPC_PREFIX`].
+/// Where the pipeline's iceoryx2 resources live, and the namespace a process's topics live in.
+/// Processes see each other only with equal root and prefix; `teleop launch` passes its own to
+/// every child through [`ENV_IPC_ROOT`] and [`ENV_IPC_PREFIX`], and each process's namespace
+/// (the launch file's `namespace` key) through [`ENV_NAMESPACE`].
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct IpcSettings {
     /// Root directory for iceoryx2's files (default: iceoryx2's `/tmp/iceoryx2/`).
     pub root: Option<String>,
     /// Prefix of shared-memory and lock files (default: `teleop_`).
     pub prefix: Option<String>,
+    /// Namespace of the node's topics (`left` makes `glove/state` the service
+    /// `teleop/left/glove/state`); `None`: the plain topic names. Checked by
+    /// [`namespace`](Self::namespace) when a [`NodeRuntime`] is made.
+    pub namespace: Option<String>,
 }
 
 impl IpcSettings {
-    /// Settings from [`ENV_IPC_ROOT`] and [`ENV_IPC_PREFIX`] (unset or empty = default).
+    /// Settings from [`ENV_IPC_ROOT`], [`ENV_IPC_PREFIX`] and [`ENV_NAMESPACE`] (unset or
+    /// empty = default).
     pub fn from_env() -> Self {
         let get = |k| std::env::var(k).ok().filter(|v: &String| !v.is_empty());
         Self {
             root: get(ENV_IPC_ROOT),
             prefix: get(ENV_IPC_PREFIX),
+            namespace: get(ENV_NAMESPACE),
         }
+    }
+
+    /// The checked namespace (`None`: the plain topic names).
+    pub fn namespace(&self) -> Result<Option<Namespace>, RuntimeError> {
+        self.namespace
+            .as_deref()
+            .map(|n| {
+                Namespace::new(n).map_err(|e| RuntimeError::Settings {
+                    what: "namespace",
+                    value: n.to_string(),
+                    reason: e.to_string(),
+                })
+            })
+            .transpose()
     }
 
     /// Settings no other process or test uses: root `root_dir`, a prefix unique to this process
@@ -103,6 +127,7 @@ impl IpcSettings {
         Self {
             root: Some(root_dir.to_string_lossy().into_owned()),
             prefix: Some(format!("t{}x{n}_", std::process::id())),
+            namespace: None,
         }
     }
 
@@ -134,6 +159,9 @@ impl IpcSettings {
         }
         if let Some(prefix) = &self.prefix {
             env.push((ENV_IPC_PREFIX, prefix.clone()));
+        }
+        if let Some(namespace) = &self.namespace {
+            env.push((ENV_NAMESPACE, namespace.clone()));
         }
         env
     }
@@ -173,33 +201,43 @@ impl IpcSettings {
 pub struct NodeRuntime {
     node: Node<Service>,
     name: String,
+    namespace: Option<Namespace>,
     source_id: u32,
 }
 
 impl NodeRuntime {
-    /// Creates the iceoryx2 node `name` (visible in `teleop nodes`).
+    /// Creates the iceoryx2 node `name` (visible in `teleop nodes`). In a namespace the node is
+    /// called `<namespace>/<name>` and its ports use the namespace's topics.
     pub fn new(name: &str, settings: &IpcSettings) -> Result<Self, RuntimeError> {
+        let namespace = settings.namespace()?;
         let config = settings.config()?;
-        let node_name = NodeName::new(name).map_err(|e| RuntimeError::Settings {
+        let name = qualified(namespace.as_ref(), name);
+        let node_name = NodeName::new(&name).map_err(|e| RuntimeError::Settings {
             what: "node name",
-            value: name.to_string(),
+            value: name.clone(),
             reason: format!("{e:?}"),
         })?;
         let node = NodeBuilder::new()
             .name(&node_name)
             .config(&config)
             .create::<Service>()
-            .map_err(|e| RuntimeError::ipc("creating node", name, e))?;
+            .map_err(|e| RuntimeError::ipc("creating node", &name, e))?;
         Ok(Self {
             node,
-            name: name.to_string(),
-            source_id: teleop_msgs::source_id(name),
+            source_id: teleop_msgs::source_id(&name),
+            name,
+            namespace,
         })
     }
 
-    /// The node's name.
+    /// The node's name (with its namespace).
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The namespace of the node's topics.
+    pub fn namespace(&self) -> Option<&Namespace> {
+        self.namespace.as_ref()
     }
 
     /// The id this node writes into the headers it stamps.
@@ -212,45 +250,70 @@ impl NodeRuntime {
         &self.node
     }
 
-    /// A publisher for `M`'s topic (creates the service if needed).
+    /// A publisher for `M`'s topic in the node's namespace (creates the service if needed).
     pub fn publisher<M: Message>(&self) -> Result<Publisher<M>, RuntimeError> {
-        let service = service_name::<M>()?;
-        let pubsub = self.pubsub::<M>(&service)?;
+        self.publisher_in(self.namespace.as_ref())
+    }
+
+    /// A publisher for `M`'s topic in `namespace` (for tools that serve several namespaces).
+    pub fn publisher_in<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Result<Publisher<M>, RuntimeError> {
+        let (service, topic) = service_name::<M>(namespace)?;
+        let pubsub = self.pubsub::<M>(&service, &topic)?;
         let publisher = pubsub
             .publisher_builder()
             .create()
-            .map_err(|e| RuntimeError::ipc("creating publisher", M::TOPIC, e))?;
+            .map_err(|e| RuntimeError::ipc("creating publisher", &topic, e))?;
         let notifier = self
-            .event(&service, M::TOPIC)?
+            .event(&service, &topic)?
             .notifier_builder()
             .create()
-            .map_err(|e| RuntimeError::ipc("creating notifier", M::TOPIC, e))?;
+            .map_err(|e| RuntimeError::ipc("creating notifier", &topic, e))?;
         Ok(Publisher::new(publisher, notifier, self.source_id))
     }
 
-    /// A subscriber for `M`'s topic (creates the service if needed). It receives the newest
-    /// sample published before it existed, if any.
+    /// A subscriber for `M`'s topic in the node's namespace (creates the service if needed). It
+    /// receives the newest sample published before it existed, if any.
     pub fn subscriber<M: Message>(&self) -> Result<Subscriber<M>, RuntimeError> {
-        let service = service_name::<M>()?;
-        let pubsub = self.pubsub::<M>(&service)?;
+        self.subscriber_in(self.namespace.as_ref())
+    }
+
+    /// A subscriber for `M`'s topic in `namespace` (for tools that serve several namespaces).
+    pub fn subscriber_in<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Result<Subscriber<M>, RuntimeError> {
+        let (service, topic) = service_name::<M>(namespace)?;
+        let pubsub = self.pubsub::<M>(&service, &topic)?;
         let subscriber = pubsub
             .subscriber_builder()
             .buffer_size(SUBSCRIBER_BUFFER)
             .create()
-            .map_err(|e| RuntimeError::ipc("creating subscriber", M::TOPIC, e))?;
+            .map_err(|e| RuntimeError::ipc("creating subscriber", &topic, e))?;
         let listener = self
-            .event(&service, M::TOPIC)?
+            .event(&service, &topic)?
             .listener_builder()
             .create()
-            .map_err(|e| RuntimeError::ipc("creating listener", M::TOPIC, e))?;
+            .map_err(|e| RuntimeError::ipc("creating listener", &topic, e))?;
         Ok(Subscriber::new(subscriber, listener))
     }
 
-    /// Publishers and subscribers of `M`'s topic, `None` when the topic does not exist (yet).
-    /// Does not create anything.
+    /// Publishers and subscribers of `M`'s topic in the node's namespace, `None` when the topic
+    /// does not exist (yet). Does not create anything.
     pub fn topic_ports<M: Message>(&self) -> Option<(usize, usize)> {
+        self.topic_ports_in::<M>(self.namespace.as_ref())
+    }
+
+    /// Publishers and subscribers of `M`'s topic in `namespace`, `None` when the topic does not
+    /// exist (yet). Does not create anything.
+    pub fn topic_ports_in<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Option<(usize, usize)> {
         use iceoryx2::prelude::PortFactory;
-        let service = service_name::<M>().ok()?;
+        let (service, _) = service_name::<M>(namespace).ok()?;
         let pubsub = self
             .node
             .service_builder(&service)
@@ -267,6 +330,7 @@ impl NodeRuntime {
     fn pubsub<M: Message>(
         &self,
         service: &ServiceName,
+        topic: &str,
     ) -> Result<
         iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>,
         RuntimeError,
@@ -281,7 +345,7 @@ impl NodeRuntime {
             .max_subscribers(MAX_SUBSCRIBERS)
             .max_nodes(MAX_NODES)
             .open_or_create()
-            .map_err(|e| pubsub_error::<M>(&self.node, service, M::TOPIC, e))
+            .map_err(|e| pubsub_error::<M>(&self.node, service, topic, e))
     }
 
     fn event(
@@ -300,14 +364,112 @@ impl NodeRuntime {
     }
 }
 
-/// The iceoryx2 service name of a topic: `teleop/<topic>`.
-pub(crate) fn service_name<M: Message>() -> Result<ServiceName, RuntimeError> {
-    let name = format!("{SERVICE_PREFIX}{}", M::TOPIC);
-    ServiceName::new(&name).map_err(|e| RuntimeError::Settings {
+/// The iceoryx2 service name of a topic, `teleop/<topic>` or `teleop/<namespace>/<topic>`, and
+/// the qualified topic name (for messages).
+fn service_name<M: Message>(
+    namespace: Option<&Namespace>,
+) -> Result<(ServiceName, String), RuntimeError> {
+    let topic = qualified(namespace, M::TOPIC);
+    let name = service_name_of(&topic);
+    let service = ServiceName::new(&name).map_err(|e| RuntimeError::Settings {
         what: "service name",
         value: name.clone(),
         reason: format!("{e:?}"),
+    })?;
+    Ok((service, topic))
+}
+
+fn service_name_of(qualified_topic: &str) -> String {
+    format!("{SERVICE_PREFIX}{qualified_topic}")
+}
+
+/// The namespaces among iceoryx2 service names: those of every service named
+/// `teleop/<namespace>/<topic>` of a contract topic, sorted, each once.
+fn namespaces_of<'a>(service_names: impl IntoIterator<Item = &'a str>) -> Vec<Namespace> {
+    let mut found: Vec<Namespace> = service_names
+        .into_iter()
+        .filter_map(|s| teleop_namespace::split(s.strip_prefix(SERVICE_PREFIX)?)?.0)
+        .collect();
+    found.sort();
+    found.dedup();
+    found
+}
+
+/// The namespaces in use by the pipeline of `settings`: every namespace with at least one
+/// service of a contract topic (a node in a namespace creates its services when it starts).
+/// The plain topics (no namespace) are not listed.
+pub fn discover_namespaces(settings: &IpcSettings) -> Result<Vec<Namespace>, RuntimeError> {
+    use iceoryx2::prelude::CallbackProgression;
+    use iceoryx2::service::Service as _;
+    let config = settings.config()?;
+    let mut names: Vec<String> = Vec::new();
+    Service::list(&config, |details| {
+        names.push(details.static_details.name().as_str().to_string());
+        CallbackProgression::Continue
     })
+    .map_err(|e| RuntimeError::ipc("listing services", "teleop/*", e))?;
+    Ok(namespaces_of(names.iter().map(String::as_str)))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use teleop_msgs::{GloveState, NodeHealth};
+
+    #[test]
+    fn service_names_without_a_namespace_are_unchanged() {
+        let (service, topic) = service_name::<GloveState>(None).unwrap();
+        assert_eq!(
+            (service.as_str(), topic.as_str()),
+            ("teleop/glove/state", "glove/state")
+        );
+        let (service, _) = service_name::<NodeHealth>(None).unwrap();
+        assert_eq!(service.as_str(), "teleop/health");
+    }
+
+    #[test]
+    fn service_names_in_a_namespace() {
+        let left = Namespace::new("left").unwrap();
+        let (service, topic) = service_name::<GloveState>(Some(&left)).unwrap();
+        assert_eq!(
+            (service.as_str(), topic.as_str()),
+            ("teleop/left/glove/state", "left/glove/state")
+        );
+        let (service, _) = service_name::<NodeHealth>(Some(&left)).unwrap();
+        assert_eq!(service.as_str(), "teleop/left/health");
+    }
+
+    #[test]
+    fn namespaces_from_service_names() {
+        let found = namespaces_of([
+            "teleop/glove/state",
+            "teleop/right/hand/command",
+            "teleop/left/health",
+            "teleop/left/glove/state",
+            "teleop/cell2/left/estop",
+            "teleop/left/not_a_topic",
+            "other/up/glove/state",
+            "teleop/Bad/glove/state",
+        ]);
+        let names: Vec<&str> = found.iter().map(Namespace::as_str).collect();
+        assert_eq!(names, ["cell2/left", "left", "right"]);
+    }
+
+    #[test]
+    fn invalid_namespace_setting_is_an_error() {
+        let settings = IpcSettings {
+            namespace: Some("Left/".into()),
+            ..IpcSettings::default()
+        };
+        let e = settings.namespace().unwrap_err().to_string();
+        assert!(e.contains("namespace") && e.contains("\"Left/\""), "{e}");
+        let settings = IpcSettings {
+            namespace: Some("left".into()),
+            ..IpcSettings::default()
+        };
+        assert_eq!(settings.namespace().unwrap().unwrap().as_str(), "left");
+    }
 }
 
 /// Why `M`'s publish-subscribe service could not be opened: a contract version mismatch when it

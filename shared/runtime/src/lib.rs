@@ -2,7 +2,9 @@
 //!
 //! Owns the plumbing every node shares, so that a node's own code is its loop and its pure step:
 //! - [`IpcSettings`]: the iceoryx2 root path and prefix (set by `teleop launch` through the
-//!   environment; tests give each test its own so they never see each other's services);
+//!   environment; tests give each test its own so they never see each other's services), and the
+//!   process's topic [`Namespace`] (`left/glove/state`; see `teleop-namespace`), so that node code
+//!   is the same on every side; [`discover_namespaces`] finds the namespaces in use;
 //! - [`NodeRuntime`]: the iceoryx2 node, typed [`Publisher`]s and [`Subscriber`]s for the topics of
 //!   `teleop-msgs`, each paired with an event service so that receivers sleep until data arrives;
 //! - [`EventLoop`]: a WaitSet over the inputs with per-input deadlines (input watchdogs) and a
@@ -29,10 +31,14 @@ pub use clock::{now_ns, sleep_until};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use health::Health;
-pub use ipc::{IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT};
+pub use ipc::{
+    discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT,
+    ENV_NAMESPACE,
+};
 pub use logging::init_logging;
 pub use ports::{Publisher, Subscriber};
 pub use signals::{install_stop_handlers, stop_signal};
+pub use teleop_namespace::{qualified, split, Namespace, NamespaceError};
 
 /// iceoryx2 service type used everywhere (inter-process, shared memory).
 pub type Service = iceoryx2::service::ipc::Service;

@@ -95,6 +95,50 @@ fn settings_isolate_pipelines() {
 }
 
 #[test]
+fn namespaces_separate_topics_and_are_discovered() {
+    let ipc = settings();
+    let in_ns = |ns: &str| IpcSettings {
+        namespace: Some(ns.into()),
+        ..ipc.settings.clone()
+    };
+    let left = NodeRuntime::new("glove", &in_ns("left")).unwrap();
+    let right = NodeRuntime::new("glove", &in_ns("right")).unwrap();
+    let root = NodeRuntime::new("glove", &ipc).unwrap();
+    assert_eq!(left.name(), "left/glove");
+    assert_eq!(left.namespace().map(Namespace::as_str), Some("left"));
+    assert_eq!(root.name(), "glove");
+    assert_ne!(left.source_id(), right.source_id());
+
+    let mut p_left = left.publisher::<GloveState>().unwrap();
+    let s_right = right.subscriber::<GloveState>().unwrap();
+    let s_root = root.subscriber::<GloveState>().unwrap();
+    // A tool serving several namespaces reaches `left` from a node outside it.
+    let s_left = root.subscriber_in::<GloveState>(left.namespace()).unwrap();
+    p_left.publish(&GloveState::default()).unwrap();
+    assert_eq!(s_left.drain(|_| {}), 1);
+    assert_eq!(s_right.drain(|_| {}), 0);
+    assert_eq!(s_root.drain(|_| {}), 0);
+
+    let found = discover_namespaces(&ipc).unwrap();
+    let names: Vec<&str> = found.iter().map(Namespace::as_str).collect();
+    assert_eq!(names, ["left", "right"]);
+}
+
+#[test]
+fn invalid_namespace_is_refused_by_name() {
+    let ipc = settings();
+    let bad = IpcSettings {
+        namespace: Some("left/".into()),
+        ..ipc.settings.clone()
+    };
+    let err = NodeRuntime::new("x", &bad).err().unwrap().to_string();
+    assert!(
+        err.contains("namespace") && err.contains("\"left/\""),
+        "{err}"
+    );
+}
+
+#[test]
 fn gaps_in_sequence_numbers_count_as_drops() {
     let ipc = settings();
     let n = NodeRuntime::new("gaps", &ipc).unwrap();
@@ -183,6 +227,7 @@ fn bad_settings_are_refused_with_the_setting_named() {
     let bad = IpcSettings {
         root: None,
         prefix: Some("bad/prefix".into()),
+        ..IpcSettings::default()
     };
     let err = NodeRuntime::new("x", &bad).err().unwrap().to_string();
     assert!(

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
+use teleop_runtime::{qualified, Namespace};
 use toml::Spanned;
 
 /// When a process that ended is started again.
@@ -55,6 +56,7 @@ struct RawProcess {
     #[serde(default = "default_true")]
     required: bool,
     node: Option<String>,
+    namespace: Option<Spanned<String>>,
     #[serde(default)]
     env: BTreeMap<String, String>,
 }
@@ -99,8 +101,12 @@ pub struct Process {
     pub restart_delay_ms: u64,
     /// When it fails for good, the whole session stops with a failure.
     pub required: bool,
-    /// The iceoryx2 node name it creates (None: it creates none).
+    /// The iceoryx2 node name it creates, with its namespace (`left/glove`; None: it creates
+    /// none). Written without the namespace in the file (default: the process name).
     pub node: Option<String>,
+    /// The namespace of its topics (passed to it in `TELEOP_NAMESPACE`); None: the topics
+    /// without a namespace.
+    pub namespace: Option<Namespace>,
     /// Extra environment.
     pub env: BTreeMap<String, String>,
 }
@@ -158,12 +164,22 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
                 at(p.program.span())
             );
         }
+        let namespace = match &p.namespace {
+            None => None,
+            Some(ns) => Some(Namespace::new(ns.get_ref()).map_err(|e| {
+                anyhow::anyhow!(
+                    "{origin}:{}: process.namespace of {name:?}: {e}",
+                    at(ns.span())
+                )
+            })?),
+        };
         processes.push(Process {
             node: match p.node {
                 Some(n) if n.is_empty() => None,
-                Some(n) => Some(n),
-                None => Some(name.clone()),
+                Some(n) => Some(qualified(namespace.as_ref(), &n)),
+                None => Some(qualified(namespace.as_ref(), &name)),
             },
+            namespace,
             name,
             program: p.program.into_inner(),
             args: p.args,
@@ -186,6 +202,18 @@ fn line_of(text: &str, offset: usize) -> usize {
 }
 
 impl Launch {
+    /// The namespaces of the processes that have an iceoryx2 node, in order of first use, each
+    /// once (`None`: the topics without a namespace).
+    pub fn namespaces(&self) -> Vec<Option<Namespace>> {
+        let mut out: Vec<Option<Namespace>> = Vec::new();
+        for p in self.processes.iter().filter(|p| p.node.is_some()) {
+            if !out.contains(&p.namespace) {
+                out.push(p.namespace.clone());
+            }
+        }
+        out
+    }
+
     /// The folder relative paths are resolved against (and the processes' working directory).
     pub fn base_dir(&self) -> PathBuf {
         match self.path.parent() {
@@ -276,5 +304,41 @@ mod tests {
 
         let e = parse_str("[session]\n").unwrap_err().to_string();
         assert!(e.contains("no [[process]]"), "{e}");
+    }
+
+    #[test]
+    fn namespaces() {
+        let l = parse_str(
+            "[[process]]\nname = \"left-glove\"\nprogram = \"teleop-glove\"\nnamespace = \"left\"\nnode = \"glove\"\n\n[[process]]\nname = \"recorder\"\nprogram = \"teleop-recorder\"\n\n[[process]]\nname = \"feedback\"\nprogram = \"teleop-feedback\"\nnamespace = \"cell2/right\"\n",
+        )
+        .unwrap();
+        let left = &l.processes[0];
+        assert_eq!(left.namespace.as_ref().map(Namespace::as_str), Some("left"));
+        assert_eq!(left.node.as_deref(), Some("left/glove"));
+        assert_eq!(l.processes[1].namespace, None);
+        assert_eq!(l.processes[1].node.as_deref(), Some("recorder"));
+        assert_eq!(l.processes[2].node.as_deref(), Some("cell2/right/feedback"));
+
+        for (bad, why) in [
+            ("\"\"", "empty"),
+            ("\"/left\"", "empty path segment"),
+            ("\"left/\"", "empty path segment"),
+            ("\"Left\"", "'L'"),
+            ("\"le ft\"", "' '"),
+        ] {
+            let e = parse_str(&format!(
+                "[[process]]\nname = \"a\"\nprogram = \"x\"\nnamespace = {bad}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.starts_with("dir/launch.toml:4: process.namespace of \"a\": ") && e.contains(why),
+                "{bad}: {e}"
+            );
+        }
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nnamespace = 3\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4") && e.contains("namespace"), "{e}");
     }
 }

@@ -1,13 +1,15 @@
 //! What `teleop launch` prints when a session ends: per-topic rates, latency since the device
 //! sample (p50/p99/max, from the headers), drops, the faults the nodes handled, restarts, and
-//! where the recording is. Collected during the session by subscribing to every topic, with
-//! fixed-size histograms so that a long session does not grow memory.
+//! where the recording is. Collected during the session by subscribing to every topic of every
+//! namespace the launch file uses, with fixed-size histograms so that a long session does not
+//! grow memory. A namespace none of whose topics carried a sample is left out when the session
+//! has others (the recorder of a two-sided session runs without a namespace, for instance).
 
 use std::collections::BTreeMap;
 use std::time::Duration;
 
 use teleop_msgs::{topics, visit_topic, Message, NodeHealth, TopicVisitor};
-use teleop_runtime::{NodeRuntime, Subscriber};
+use teleop_runtime::{qualified, Namespace, NodeRuntime, Subscriber};
 
 /// Latency histogram with about 5 % resolution from 1 us to about 100 s.
 pub struct Histogram {
@@ -62,10 +64,13 @@ impl Histogram {
 trait Probe {
     fn poll(&mut self);
     fn line(&self, seconds: f64) -> String;
+    fn count(&self) -> u64;
 }
 
 struct TopicProbe<M: Message> {
     sub: Subscriber<M>,
+    /// The qualified topic name.
+    name: String,
     count: u64,
     latency: Histogram,
     dropped_before: u64,
@@ -81,6 +86,10 @@ impl<M: Message> Probe for TopicProbe<M> {
         });
     }
 
+    fn count(&self) -> u64 {
+        self.count
+    }
+
     fn line(&self, seconds: f64) -> String {
         let ms = |q: f64| {
             self.latency
@@ -88,8 +97,8 @@ impl<M: Message> Probe for TopicProbe<M> {
                 .map_or("-".to_string(), |us| format!("{:.3}", us / 1000.0))
         };
         format!(
-            "{:<22} {:>9.1} {:>9} {:>9} {:>9} {:>7}",
-            M::TOPIC,
+            "{:<28} {:>9.1} {:>9} {:>9} {:>9} {:>7}",
+            self.name,
             self.count as f64 / seconds.max(1e-9),
             ms(0.5),
             ms(0.99),
@@ -103,17 +112,18 @@ impl<M: Message> Probe for TopicProbe<M> {
     }
 }
 
-struct MakeProbe<'a>(&'a NodeRuntime);
+struct MakeProbe<'a>(&'a NodeRuntime, Option<&'a Namespace>);
 
 impl TopicVisitor for MakeProbe<'_> {
     type Output = anyhow::Result<Box<dyn Probe>>;
     fn visit<M: Message>(self) -> Self::Output {
-        let sub = self.0.subscriber::<M>()?;
+        let sub = self.0.subscriber_in::<M>(self.1)?;
         // The history sample predates the session.
         sub.drain(|_| {});
         let dropped_before = sub.dropped();
         Ok(Box::new(TopicProbe::<M> {
             sub,
+            name: qualified(self.1, M::TOPIC),
             count: 0,
             latency: Histogram::new(),
             dropped_before,
@@ -123,25 +133,35 @@ impl TopicVisitor for MakeProbe<'_> {
 
 /// Watches a running session.
 pub struct SessionWatch {
-    probes: Vec<Box<dyn Probe>>,
-    health: Subscriber<NodeHealth>,
+    /// Per namespace, a probe per topic.
+    probes: Vec<Vec<Box<dyn Probe>>>,
+    health: Vec<Subscriber<NodeHealth>>,
     latest: BTreeMap<String, NodeHealth>,
     _runtime: NodeRuntime,
 }
 
 impl SessionWatch {
-    /// Subscribes to every topic of the contract.
-    pub fn new(ipc: &teleop_runtime::IpcSettings) -> anyhow::Result<Self> {
+    /// Subscribes to every topic of the contract in each of `namespaces`.
+    pub fn new(
+        ipc: &teleop_runtime::IpcSettings,
+        namespaces: &[Option<Namespace>],
+    ) -> anyhow::Result<Self> {
         let runtime = NodeRuntime::new("teleop-launch", ipc)?;
         let mut probes = Vec::new();
-        for t in topics() {
-            if let Some(p) = visit_topic(t.name, MakeProbe(&runtime)) {
-                probes.push(p?);
+        let mut health = Vec::new();
+        for ns in namespaces {
+            let mut of_ns = Vec::new();
+            for t in topics() {
+                if let Some(p) = visit_topic(t.name, MakeProbe(&runtime, ns.as_ref())) {
+                    of_ns.push(p?);
+                }
             }
+            probes.push(of_ns);
+            health.push(runtime.subscriber_in(ns.as_ref())?);
         }
         Ok(Self {
             probes,
-            health: runtime.subscriber()?,
+            health,
             latest: BTreeMap::new(),
             _runtime: runtime,
         })
@@ -149,13 +169,15 @@ impl SessionWatch {
 
     /// Takes everything that arrived since the last call.
     pub fn poll(&mut self) {
-        for p in &mut self.probes {
+        for p in self.probes.iter_mut().flatten() {
             p.poll();
         }
         let latest = &mut self.latest;
-        self.health.drain(|h| {
-            latest.insert(h.name(), *h);
-        });
+        for health in &self.health {
+            health.drain(|h| {
+                latest.insert(h.name(), *h);
+            });
+        }
     }
 
     /// The summary text.
@@ -167,20 +189,26 @@ impl SessionWatch {
     ) -> String {
         let s = elapsed.as_secs_f64();
         let mut out = format!(
-            "\nsession summary ({s:.1} s); latency = stamp - device sample (origin), ms\n{:<22} {:>9} {:>9} {:>9} {:>9} {:>7}\n",
+            "\nsession summary ({s:.1} s); latency = stamp - device sample (origin), ms\n{:<28} {:>9} {:>9} {:>9} {:>9} {:>7}\n",
             "TOPIC", "RATE_HZ", "LAT_P50", "LAT_P99", "LAT_MAX", "DROPS"
         );
-        for p in &self.probes {
-            out.push_str(&p.line(s));
-            out.push('\n');
+        let several = self.probes.len() > 1;
+        for of_ns in &self.probes {
+            if several && of_ns.iter().all(|p| p.count() == 0) {
+                continue;
+            }
+            for p in of_ns {
+                out.push_str(&p.line(s));
+                out.push('\n');
+            }
         }
         out.push_str(&format!(
-            "{:<22} {:>9} {:>9} {:>9} {:>9}\n",
+            "{:<28} {:>9} {:>9} {:>9} {:>9}\n",
             "NODE", "TIMEOUTS", "ERRORS", "CLAMPS", "DROPS"
         ));
         for (name, h) in &self.latest {
             out.push_str(&format!(
-                "{name:<22} {:>9} {:>9} {:>9} {:>9}\n",
+                "{name:<28} {:>9} {:>9} {:>9} {:>9}\n",
                 h.timeouts, h.errors, h.clamps, h.dropped
             ));
         }

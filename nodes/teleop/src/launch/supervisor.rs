@@ -42,7 +42,7 @@ pub fn run(
     teleop_runtime::install_stop_handlers();
     let config = ipc.config()?;
     clean_dead_nodes(&config);
-    let mut watch = super::summary::SessionWatch::new(ipc)?;
+    let mut watch = super::summary::SessionWatch::new(ipc, &launch.namespaces())?;
     let recordings: Arc<Mutex<Vec<String>>> = Arc::default();
     let started = Instant::now();
     let mut slots: Vec<Slot> = Vec::with_capacity(launch.processes.len());
@@ -205,6 +205,15 @@ fn spawn(
         .args(&process.args)
         .current_dir(launch.base_dir())
         .envs(ipc.to_env())
+        // Every process runs in its own namespace, or in none even if `teleop launch` was
+        // given one in its environment.
+        .env_remove(teleop_runtime::ENV_NAMESPACE)
+        .envs(
+            process
+                .namespace
+                .iter()
+                .map(|ns| (teleop_runtime::ENV_NAMESPACE, ns.as_str())),
+        )
         // The recorder stores the launch file as metadata.
         .env(
             "TELEOP_LAUNCH_FILE",
