@@ -110,6 +110,7 @@ fn check_file(path: &Path, written: &[Written]) {
         .collect();
     assert_eq!(lines.len(), written.len());
     let mut checked = 0;
+    let mut checked_paths = std::collections::BTreeSet::new();
     for (line, w) in lines.iter().zip(written) {
         assert_eq!(line["topic"], w.topic.as_str());
         assert_eq!(line["log_time"], w.log_time);
@@ -136,7 +137,22 @@ fn check_file(path: &Path, written: &[Written]) {
                 leaf.path
             );
             checked += 1;
+            checked_paths.insert(format!("{} {}", w.topic, leaf.path));
         }
+    }
+    // The fields of contract version 2 are among them.
+    for field in [
+        "hand/state joints[23].effort",
+        "hand/state link_kind",
+        "hand/state bus_state",
+        "hand/state link_error_code",
+        "hand/state link_errors",
+        "hand/state reserved[4]",
+        "hand/tactile fingertips[4].pressure",
+        "hand/tactile fingertips[4].temperature",
+        "hand/tactile fingertips[4].sensor_kind",
+    ] {
+        assert!(checked_paths.contains(field), "{field} not checked");
     }
     println!(
         "{}: Python decoded {} messages, {checked} fields, all equal",
