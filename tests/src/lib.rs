@@ -97,6 +97,32 @@ impl Sandbox {
         self.write("launch.toml", &patch(relocate(launch)))
     }
 
+    /// Writes the bimanual session (the repository's `launch/bimanual.toml` and every file of
+    /// `config/`, at the same places) into the sandbox with every `/tmp/teleop-...` device path
+    /// and socket moved inside the sandbox; its recordings go to `recordings/` in the sandbox.
+    /// Returns the launch file's path.
+    pub fn bimanual_session(&self) -> PathBuf {
+        let repo = Self::repo();
+        let inside = format!("{}/teleop-", self.dir.path().display());
+        let relocate = |text: String| text.replace("/tmp/teleop-", &inside);
+        let mut folders = vec![PathBuf::from("config")];
+        while let Some(folder) = folders.pop() {
+            for entry in std::fs::read_dir(repo.join(&folder)).expect("config folder") {
+                let path = entry.expect("config entry").path();
+                let name = folder.join(path.file_name().expect("file name"));
+                if path.is_dir() {
+                    folders.push(name);
+                } else if path.extension().is_some_and(|e| e == "toml") {
+                    let text = std::fs::read_to_string(&path).expect("config file");
+                    self.write(&name.display().to_string(), &relocate(text));
+                }
+            }
+        }
+        let launch = std::fs::read_to_string(repo.join("launch/bimanual.toml"))
+            .expect("launch/bimanual.toml");
+        self.write("launch/bimanual.toml", &relocate(launch))
+    }
+
     /// Sends one command to a simulator's control socket and returns its one-line answer.
     pub fn control(&self, socket: &str, command: &str) -> String {
         use std::io::{BufRead, BufReader, Write};
