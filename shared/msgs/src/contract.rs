@@ -197,9 +197,9 @@ nested! {
         position: f32 => "float32",
         /// Measured speed in the state's units.
         speed: f32 => "float32",
-        /// Joint effort in SI units (N m for revolute joints), measured (Shadow Hand strain
-        /// gauges) or estimated (Allegro commanded torque); NaN when the hand neither measures
-        /// nor estimates it (Revo2).
+        /// Joint effort in SI units whatever the state's `units` (N m for revolute joints),
+        /// measured (Shadow Hand strain gauges) or estimated (Allegro commanded torque); NaN
+        /// when the hand neither measures nor estimates it (Revo2).
         effort: f32 => "float32",
         /// Motor current in milliamperes (NaN when the hand does not report it).
         current_ma: f32 => "float32",

@@ -13,7 +13,11 @@
 //! [`topics`] lists every topic with its payload type; [`visit_topic`] lets generic tools
 //! (echo, stats, recorder) work on any topic without per-topic code.
 //!
-//! Must not depend on: anything but `iceoryx2` (for the `ZeroCopySend` derive). No I/O here.
+//! The contract is versioned ([`CONTRACT_VERSION`]): the version is part of every payload's
+//! iceoryx2 type name, so processes built from different contracts refuse each other by name,
+//! and recordings of earlier versions are converted on read by `teleop-recording`.
+//!
+//! Must not depend on: anything but `iceoryx2` (for `ZeroCopySend`). No I/O here.
 
 mod contract;
 mod message;
