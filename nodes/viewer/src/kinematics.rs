@@ -2,21 +2,21 @@
 //!
 //! Both hands use the same frame, a right hand lying palm down: the wrist at the origin, the
 //! fingers pointing along +Y, the back of the hand facing +Z (so flexion curls the fingers
-//! towards -Z) and the thumb on the -X side. Fingers are always in anatomical order
-//! ([`FINGERS`]: thumb, index, middle, ring, little), whatever order a device uses.
+//! towards -Z) and the thumb on the -X side (the frame of `teleop_hand_profile`).
 //!
 //! - [`OperatorHand`]: a human hand posed from the glove's normalised positions (five flexions
-//!   and the thumb's rotation), with the usual MCP/PIP/DIP coupling of a human finger.
-//! - [`Revo2Hand`]: the BrainCo Revo2's joint layout (thumb flex, thumb abduct, index, middle,
-//!   ring, pinky: six actuated joints; each finger has two phalanges driven together by a
-//!   linkage) posed from normalised joint positions (0 = open .. 1 = closed), mapped onto the
-//!   joint ranges the rest of the pipeline assumes (`teleop_revo2_protocol::DEFAULT_JOINT_RANGES`).
+//!   and the thumb's rotation), with the usual MCP/PIP/DIP coupling of a human finger; its
+//!   fingers are in anatomical order ([`FINGERS`]: thumb, index, middle, ring, little).
+//! - [`RobotHand`]: whichever robot hand a profile describes, its fingers in the profile's
+//!   order, posed from joint angles in radians by forward kinematics of each finger's chain.
 //!
 //! Pure geometry with `glam`: no I/O, no rerun.
 
 use glam::{Quat, Vec3};
+use teleop_hand_profile::{HandProfile, TipSensor};
 
-/// Finger names in anatomical order, the order of every per-finger array here.
+/// The operator's (glove) fingers in anatomical order, the order of the operator model's
+/// per-finger arrays.
 pub const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
 
 /// The glove channel ([`teleop_msgs::GLOVE_CHANNELS`] index) of each finger in [`FINGERS`]
@@ -25,39 +25,39 @@ pub const GLOVE_CHANNEL_OF_FINGER: [usize; 5] = [4, 3, 2, 1, 0];
 /// The glove's thumb rotation channel.
 pub const GLOVE_THUMB_ROTATION: usize = 5;
 
-/// The Revo2 joint ([`teleop_msgs::REVO2_JOINTS`] index) that flexes each finger in
-/// [`FINGERS`] order.
-pub const REVO2_JOINT_OF_FINGER: [usize; 5] = [0, 2, 3, 4, 5];
-/// The Revo2's thumb abduction joint.
-pub const REVO2_THUMB_ABDUCT: usize = 1;
-
 /// Towards the palm (the direction flexion curls a finger).
 const PALM_SIDE: Vec3 = Vec3::new(0.0, 0.0, -1.0);
 
-/// A posed hand: the wrist and, per finger, its joints from the base knuckle to the tip.
+/// A posed hand: the wrist, the palm's outline and, per finger, its joints from the base to
+/// the tip.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Skeleton {
     /// The wrist (origin of the hand frame).
     pub wrist: Vec3,
-    /// Per finger ([`FINGERS`] order): base joint, intermediate joints, fingertip.
-    pub fingers: [Vec<Vec3>; 5],
+    /// Line strips outlining the palm.
+    pub palm: Vec<Vec<Vec3>>,
+    /// Per finger (the model's finger order): base, intermediate joints, fingertip.
+    pub fingers: Vec<Vec<Vec3>>,
 }
 
 impl Skeleton {
-    /// The fingertips, [`FINGERS`] order.
-    pub fn tips(&self) -> [Vec3; 5] {
-        core::array::from_fn(|i| self.fingers[i].last().copied().unwrap_or(self.wrist))
+    /// The fingertips, finger order.
+    pub fn tips(&self) -> Vec<Vec3> {
+        self.fingers
+            .iter()
+            .map(|chain| chain.last().copied().unwrap_or(self.wrist))
+            .collect()
     }
 
-    /// Unit direction of each distal phalanx (towards the tip), [`FINGERS`] order.
-    pub fn tip_directions(&self) -> [Vec3; 5] {
-        core::array::from_fn(|i| {
-            let chain = &self.fingers[i];
-            match chain.as_slice() {
+    /// Unit direction of each finger's last segment (towards the tip), finger order.
+    pub fn tip_directions(&self) -> Vec<Vec3> {
+        self.fingers
+            .iter()
+            .map(|chain| match chain.as_slice() {
                 [.., a, b] => (*b - *a).normalize_or(Vec3::Y),
                 _ => Vec3::Y,
-            }
-        })
+            })
+            .collect()
     }
 
     /// Every joint (wrist first, then each finger's chain).
@@ -69,20 +69,9 @@ impl Skeleton {
         out
     }
 
-    /// Line strips that draw the skeleton: the palm (wrist to each finger base, and the
-    /// knuckle line from index to little), then each finger.
+    /// Line strips that draw the skeleton: the palm, then each finger.
     pub fn strips(&self) -> Vec<Vec<Vec3>> {
-        let bases: [Vec3; 5] =
-            core::array::from_fn(|i| self.fingers[i].first().copied().unwrap_or(self.wrist));
-        let mut out = Vec::with_capacity(11);
-        for base in bases {
-            out.push(vec![self.wrist, base]);
-        }
-        out.push(bases[1..].to_vec());
-        for chain in &self.fingers {
-            out.push(chain.clone());
-        }
-        out
+        self.palm.iter().chain(&self.fingers).cloned().collect()
     }
 }
 
@@ -216,119 +205,158 @@ impl OperatorHand {
             let angles = self.finger_fist_rad.map(|a| a * f);
             chain(g.base, Vec3::Y, PALM_SIDE, &g.lengths, &angles)
         };
+        let fingers = vec![thumb, long(1), long(2), long(3), long(4)];
+        // The wrist to each finger's base, and the knuckle line from index to little.
+        let bases: Vec<Vec3> = fingers.iter().map(|chain| chain[0]).collect();
+        let mut palm: Vec<Vec<Vec3>> = bases.iter().map(|b| vec![Vec3::ZERO, *b]).collect();
+        palm.push(bases[1..].to_vec());
         Skeleton {
             wrist: Vec3::ZERO,
-            fingers: [thumb, long(1), long(2), long(3), long(4)],
+            palm,
+            fingers,
         }
     }
 }
 
-/// The Revo2's geometry and joint ranges.
+/// A robot hand drawn from its profile's kinematics (`teleop_hand_profile`): each finger is a
+/// chain from its base pose (`base`, `base_rpy`); each link translates by its `origin` from the
+/// previous frame, then turns by `ratio ×` its joint's angle about its `axis`; the fingertip is
+/// the `tip` offset in the last link's frame. Posed from joint angles in radians, in the
+/// profile's joint order.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Revo2Hand {
-    /// Angle at normalised 0 and 1 of each joint, radians, Revo2 joint order
-    /// ([`teleop_msgs::REVO2_JOINTS`]).
-    pub ranges_rad: [(f32, f32); 6],
-    /// Base (MCP) of index, middle, ring and pinky.
-    pub finger_bases: [Vec3; 4],
-    /// Proximal and distal phalanx lengths of index, middle, ring and pinky.
-    pub finger_lengths: [[f32; 2]; 4],
-    /// Distal joint angle per radian of proximal angle (the finger linkage).
-    pub distal_coupling: f32,
-    /// Thumb base (the abduction joint).
-    pub thumb_base: Vec3,
-    /// Thumb metacarpal, proximal and distal lengths (the metacarpal only turns with the
-    /// abduction joint; the flex joint bends the other two).
-    pub thumb_lengths: [f32; 3],
-    /// Direction of the thumb at abduction 0 (rotated out, in the palm plane).
-    pub thumb_direction: Vec3,
-    /// Thumb distal joint angle per radian of thumb flex (the thumb linkage).
-    pub thumb_coupling: f32,
+pub struct RobotHand {
+    profile: HandProfile,
+    /// Where the profile came from (a file, a recording, or compiled in), for display.
+    source: String,
+    /// Base pose of each finger, hand frame.
+    bases: Vec<(Vec3, Quat)>,
+    /// The finger of each fingertip sensor, in `hand/tactile` order.
+    tip_fingers: Vec<usize>,
+    /// The fingers whose base outlines the palm, ordered around the wrist (thumb side first).
+    palm: Vec<usize>,
 }
 
-impl Default for Revo2Hand {
-    fn default() -> Self {
-        let ranges_rad = teleop_revo2_protocol::DEFAULT_JOINT_RANGES
-            .map(|r| (r.min_deg.to_radians(), r.max_deg.to_radians()));
+impl RobotHand {
+    /// The hand of `profile`; `source` says where it came from.
+    pub fn new(profile: HandProfile, source: impl Into<String>) -> Self {
+        let bases: Vec<(Vec3, Quat)> = profile
+            .fingers
+            .iter()
+            .map(|f| {
+                let [roll, pitch, yaw] = f.base_rpy;
+                // URDF convention: roll about x, then pitch about y, then yaw about z (fixed axes).
+                let rotation = Quat::from_rotation_z(yaw)
+                    * Quat::from_rotation_y(pitch)
+                    * Quat::from_rotation_x(roll);
+                (Vec3::from(f.base), rotation)
+            })
+            .collect();
+        let tip_fingers = profile
+            .fingers
+            .iter()
+            .enumerate()
+            .filter(|(_, f)| f.tip_sensor != TipSensor::None)
+            .map(|(i, _)| i)
+            .collect();
+        // The palm: the bases in front of the wrist, by their angle around it from the thumb
+        // side (-X) to the little finger side (+X). A chain behind the wrist (the Shadow Hand's
+        // wrist joints) is drawn on its own.
+        let mut palm: Vec<(f32, usize)> = bases
+            .iter()
+            .enumerate()
+            .filter(|(_, (base, _))| base.y > 0.0)
+            .map(|(i, (base, _))| (base.x.atan2(base.y), i))
+            .collect();
+        palm.sort_by(|a, b| a.0.total_cmp(&b.0));
         Self {
-            ranges_rad,
-            finger_bases: [
-                Vec3::new(-0.027, 0.100, 0.0),
-                Vec3::new(-0.008, 0.103, 0.0),
-                Vec3::new(0.011, 0.100, 0.0),
-                Vec3::new(0.029, 0.093, 0.0),
-            ],
-            finger_lengths: [
-                [0.048, 0.042],
-                [0.052, 0.044],
-                [0.048, 0.042],
-                [0.040, 0.036],
-            ],
-            distal_coupling: 0.9,
-            thumb_base: Vec3::new(-0.028, 0.030, -0.012),
-            thumb_lengths: [0.040, 0.038, 0.032],
-            thumb_direction: Vec3::new(-0.6, 0.8, 0.0),
-            thumb_coupling: 0.8,
+            profile,
+            source: source.into(),
+            bases,
+            tip_fingers,
+            palm: palm.into_iter().map(|(_, i)| i).collect(),
         }
     }
-}
 
-impl Revo2Hand {
-    /// Joint angles (radians, Revo2 joint order) of normalised positions (0 = open, 1 =
-    /// closed; clamped; NaN counts as open).
-    pub fn angles(&self, normalised: &[f32; 6]) -> [f32; 6] {
-        core::array::from_fn(|j| {
-            let q = if normalised[j].is_nan() {
-                0.0
-            } else {
-                normalised[j].clamp(0.0, 1.0)
-            };
-            let (lo, hi) = self.ranges_rad[j];
-            lo + (hi - lo) * q
-        })
+    /// The builtin profile of a contract hand model id (`hand_model` fields), if one is
+    /// compiled in.
+    pub fn builtin_for_model(model_id: u8) -> Option<Self> {
+        HandProfile::builtin_names()
+            .filter_map(HandProfile::builtin)
+            .find(|p| p.model_id == model_id)
+            .map(|p| {
+                let source = format!("builtin `{}`", p.name);
+                Self::new(p, source)
+            })
     }
 
-    /// Normalised positions of joint angles in radians (the inverse of [`angles`](Self::angles),
-    /// for hands that report physical units).
-    pub fn normalise(&self, radians: &[f32; 6]) -> [f32; 6] {
-        core::array::from_fn(|j| {
-            let (lo, hi) = self.ranges_rad[j];
-            if (hi - lo).abs() < f32::EPSILON {
-                0.0
-            } else {
-                ((radians[j] - lo) / (hi - lo)).clamp(0.0, 1.0)
-            }
-        })
+    /// The profile.
+    pub fn profile(&self) -> &HandProfile {
+        &self.profile
     }
 
-    /// The hand at normalised joint positions (Revo2 joint order).
-    pub fn pose(&self, normalised: &[f32; 6]) -> Skeleton {
-        let a = self.angles(normalised);
-        let thumb = {
-            let turn = Quat::from_rotation_y(-a[REVO2_THUMB_ABDUCT]);
-            let flex = a[REVO2_JOINT_OF_FINGER[0]];
-            chain(
-                self.thumb_base,
-                turn * self.thumb_direction,
-                turn * PALM_SIDE,
-                &self.thumb_lengths,
-                &[0.0, flex, flex * self.thumb_coupling],
-            )
-        };
-        let long = |i: usize| {
-            let flex = a[REVO2_JOINT_OF_FINGER[i]];
-            chain(
-                self.finger_bases[i - 1],
-                Vec3::Y,
-                PALM_SIDE,
-                &self.finger_lengths[i - 1],
-                &[flex, flex * self.distal_coupling],
-            )
-        };
+    /// Where the profile came from.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// The finger index of each fingertip sensor, in `hand/tactile` order.
+    pub fn tip_fingers(&self) -> &[usize] {
+        &self.tip_fingers
+    }
+
+    /// Every joint at its `open` angle, radians.
+    pub fn open_angles(&self) -> Vec<f32> {
+        self.profile.joints.iter().map(|j| j.open).collect()
+    }
+
+    /// The hand at joint angles in radians (profile joint order; missing joints rest at their
+    /// `open` angle, angles are clamped to the limits and NaN counts as open).
+    pub fn pose(&self, radians: &[f32]) -> Skeleton {
+        let angles: Vec<f32> = self
+            .profile
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| j.clamp(radians.get(i).copied().unwrap_or(j.open)))
+            .collect();
+        let fingers: Vec<Vec<Vec3>> = self
+            .profile
+            .fingers
+            .iter()
+            .zip(&self.bases)
+            .map(|(finger, &(base, rotation))| {
+                let mut position = base;
+                let mut rotation = rotation;
+                let mut points = vec![position];
+                for link in &finger.links {
+                    position += rotation * Vec3::from(link.origin);
+                    let angle = link.joint.map_or(0.0, |j| angles[j]) * link.ratio;
+                    rotation *= Quat::from_axis_angle(Vec3::from(link.axis), angle);
+                    push_distinct(&mut points, position);
+                }
+                push_distinct(&mut points, position + rotation * Vec3::from(finger.tip));
+                points
+            })
+            .collect();
+        let mut outline = vec![Vec3::ZERO];
+        outline.extend(self.palm.iter().map(|&i| fingers[i][0]));
+        outline.push(Vec3::ZERO);
         Skeleton {
             wrist: Vec3::ZERO,
-            fingers: [thumb, long(1), long(2), long(3), long(4)],
+            palm: if self.palm.is_empty() {
+                vec![]
+            } else {
+                vec![outline]
+            },
+            fingers,
         }
+    }
+}
+
+/// Appends `p` unless it is where the chain already is (a link that only turns).
+fn push_distinct(points: &mut Vec<Vec3>, p: Vec3) {
+    if points.last().is_none_or(|last| last.distance(p) > 1e-7) {
+        points.push(p);
     }
 }
 
@@ -403,59 +431,308 @@ mod tests {
         assert_eq!(&p.flexion[2..], &[0.0, 1.0, 0.0]);
     }
 
-    #[test]
-    fn revo2_joint_ranges() {
-        let hand = Revo2Hand::default();
-        // The pipeline's assumed ranges: 0..90 degrees for every joint.
-        assert_eq!(hand.angles(&[0.0; 6]), [0.0; 6]);
-        for a in hand.angles(&[1.0; 6]) {
-            assert!((a - core::f32::consts::FRAC_PI_2).abs() < EPS);
-        }
-        // Clamped, NaN = open, and back again.
-        let a = hand.angles(&[-0.5, 1.5, f32::NAN, 0.5, 0.25, 1.0]);
-        assert_eq!(a[0], 0.0);
-        assert!((a[1] - core::f32::consts::FRAC_PI_2).abs() < EPS);
-        assert_eq!(a[2], 0.0);
-        let back = hand.normalise(&a);
-        assert!((back[3] - 0.5).abs() < EPS && (back[4] - 0.25).abs() < EPS);
+    fn builtin(name: &str) -> RobotHand {
+        let profile = HandProfile::builtin(name).expect("a shipped profile");
+        RobotHand::new(profile, "test")
+    }
 
-        // 0 = open: straight fingers; 1 = closed: curled under the palm.
-        let open = hand.pose(&[0.0; 6]);
-        for (i, name) in FINGERS.iter().enumerate().skip(1) {
-            let chain = &open.fingers[i];
-            let len: f32 = hand.finger_lengths[i - 1].iter().sum();
-            assert!(
-                (chain[2] - (chain[0] + Vec3::Y * len)).length() < EPS,
-                "{name}"
+    /// Radians of normalised values (0 = open, 1 = closed) per joint.
+    fn at(hand: &RobotHand, normalised: &[f32]) -> Vec<f32> {
+        hand.profile()
+            .joints
+            .iter()
+            .zip(normalised)
+            .map(|(j, q)| j.radians(*q))
+            .collect()
+    }
+
+    /// The BrainCo Revo2 model this viewer drew before hand profiles, kept to show that the
+    /// Revo2 profile poses the hand the same way.
+    mod old_revo2 {
+        use super::super::chain;
+        use glam::{Quat, Vec3};
+
+        /// Fingertips (thumb, index, middle, ring, pinky) at normalised joint positions in the
+        /// Revo2 joint order (thumb flex, thumb abduct, index, middle, ring, pinky).
+        pub fn tips(q: &[f32; 6]) -> [Vec3; 5] {
+            let a = q.map(|q| q.clamp(0.0, 1.0) * core::f32::consts::FRAC_PI_2);
+            let palm = Vec3::NEG_Z;
+            let turn = Quat::from_rotation_y(-a[1]);
+            let thumb = chain(
+                Vec3::new(-0.028, 0.030, -0.012),
+                turn * Vec3::new(-0.6, 0.8, 0.0),
+                turn * palm,
+                &[0.040, 0.038, 0.032],
+                &[0.0, a[0], a[0] * 0.8],
             );
-            assert_eq!(chain.len(), 3, "{name}: two phalanges");
+            let bases = [
+                Vec3::new(-0.027, 0.100, 0.0),
+                Vec3::new(-0.008, 0.103, 0.0),
+                Vec3::new(0.011, 0.100, 0.0),
+                Vec3::new(0.029, 0.093, 0.0),
+            ];
+            let lengths = [
+                [0.048, 0.042],
+                [0.052, 0.044],
+                [0.048, 0.042],
+                [0.040, 0.036],
+            ];
+            let long = |i: usize| {
+                let flex = a[i + 2];
+                let c = chain(bases[i], Vec3::Y, palm, &lengths[i], &[flex, flex * 0.9]);
+                c[c.len() - 1]
+            };
+            [thumb[3], long(0), long(1), long(2), long(3)]
         }
-        let closed = hand.pose(&[1.0; 6]);
-        for (i, name) in FINGERS.iter().enumerate().skip(1) {
-            let chain = &closed.fingers[i];
-            assert!(chain[2].z < chain[0].z - 0.03, "{}", name);
-            // The proximal phalanx points straight down at 90 degrees.
-            assert!((chain[1] - chain[0])
-                .normalize()
-                .abs_diff_eq(Vec3::NEG_Z, 1e-4));
+    }
+
+    #[test]
+    fn revo2_profile_poses_the_hand_as_the_old_model() {
+        let hand = builtin("revo2");
+        assert_eq!(hand.profile().joints.len(), 6);
+        assert_eq!(hand.tip_fingers(), &[0, 1, 2, 3, 4]);
+        for q in [
+            [0.0; 6],
+            [1.0; 6],
+            [0.5; 6],
+            [0.2, 0.9, 0.1, 0.4, 0.7, 1.0],
+            [1.0, 0.0, 0.3, 0.0, 0.6, 0.25],
+        ] {
+            let new = hand.pose(&at(&hand, &q)).tips();
+            let old = old_revo2::tips(&q);
+            for (finger, (n, o)) in new.iter().zip(old).enumerate() {
+                assert!(n.distance(o) < 1e-3, "{q:?} finger {finger}: {n} vs {o}");
+            }
         }
-        // Each finger closes monotonically: its reach along the palm shrinks.
-        let mut last = f32::INFINITY;
-        for k in 0..=10 {
-            let q = k as f32 / 10.0;
-            let reach = hand.pose(&[0.0, 0.0, q, 0.0, 0.0, 0.0]).tips()[1].y;
-            assert!(reach < last, "q {q}: {reach} after {last}");
-            last = reach;
+    }
+
+    /// Sum of segment lengths of each finger.
+    fn lengths(s: &Skeleton) -> Vec<f32> {
+        s.fingers.iter().map(|c| finger_length(c)).collect()
+    }
+
+    /// Each finger's flexion joints moved from open to closed (the rest open) bring its tip
+    /// closer to the palm at every step (the centre of the palm's outline, 2 cm to the palm
+    /// side), keeping the link lengths.
+    fn flexion_closes_towards_the_palm(hand: &RobotHand) {
+        let open = hand.open_angles();
+        let open_pose = hand.pose(&open);
+        let outline = &open_pose.palm[0];
+        let centre = outline.iter().sum::<Vec3>() / outline.len() as f32 - Vec3::Z * 0.02;
+        for (f, finger) in hand.profile().fingers.iter().enumerate() {
+            let flex: Vec<usize> = (0..hand.profile().joints.len())
+                .filter(|&j| {
+                    let joint = &hand.profile().joints[j];
+                    joint.finger == f && joint.role == teleop_hand_profile::Role::Flex
+                })
+                .collect();
+            if flex.is_empty() {
+                continue;
+            }
+            let start = open_pose.tips()[f].distance(centre);
+            let mut last = start;
+            for k in 1..=4 {
+                let mut angles = open.clone();
+                for &j in &flex {
+                    angles[j] = hand.profile().joints[j].radians(k as f32 / 4.0);
+                }
+                let posed = hand.pose(&angles);
+                let distance = posed.tips()[f].distance(centre);
+                assert!(
+                    distance < last,
+                    "{}: step {k}: {distance} m from the palm after {last}",
+                    finger.name
+                );
+                last = distance;
+                for (a, b) in lengths(&posed).iter().zip(lengths(&open_pose)) {
+                    assert!((a - b).abs() < 1e-5, "{}: lengths {a} vs {b}", finger.name);
+                }
+            }
+            assert!(
+                last < start - 0.02,
+                "{}: closed {last} m from the palm, open {start}",
+                finger.name
+            );
         }
+    }
+
+    #[test]
+    fn revo2_opens_straight_and_closes_under_the_palm() {
+        let hand = builtin("revo2");
+        let open = hand.pose(&hand.open_angles());
+        // Open: index .. pinky point straight along +Y, two phalanges each.
+        for chain in &open.fingers[1..] {
+            assert_eq!(chain.len(), 3);
+            let along = chain[2] - chain[0];
+            assert!(along.normalize().abs_diff_eq(Vec3::Y, EPS), "{along}");
+        }
+        flexion_closes_towards_the_palm(&hand);
         // Only the driven finger moves.
-        let one = hand.pose(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0]);
+        let one = hand.pose(&at(&hand, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0]));
         assert_eq!(one.fingers[1], open.fingers[1]);
         assert_ne!(one.fingers[2], open.fingers[2]);
-        // Thumb abduction swings the thumb under the palm; flexion alone keeps it beside it.
-        let out = hand.pose(&[0.0; 6]).tips()[0];
-        let abducted = hand.pose(&[0.0, 1.0, 0.0, 0.0, 0.0, 0.0]).tips()[0];
-        assert!((out.z - hand.thumb_base.z).abs() < EPS);
-        assert!(abducted.z < hand.thumb_base.z - 0.05);
+        // Out of range and NaN: clamped to the limits, NaN = open.
+        let wild = hand.pose(&[f32::NAN, 9.0, -3.0, 0.0, 0.0, 0.0]);
+        let expect = hand.pose(&[0.0, core::f32::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(wild, expect);
+        // Missing joints rest open.
+        assert_eq!(hand.pose(&[]), open);
+    }
+
+    #[test]
+    fn allegro_has_four_fingers_that_close_towards_the_palm() {
+        let hand = builtin("allegro");
+        assert_eq!(hand.profile().fingers.len(), 4);
+        assert_eq!(hand.profile().joints.len(), 16);
+        assert!(hand.tip_fingers().is_empty(), "no fingertip sensors");
+        let open = hand.pose(&hand.open_angles());
+        assert_eq!(open.fingers.len(), 4);
+        assert_eq!(open.tips().len(), 4);
+        flexion_closes_towards_the_palm(&hand);
+        // Joint 0 turns a finger about its own axis (as in the URDF): a straight index stays
+        // where it is, a bent one swings sideways.
+        let mut turned = hand.open_angles();
+        turned[0] = 0.3;
+        assert!(hand.pose(&turned).tips()[0].abs_diff_eq(open.tips()[0], EPS));
+        let mut bent = hand.open_angles();
+        bent[1] = 1.0;
+        let mut bent_turned = bent.clone();
+        bent_turned[0] = 0.3;
+        let moved = hand.pose(&bent_turned).tips()[0] - hand.pose(&bent).tips()[0];
+        assert!(moved.x.abs() > 0.01, "{moved}");
+    }
+
+    #[test]
+    fn shadow_has_24_joints_and_coupled_distal_joints() {
+        let hand = builtin("shadow");
+        let profile = hand.profile();
+        assert_eq!(profile.joints.len(), 24);
+        assert_eq!(hand.tip_fingers().len(), 5);
+        flexion_closes_towards_the_palm(&hand);
+        // J1 follows J2: a command with J2 closed and J1 at its coupled angle curls the
+        // distal phalanx further than J2 alone.
+        let ffj1 = profile.joint_index("FFJ1").expect("FFJ1");
+        let ffj2 = profile.joint_index("FFJ2").expect("FFJ2");
+        let coupling = profile.joints[ffj1].coupling.expect("FFJ1 is coupled");
+        assert_eq!(coupling.to, ffj2);
+        let ff = profile
+            .fingers
+            .iter()
+            .position(|f| f.name == "ff")
+            .expect("ff");
+        let mut j2 = hand.open_angles();
+        j2[ffj2] = 1.0;
+        let mut both = j2.clone();
+        both[ffj1] = coupling.ratio * j2[ffj2];
+        let (j2_only, coupled) = (hand.pose(&j2), hand.pose(&both));
+        // (curled back towards the wrist).
+        assert!(coupled.tips()[ff].y < j2_only.tips()[ff].y - 0.01);
+        // The middle phalanx is where J2 alone put it: J1 turns only the distal one.
+        let n = coupled.fingers[ff].len();
+        assert!(coupled.fingers[ff][n - 2].abs_diff_eq(j2_only.fingers[ff][n - 2], EPS));
+        for (a, b) in lengths(&coupled).iter().zip(lengths(&j2_only)) {
+            assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+        }
+    }
+
+    /// A fingertip at joint angles given by name (the rest open).
+    fn tip_at(hand: &RobotHand, finger: &str, angles: &[(&str, f32)]) -> Vec3 {
+        let profile = hand.profile();
+        let mut q = hand.open_angles();
+        for (name, a) in angles {
+            q[profile.joint_index(name).expect(name)] = *a;
+        }
+        let f = profile.fingers.iter().position(|f| f.name == finger);
+        hand.pose(&q).tips()[f.expect(finger)]
+    }
+
+    #[test]
+    fn allegro_and_shadow_chains_reproduce_their_urdfs() {
+        // Expected tips: forward kinematics of allegro_hand_description_right.urdf and of
+        // sr_description's right hand (joint origins, rpy and axes as published), mapped into
+        // the hand frame as config/hands/{allegro,shadow}.toml describe.
+        let allegro = builtin("allegro");
+        let cases = [
+            (
+                &allegro,
+                "index",
+                vec![
+                    ("index_0", 0.2),
+                    ("index_1", 0.8),
+                    ("index_2", 0.6),
+                    ("index_3", 0.4),
+                ],
+                Vec3::new(-0.068_550, 0.145_957, -0.100_535),
+            ),
+            (
+                &allegro,
+                "thumb",
+                vec![
+                    ("thumb_0", 1.0),
+                    ("thumb_1", 0.5),
+                    ("thumb_2", 0.7),
+                    ("thumb_3", 0.3),
+                ],
+                Vec3::new(-0.054_896, 0.079_325, -0.103_080),
+            ),
+        ];
+        let shadow = builtin("shadow");
+        let shadow_cases = [
+            (
+                &shadow,
+                "lf",
+                vec![
+                    ("LFJ5", 0.5),
+                    ("LFJ4", 0.2),
+                    ("LFJ3", 0.6),
+                    ("LFJ2", 0.8),
+                    ("LFJ1", 0.8),
+                ],
+                Vec3::new(-0.004_926, 0.089_239, -0.085_482),
+            ),
+            (
+                &shadow,
+                "th",
+                vec![
+                    ("THJ5", 0.4),
+                    ("THJ4", 1.0),
+                    ("THJ3", 0.1),
+                    ("THJ2", 0.5),
+                    ("THJ1", 0.9),
+                ],
+                Vec3::new(-0.014_539, 0.098_510, -0.048_393),
+            ),
+        ];
+        for (hand, finger, angles, expect) in cases.iter().chain(&shadow_cases) {
+            let tip = tip_at(hand, finger, angles);
+            assert!(tip.distance(*expect) < 1e-5, "{finger}: {tip} vs {expect}");
+        }
+        // Straight and not spread, the Shadow's first finger points out from its knuckle:
+        // 0.045 + 0.025 + 0.026.
+        let ff = tip_at(&shadow, "ff", &[("FFJ4", 0.0)]);
+        assert!(
+            ff.abs_diff_eq(Vec3::new(-0.033, 0.095 + 0.096, 0.0), EPS),
+            "{ff}"
+        );
+    }
+
+    #[test]
+    fn base_rpy_is_roll_then_pitch_then_yaw_about_fixed_axes() {
+        let mut profile = HandProfile::builtin("revo2").expect("revo2");
+        let finger = &mut profile.fingers[1];
+        finger.base = [0.0; 3];
+        finger.base_rpy = [
+            core::f32::consts::FRAC_PI_2,
+            0.0,
+            core::f32::consts::FRAC_PI_2,
+        ];
+        finger.links.truncate(1);
+        finger.links[0].joint = None;
+        finger.tip = [0.0, 0.1, 0.0];
+        let hand = RobotHand::new(profile, "test");
+        // Roll +90 deg about x takes +Y to +Z; yaw about z leaves +Z alone.
+        let tip = hand.pose(&hand.open_angles()).tips()[1];
+        assert!(tip.abs_diff_eq(Vec3::new(0.0, 0.0, 0.1), EPS), "{tip}");
     }
 
     #[test]
@@ -463,7 +740,20 @@ mod tests {
         let s = OperatorHand::default().pose(&OperatorPose::default());
         assert_eq!(s.strips().len(), 5 + 1 + 5);
         assert_eq!(s.joints().len(), 1 + 5 * 4);
-        let r = Revo2Hand::default().pose(&[0.0; 6]);
+        // Revo2: the palm outline (wrist, five bases, wrist), then five fingers; joints:
+        // thumb base, two joints and tip; base, joint and tip of the others.
+        let hand = builtin("revo2");
+        let r = hand.pose(&hand.open_angles());
+        assert_eq!(
+            r.palm,
+            vec![{
+                let mut outline = vec![Vec3::ZERO];
+                outline.extend(r.fingers.iter().map(|c| c[0]));
+                outline.push(Vec3::ZERO);
+                outline
+            }]
+        );
+        assert_eq!(r.strips().len(), 1 + 5);
         assert_eq!(r.joints().len(), 1 + 4 + 4 * 3);
     }
 }

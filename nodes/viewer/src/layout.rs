@@ -1,62 +1,68 @@
 //! The default layout (a rerun blueprint): the hands and the current forces on the left, the
-//! per-finger time series, force histories, link health and latency on the right.
+//! per-finger closure plots, force histories, link health and latency on the right. What
+//! depends on the robot hand comes from the content layer's [`Layout`].
 
 use rerun::blueprint::{
     components::PanelState, BarChartView, Blueprint, BlueprintPanel, ContainerLike, Grid,
     Horizontal, SelectionPanel, Spatial3DView, TimePanel, TimeSeriesView, Vertical,
 };
 
-use crate::content::{force_path, POSITION_SERIES, RECORDING_TIME};
-use crate::kinematics::FINGERS;
+use crate::content::{Layout, Plot, RECORDING_TIME};
 
-/// A time series view over one force of every finger.
-fn finger_forces(name: &str, which: &str) -> TimeSeriesView {
-    TimeSeriesView::new(name)
+/// A time series view over the plot's entity paths.
+fn series_view(plot: &Plot) -> TimeSeriesView {
+    TimeSeriesView::new(plot.title.as_str())
         .with_origin("/")
-        .with_contents(FINGERS.map(|f| format!("+ /{}", force_path(f, which))))
+        .with_contents(plot.contents.iter().map(|p| format!("+ /{p}")))
 }
 
 /// The layout a person reads at a glance:
 ///
 /// ```text
 /// +-----------------------------+--------------------------------------------+
-/// |                             | thumb   | index   | middle   closure 0..1: |
-/// | Hands (3D): the operator    | ring    | little  | thumb     glove, cmd,  |
-/// | (left) and the Revo2        |         |         | rotation  measured     |
-/// | (right), contacts, arrows   +----------------------+---------------------+
-/// |                             | tactile normal (N)   | glove force command |
+/// |                             | a closure plot per robot finger (its       |
+/// | Hands (3D): the operator    | joints commanded and measured, 0 = open .. |
+/// | (left) and the robot hand   | 1 = closed, and the glove channels that    |
+/// | (right), contacts, arrows   | drive them), three per row                 |
+/// |                             +----------------------+---------------------+
+/// |                             | tactile (per tip)    | glove force command |
 /// +--------------+--------------+----------------------+---------------------+
 /// | tactile now  | glove now    | link health          | latency (ms)        |
 /// +--------------+--------------+----------------------+---------------------+
 /// ```
 ///
-/// The time panel shows [`RECORDING_TIME`]; the blueprint and selection panels start
-/// collapsed, and no views are added automatically.
-pub fn default_blueprint() -> Blueprint {
-    let hands = Spatial3DView::new("Hands: operator (left), Revo2 (right)").with_origin("/hands");
-    let bars = Horizontal::new([
-        BarChartView::new("Tactile normal force now (N), thumb..little")
-            .with_origin("/bars/tactile_normal")
-            .into(),
-        BarChartView::new("Glove force command now, thumb..little")
-            .with_origin("/bars/glove_force")
-            .into(),
-    ]);
+/// Without fingertip sensors the tactile views are left out. The time panel shows
+/// [`RECORDING_TIME`]; the blueprint and selection panels start collapsed, and no views are
+/// added automatically.
+pub fn default_blueprint(layout: &Layout) -> Blueprint {
+    let hands = Spatial3DView::new(layout.hands_title.as_str()).with_origin("/hands");
+    let glove_bars: ContainerLike = BarChartView::new("Glove force command now, thumb..little")
+        .with_origin("/bars/glove_force")
+        .into();
+    let bars = match &layout.tactile {
+        Some((title, _)) => Horizontal::new([
+            BarChartView::new(title.as_str())
+                .with_origin("/bars/tactile")
+                .into(),
+            glove_bars,
+        ]),
+        None => Horizontal::new([glove_bars]),
+    };
     let left = Vertical::new([hands.into(), bars.into()]).with_row_shares([3.0, 1.2]);
 
-    let fingers: Vec<ContainerLike> = POSITION_SERIES
+    let fingers: Vec<ContainerLike> = layout
+        .closures
         .iter()
-        .map(|f| {
-            TimeSeriesView::new(format!("{} closure", f.replace('_', " ")))
-                .with_origin(format!("/fingers/{f}/position"))
-                .into()
-        })
+        .map(|plot| series_view(plot).into())
         .collect();
     let fingers = Grid::new(fingers).with_grid_columns(3);
-    let forces = Horizontal::new([
-        finger_forces("Tactile normal force (N)", "tactile_normal").into(),
-        finger_forces("Glove force command (glove units)", "glove_command").into(),
-    ]);
+    let glove_force = TimeSeriesView::new("Glove force command (glove units)")
+        .with_origin("/glove/force")
+        .into();
+    let forces = match &layout.tactile {
+        Some((_, plot)) => Horizontal::new([series_view(plot).into(), glove_force]),
+        None => Horizontal::new([glove_force]),
+    };
     let status = Horizontal::new([
         TimeSeriesView::new("Link health (counts since start)")
             .with_origin("/health")

@@ -3,10 +3,12 @@
 //!
 //! Three layers, so that the content is tested without rerun and rerun stays in this crate:
 //! - content ([`kinematics`], [`sample`], [`content`]): pure. Hand models with `glam` (the
-//!   operator's hand posed from the glove, the Revo2 from its joint state) and the conversion of
-//!   each sample into entity paths and plain values ([`content::Frame`]), with decimation.
+//!   operator's hand posed from the glove; the robot hand from its profile, `teleop-hand-profile`,
+//!   and its joint state) and the conversion of each sample into entity paths and plain values
+//!   ([`content::Frame`]), with decimation.
 //! - rerun ([`logger`], [`layout`]): logs frames as rerun archetypes on two timelines
-//!   (`recording_time`, `sample_time`) and sends the default layout (blueprint).
+//!   (`recording_time`, `sample_time`) and sends the default layout (blueprint) for the robot
+//!   hand.
 //! - sources ([`live`], [`recording`]): iceoryx2 subscribers feeding a logging thread through a
 //!   bounded queue that drops (and counts) rather than blocks; or a recording read in log-time
 //!   order, with a progress bar.

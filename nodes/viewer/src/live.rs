@@ -22,6 +22,7 @@ use teleop_runtime::{
 };
 
 use crate::content::{Decimator, Scene, SceneConfig};
+use crate::kinematics::RobotHand;
 use crate::logger::RerunLogger;
 use crate::sample::Sample;
 
@@ -239,11 +240,13 @@ pub fn log_loop(
     frames
 }
 
-/// Streams the live pipeline to `logger` until SIGINT/SIGTERM (or `options.duration`).
+/// Streams the live pipeline to `logger` until SIGINT/SIGTERM (or `options.duration`), drawing
+/// `robot`, or (`None`) the builtin profile of the first hand sample's model.
 pub fn run_live(
     runtime: &NodeRuntime,
     logger: RerunLogger,
     options: &LiveOptions,
+    robot: Option<RobotHand>,
 ) -> anyhow::Result<LiveSummary> {
     let mut taps: Vec<Box<dyn Tap>> = Vec::new();
     for t in topics() {
@@ -255,8 +258,8 @@ pub fn run_live(
     let (tx, rx) = std::sync::mpsc::sync_channel::<Received>(options.queue.max(1));
     let mut forwarder = Forwarder::new(tx, options.scene.scalar_hz, Arc::clone(&counters));
 
-    let mut scene = Scene::new(options.scene);
-    logger.log_static(&scene.static_entries())?;
+    let mut scene = Scene::new(options.scene, robot);
+    logger.log_scene(&scene)?;
     let logging = {
         let counters = Arc::clone(&counters);
         let report_every = options.report_every;

@@ -1,14 +1,17 @@
 //! The rerun layer: logs the content layer's [`Frame`]s and [`Entry`]s to a
 //! [`rerun::RecordingStream`] (whatever its sink: a viewer, a file, memory), converting the
-//! plain values to rerun archetypes at this boundary only.
+//! plain values to rerun archetypes at this boundary only, and sends the layout
+//! ([`default_blueprint`]) when the content asks for one.
 
+use rerun::blueprint::BlueprintActivation;
 use rerun::{
     Arrows3D, BarChart, Color, LineStrips3D, Points3D, Radius, RecordingStream,
     RecordingStreamResult, Scalars, SeriesLines, TextDocument, TimeCell, Transform3D,
     ViewCoordinates,
 };
 
-use crate::content::{Entry, Frame, Rgba, Visual, RECORDING_TIME, SAMPLE_TIME};
+use crate::content::{Entry, Frame, Layout, Rgba, Scene, Visual, RECORDING_TIME, SAMPLE_TIME};
+use crate::layout::default_blueprint;
 
 fn color(c: Rgba) -> Color {
     Color::from_unmultiplied_rgba(c[0], c[1], c[2], c[3])
@@ -39,8 +42,24 @@ impl RerunLogger {
         Ok(())
     }
 
-    /// Logs a frame at its point of both timelines.
+    /// Sends `layout` as the default blueprint and makes it the active one.
+    pub fn send_layout(&self, layout: &Layout) -> RecordingStreamResult<()> {
+        default_blueprint(layout).send(&self.rec, BlueprintActivation::default())
+    }
+
+    /// What a scene shows before its first sample: its timeless entries and its layout.
+    pub fn log_scene(&self, scene: &Scene) -> RecordingStreamResult<()> {
+        self.log_static(&scene.static_entries())?;
+        self.send_layout(&scene.layout())
+    }
+
+    /// Logs a frame at its point of both timelines (and its timeless entries and layout, if
+    /// any).
     pub fn log_frame(&self, frame: &Frame) -> RecordingStreamResult<()> {
+        self.log_static(&frame.statics)?;
+        if let Some(layout) = &frame.layout {
+            self.send_layout(layout)?;
+        }
         self.rec.set_time(
             RECORDING_TIME,
             TimeCell::from_duration_nanos(frame.recording_time_ns),

@@ -7,12 +7,13 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
+use teleop_hand_profile::HandProfile;
 use teleop_recording::Filter;
 use teleop_runtime::{
     init_logging, now_ns, IpcSettings, NodeRuntime, ENV_IPC_PREFIX, ENV_IPC_ROOT,
 };
 use teleop_viewer::content::SceneConfig;
-use teleop_viewer::layout::default_blueprint;
+use teleop_viewer::kinematics::RobotHand;
 use teleop_viewer::live::{run_live, LiveOptions};
 use teleop_viewer::logger::RerunLogger;
 use teleop_viewer::recording::view_recording;
@@ -27,11 +28,16 @@ const INSTALL: &str =
     version,
     about = "Show the live pipeline, or a recording, in a rerun viewer",
     after_help = "Without FILE: the live pipeline until Ctrl-C. Without --connect or --save: \
-                  starts `rerun` from PATH (--spawn)."
+                  starts `rerun` from PATH (--spawn). The robot hand is drawn from --profile; \
+                  else from the profile a recording embeds; else from the builtin profile of \
+                  the first hand sample's model."
 )]
 struct Args {
     /// A recording (.mcap) to show instead of the live pipeline.
     file: Option<PathBuf>,
+    /// The robot hand's profile (config/hands/<hand>.toml) to draw it with.
+    #[arg(long, value_name = "FILE")]
+    profile: Option<PathBuf>,
     /// Stream to a running viewer (default: rerun+http://127.0.0.1:9876/proxy).
     #[arg(
         long,
@@ -97,6 +103,13 @@ fn run(args: &Args) -> anyhow::Result<()> {
         pose_hz: args.pose_hz,
         time_origin_ns: now_ns(),
     };
+    let robot = match &args.profile {
+        Some(path) => Some(RobotHand::new(
+            HandProfile::load(path)?,
+            path.display().to_string(),
+        )),
+        None => None,
+    };
     match &args.file {
         Some(file) => {
             let name = file
@@ -109,7 +122,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 start: args.start.map(secs),
                 end: args.end.map(secs),
             };
-            let summary = view_recording(file, &filter, &logger, scene, true)?;
+            let summary = view_recording(file, &filter, &logger, scene, robot, true)?;
             finish(args, &rec)?;
             eprintln!(
                 "{}: {} messages, {} frames logged{}",
@@ -141,7 +154,7 @@ fn run(args: &Args) -> anyhow::Result<()> {
                     .map(|s| Duration::from_secs_f64(s.clamp(0.0, 1e6))),
                 ..LiveOptions::default()
             };
-            let summary = run_live(&runtime, RerunLogger::new(rec.clone()), &options)?;
+            let summary = run_live(&runtime, RerunLogger::new(rec.clone()), &options, robot)?;
             finish(args, &rec)?;
             eprintln!(
                 "viewed {} samples ({} frames); dropped {} (viewer behind), missed {}, \
@@ -157,11 +170,9 @@ fn run(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The recording stream for the chosen sink, with the default layout.
+/// The recording stream for the chosen sink (the sources send the layout).
 fn open_stream(args: &Args, recording_name: &str) -> anyhow::Result<RecordingStream> {
-    let builder = RecordingStreamBuilder::new("teleop")
-        .recording_name(recording_name)
-        .with_blueprint(default_blueprint());
+    let builder = RecordingStreamBuilder::new("teleop").recording_name(recording_name);
     if let Some(url) = &args.connect {
         check_listening(url)?;
         return Ok(builder.connect_grpc_opts(url.clone())?);

@@ -1,14 +1,18 @@
 //! The recording source: a recording's messages in log-time order, on the recording's own
 //! timelines (`recording_time` from each message's log time, `sample_time` from its stamp,
-//! both counted from the recording's first message).
+//! both counted from the recording's first message), with the robot hand of the profile the
+//! recorder embedded ([`recorded_profile`]) unless the caller gives one.
 
 use std::io::{IsTerminal, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
+use teleop_hand_profile::HandProfile;
 use teleop_recording::{info, read_messages, Filter, RecordingInfo};
 
 use crate::content::{Scene, SceneConfig};
+use crate::kinematics::RobotHand;
 use crate::logger::RerunLogger;
 use crate::sample::Sample;
 
@@ -109,23 +113,60 @@ impl Progress {
     }
 }
 
+/// The metadata record in which the recorder embeds the hand profile
+/// (`teleop-recorder --metadata hand_profile=FILE`): fields `file` (its path) and `text`.
+pub const PROFILE_METADATA: &str = "hand_profile";
+
+/// The hand profile embedded in a recording's metadata, `None` when it has none (recordings
+/// made before profiles existed). An embedded profile that does not load is an error naming
+/// the recording, the embedded file, the line and the field.
+pub fn recorded_profile(path: &Path, about: &RecordingInfo) -> anyhow::Result<Option<RobotHand>> {
+    let Some((_, fields)) = about.metadata.iter().find(|(n, _)| n == PROFILE_METADATA) else {
+        return Ok(None);
+    };
+    let text = fields.get("text").ok_or_else(|| {
+        anyhow::anyhow!(
+            "{}: metadata `{PROFILE_METADATA}` has no `text` field",
+            path.display()
+        )
+    })?;
+    let origin = format!(
+        "{} (metadata {PROFILE_METADATA}, from {})",
+        path.display(),
+        fields.get("file").map_or("?", String::as_str)
+    );
+    let profile = HandProfile::from_toml_str(text, &origin).context(
+        "the recording's hand profile does not load; pass --profile FILE to use another",
+    )?;
+    Ok(Some(RobotHand::new(profile, origin)))
+}
+
 /// Logs the messages of the recording at `path` that `filter` selects to `logger`;
 /// `config.time_origin_ns` is replaced by the recording's first log time (so times match
-/// `teleop recordings info` and `teleop replay --start`). Shows a progress bar on stderr when
-/// `progress` is set.
+/// `teleop recordings info` and `teleop replay --start`). The robot hand is `robot` when
+/// given, else the profile embedded in the recording, else the builtin profile of the first
+/// hand sample's model. Shows a progress bar on stderr when `progress` is set.
 pub fn view_recording(
     path: &Path,
     filter: &Filter,
     logger: &RerunLogger,
     config: SceneConfig,
+    robot: Option<RobotHand>,
     progress: bool,
 ) -> anyhow::Result<RecordingSummary> {
     let about = info(path)?;
-    let mut scene = Scene::new(SceneConfig {
-        time_origin_ns: about.start_ns,
-        ..config
-    });
-    logger.log_static(&scene.static_entries())?;
+    let robot = match robot {
+        Some(robot) => Some(robot),
+        None => recorded_profile(path, &about)?,
+    };
+    let mut scene = Scene::new(
+        SceneConfig {
+            time_origin_ns: about.start_ns,
+            ..config
+        },
+        robot,
+    );
+    logger.log_scene(&scene)?;
     let mut bar = Progress::new("reading", expected_messages(&about, filter), progress);
     let mut summary = RecordingSummary::default();
     for message in read_messages(path, filter)? {

@@ -61,7 +61,7 @@ fn live_samples_are_decimated_and_logged() {
             duration: Some(Duration::from_secs(3)),
             ..LiveOptions::default()
         };
-        run_live(&runtime, logger, &options).unwrap()
+        run_live(&runtime, logger, &options, None).unwrap()
     });
 
     let runtime = NodeRuntime::new("test-hand", &settings).unwrap();
@@ -94,7 +94,7 @@ fn live_samples_are_decimated_and_logged() {
     assert_eq!(summary.frames, summary.forwarded);
 
     let msgs = storage.take();
-    let index = scalars(&msgs, "fingers/index/position/measured");
+    let index = scalars(&msgs, "robot/index/index/measured");
     assert_eq!(index.len() as u64, summary.forwarded);
     assert!(index.iter().all(|v| *v == 0.25));
     let times = sample_times(&msgs, "health/hand/link_errors");

@@ -7,7 +7,6 @@ use teleop_msgs::{
     hand_model, Fingertip, GloveState, HandState, NodeHealth, SampleHeader, Tactile,
 };
 use teleop_viewer::content::{contact_radius, Scene, SceneConfig, RECORDING_TIME, SAMPLE_TIME};
-use teleop_viewer::layout::default_blueprint;
 use teleop_viewer::logger::RerunLogger;
 use teleop_viewer::rerun::components::{Position3D, Radius, Scalar, TensorData};
 use teleop_viewer::rerun::datatypes::TensorBuffer;
@@ -121,15 +120,17 @@ impl Logged {
 
 fn log_samples(samples: &[(Sample, u64)]) -> (Logged, Scene) {
     let (rec, storage) = RecordingStreamBuilder::new("teleop_viewer_test")
-        .with_blueprint(default_blueprint())
         .memory()
         .expect("memory sink");
     let logger = RerunLogger::new(rec.clone());
-    let mut scene = Scene::new(SceneConfig {
-        time_origin_ns: ORIGIN,
-        ..SceneConfig::default()
-    });
-    logger.log_static(&scene.static_entries()).expect("static");
+    let mut scene = Scene::new(
+        SceneConfig {
+            time_origin_ns: ORIGIN,
+            ..SceneConfig::default()
+        },
+        None,
+    );
+    logger.log_scene(&scene).expect("static and layout");
     for (sample, received) in samples {
         if let Some(frame) = scene.frame(sample, *received) {
             logger.log_frame(&frame).expect("log");
@@ -153,11 +154,13 @@ fn glove_state_logs_the_operator_hand_and_closures() {
 
     // The fingertips are where the kinematic model puts them.
     let tips = logged.positions("hands/operator/tips");
-    let expected = scene
+    let expected: Vec<[f32; 3]> = scene
         .operator_pose(&glove.position)
         .tips()
-        .map(|v| v.to_array());
-    assert_eq!(tips, vec![expected.to_vec()]);
+        .into_iter()
+        .map(|v| v.to_array())
+        .collect();
+    assert_eq!(tips, vec![expected]);
     // Open little finger: straight out along +Y from its knuckle; the bent index is curled.
     let little = scene.operator_model().fingers[3];
     let length: f32 = little.lengths.iter().sum();
@@ -169,23 +172,20 @@ fn glove_state_logs_the_operator_hand_and_closures() {
     let joints = logged.positions("hands/operator/joints");
     assert_eq!(joints[0].len(), 21);
 
-    assert_eq!(logged.scalars("fingers/index/position/glove"), vec![1.0]);
-    assert_eq!(logged.scalars("fingers/middle/position/glove"), vec![0.5]);
-    assert_eq!(logged.scalars("fingers/little/position/glove"), vec![0.0]);
-    assert_eq!(
-        logged.scalars("fingers/thumb_rotation/position/glove"),
-        vec![0.0]
-    );
+    assert_eq!(logged.scalars("glove/position/index"), vec![1.0]);
+    assert_eq!(logged.scalars("glove/position/middle"), vec![0.5]);
+    assert_eq!(logged.scalars("glove/position/little"), vec![0.0]);
+    assert_eq!(logged.scalars("glove/position/thumb_rotation"), vec![0.0]);
     assert_eq!(logged.scalars("health/glove/errors"), vec![2.0]);
     assert_eq!(logged.scalars("latency/delivery/glove_state"), vec![2.0]);
 
     // Both timelines, from the origin.
     assert_eq!(
-        logged.times("fingers/index/position/glove", RECORDING_TIME),
+        logged.times("glove/position/index", RECORDING_TIME),
         vec![(12 * MS) as i64]
     );
     assert_eq!(
-        logged.times("fingers/index/position/glove", SAMPLE_TIME),
+        logged.times("glove/position/index", SAMPLE_TIME),
         vec![(10 * MS) as i64]
     );
 
@@ -228,25 +228,27 @@ fn tactile_logs_bars_and_contacts_scaled_by_force() {
     ]);
 
     // Bar chart of the current normal forces, thumb .. little.
-    let bars = logged.rows::<TensorData>(
-        "bars/tactile_normal",
-        BarChart::descriptor_values().component,
-    );
+    let bars = logged.rows::<TensorData>("bars/tactile", BarChart::descriptor_values().component);
     assert_eq!(bars.len(), 1);
     let TensorBuffer::F32(values) = &bars[0][0].0.buffer else {
         panic!("f32 bars expected");
     };
     assert_eq!(values.to_vec(), vec![0.0, 3.0, 0.0, 0.5, 0.0]);
-    assert_eq!(
-        logged.scalars("fingers/index/force/tactile_normal"),
-        vec![3.0]
-    );
+    assert_eq!(logged.scalars("robot/index/tactile/normal_n"), vec![3.0]);
 
+    // The first hand sample picked the Revo2's profile: its layout was sent after the first.
+    assert_eq!(logged.activations, 2);
+    let robot = scene.robot_model().expect("the Revo2 profile");
+    assert_eq!(robot.profile().name, "revo2");
     // Contacts at the posed robot fingertips, radius from the force.
-    let posed = scene
-        .robot_model()
-        .pose(&[0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
-        .tips();
+    let half_index: Vec<f32> = robot
+        .profile()
+        .joints
+        .iter()
+        .zip([0.0, 0.0, 0.5, 0.0, 0.0, 0.0])
+        .map(|(j, q)| j.radians(q))
+        .collect();
+    let posed = robot.pose(&half_index).tips();
     assert_eq!(
         logged.positions("hands/robot/contacts"),
         vec![vec![posed[1].to_array(), posed[3].to_array()]]
@@ -271,7 +273,7 @@ fn tactile_logs_bars_and_contacts_scaled_by_force() {
     // Link health of the hand and its measured joints.
     assert_eq!(logged.scalars("health/hand/link_errors"), vec![3.0]);
     assert_eq!(logged.scalars("health/hand/lost_frames"), vec![1.0]);
-    assert_eq!(logged.scalars("fingers/index/position/measured"), vec![0.5]);
+    assert_eq!(logged.scalars("robot/index/index/measured"), vec![0.5]);
 }
 
 #[test]
