@@ -90,6 +90,35 @@ fn the_profile_embedded_in_a_recording_drives_reprocessing() {
 }
 
 #[test]
+fn reprocessing_onto_its_own_input_is_refused_and_keeps_the_recording() {
+    let sandbox = Sandbox::new();
+    let copy = sandbox.dir.path().join("session.mcap");
+    std::fs::copy(sample(), &copy).unwrap();
+    let before = std::fs::read(&copy).unwrap();
+    // The same file, also through another spelling of its path.
+    let other = sandbox.dir.path().join(".").join("session.mcap");
+    for out in [&copy, &other] {
+        let r = sandbox.run_teleop(&[
+            "reprocess",
+            copy.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success());
+        assert!(
+            stderr.contains("is the recording being reprocessed"),
+            "{stderr}"
+        );
+        assert_eq!(
+            std::fs::read(&copy).unwrap(),
+            before,
+            "the recording is intact"
+        );
+    }
+}
+
+#[test]
 fn a_recording_without_a_profile_uses_the_shipped_profile_of_its_hand() {
     let sandbox = Sandbox::new();
     let out = sandbox.dir.path().join("out.mcap");

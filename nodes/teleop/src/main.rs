@@ -173,6 +173,10 @@ enum Command {
         /// Force-feedback configuration.
         #[arg(long)]
         feedback_config: Option<PathBuf>,
+        /// Hand profile (default: the one embedded in the recording, else the shipped profile of
+        /// the recorded hand model).
+        #[arg(long)]
+        profile: Option<PathBuf>,
     },
     /// Show the live pipeline or a recording in a rerun viewer (`teleop view --help`).
     ///
@@ -287,6 +291,7 @@ fn main() -> ExitCode {
             retarget_config,
             calibration,
             feedback_config,
+            profile,
         } => recordings::reprocess_cmd(
             &file,
             &out,
@@ -294,6 +299,7 @@ fn main() -> ExitCode {
                 retarget_config,
                 calibration,
                 feedback_config,
+                profile,
             },
         ),
         Command::Revo2 { target, command } => revo2::run(&target, &command),

@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use node_feedback::{Event, FeedbackEngine};
 use node_retarget::RetargetEngine;
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     source_id, visit_topic, EStop, GloveForceCommand, GloveState, HandCommand, HandState, Message,
     Tactile, TopicVisitor,
@@ -268,6 +269,70 @@ pub struct ReprocessOptions {
     pub retarget_config: Option<PathBuf>,
     pub calibration: Option<PathBuf>,
     pub feedback_config: Option<PathBuf>,
+    pub profile: Option<PathBuf>,
+}
+
+/// The metadata record the recorder embeds the hand profile in (`--metadata hand_profile=FILE`).
+pub const PROFILE_METADATA: &str = "hand_profile";
+
+/// The hand a recording was made with: `--profile` when given; else the profile embedded in the
+/// recording's metadata; else (recordings made before profiles existed) the shipped profile of
+/// the recorded hand commands' model. Says which on stderr.
+fn recording_profile(
+    input: &Path,
+    explicit: Option<&Path>,
+    messages: &[OwnedMessage],
+) -> anyhow::Result<HandProfile> {
+    if let Some(path) = explicit {
+        return Ok(HandProfile::load(path)?);
+    }
+    let info = recording_info(input)?;
+    if let Some((_, fields)) = info.metadata.iter().find(|(n, _)| n == PROFILE_METADATA) {
+        let text = fields.get("text").ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: metadata `{PROFILE_METADATA}` has no `text` field",
+                input.display()
+            )
+        })?;
+        let origin = format!(
+            "{} (metadata {PROFILE_METADATA}, from {})",
+            input.display(),
+            fields.get("file").map_or("?", String::as_str)
+        );
+        let profile = HandProfile::from_toml_str(text, &origin)?;
+        eprintln!(
+            "hand profile `{}` from the recording's metadata",
+            profile.name
+        );
+        return Ok(profile);
+    }
+    let model = messages
+        .iter()
+        .filter(|m| m.topic == HandCommand::TOPIC)
+        .find_map(|m| m.decode::<HandCommand>())
+        .map(|c| c.hand_model)
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: no `{PROFILE_METADATA}` metadata and no hand command to tell the hand by: \
+                 pass --profile",
+                input.display()
+            )
+        })?;
+    let profile = HandProfile::builtin_names()
+        .filter_map(HandProfile::builtin)
+        .find(|p| p.model_id == model)
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: no `{PROFILE_METADATA}` metadata and no shipped profile for hand model {model}: \
+                 pass --profile",
+                input.display()
+            )
+        })?;
+    eprintln!(
+        "hand profile `{}` (shipped; the recording names none, its hand commands are model {model})",
+        profile.name
+    );
+    Ok(profile)
 }
 
 /// Differences between recomputed and recorded outputs of one topic.
@@ -288,11 +353,26 @@ pub fn reprocess_cmd(
     out: &Path,
     opts: &ReprocessOptions,
 ) -> anyhow::Result<ExitCode> {
-    let (rcfg, cal, _) =
-        node_retarget::load(opts.retarget_config.as_deref(), opts.calibration.as_deref())?;
-    let fcfg = node_feedback::load(opts.feedback_config.as_deref())?;
-    let mut retarget = RetargetEngine::new(&rcfg, cal)?;
-    let mut feedback = FeedbackEngine::new(&fcfg)?;
+    // The output replaces any file of that name: never the input itself (same file by any path).
+    if let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(out)) {
+        anyhow::ensure!(
+            a != b,
+            "--out {} is the recording being reprocessed; write to another file",
+            out.display()
+        );
+    }
+    let messages: Vec<OwnedMessage> =
+        read_messages(input, &Filter::all())?.collect::<Result<_, _>>()?;
+    let profile = recording_profile(input, opts.profile.as_deref(), &messages)?;
+    let loaded = node_retarget::load(
+        opts.retarget_config.as_deref(),
+        opts.calibration.as_deref(),
+        Some(profile.clone()),
+    )?;
+    let rcfg = loaded.config;
+    let (fcfg, _) = node_feedback::load(opts.feedback_config.as_deref(), Some(profile.clone()))?;
+    let mut retarget = RetargetEngine::new(&rcfg, loaded.calibration, &profile)?;
+    let mut feedback = FeedbackEngine::new(&fcfg, &profile)?;
     let glove_timeout = rcfg.glove_timeout_ms.max(1) * 1_000_000;
     let tick = fcfg.tick_ms.max(1) * 1_000_000;
 
@@ -304,6 +384,7 @@ pub fn reprocess_cmd(
         ("retarget_config", &opts.retarget_config),
         ("calibration", &opts.calibration),
         ("feedback_config", &opts.feedback_config),
+        (PROFILE_METADATA, &opts.profile),
     ] {
         if let Some(m) = path.as_deref().and_then(teleop_recorder::file_metadata) {
             metadata.push((name.to_string(), m));
@@ -338,8 +419,6 @@ pub fn reprocess_cmd(
         header
     };
 
-    let messages: Vec<OwnedMessage> =
-        read_messages(input, &Filter::all())?.collect::<Result<_, _>>()?;
     // The recorded outputs are logged after the inputs they answer: index them first.
     for msg in &messages {
         match msg.topic.as_str() {
