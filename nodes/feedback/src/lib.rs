@@ -75,6 +75,9 @@ pub fn load(
 }
 
 /// One input of the engine.
+// The variants are the samples themselves, handled by value on the stack; boxing the large
+// ones would allocate per sample.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Event {
     /// A tactile sample.
