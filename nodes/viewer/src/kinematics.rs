@@ -446,61 +446,71 @@ mod tests {
             .collect()
     }
 
-    /// The BrainCo Revo2 model this viewer drew before hand profiles, kept to show that the
-    /// Revo2 profile poses the hand the same way.
-    mod old_revo2 {
-        use super::super::chain;
-        use glam::{Quat, Vec3};
-
-        /// Fingertips (thumb, index, middle, ring, pinky) at normalised joint positions in the
-        /// Revo2 joint order (thumb flex, thumb abduct, index, middle, ring, pinky).
-        pub fn tips(q: &[f32; 6]) -> [Vec3; 5] {
-            let a = q.map(|q| q.clamp(0.0, 1.0) * core::f32::consts::FRAC_PI_2);
-            let palm = Vec3::NEG_Z;
-            let turn = Quat::from_rotation_y(-a[1]);
-            let thumb = chain(
-                Vec3::new(-0.028, 0.030, -0.012),
-                turn * Vec3::new(-0.6, 0.8, 0.0),
-                turn * palm,
-                &[0.040, 0.038, 0.032],
-                &[0.0, a[0], a[0] * 0.8],
-            );
-            let bases = [
-                Vec3::new(-0.027, 0.100, 0.0),
-                Vec3::new(-0.008, 0.103, 0.0),
-                Vec3::new(0.011, 0.100, 0.0),
-                Vec3::new(0.029, 0.093, 0.0),
-            ];
-            let lengths = [
-                [0.048, 0.042],
-                [0.052, 0.044],
-                [0.048, 0.042],
-                [0.040, 0.036],
-            ];
-            let long = |i: usize| {
-                let flex = a[i + 2];
-                let c = chain(bases[i], Vec3::Y, palm, &lengths[i], &[flex, flex * 0.9]);
-                c[c.len() - 1]
-            };
-            [thumb[3], long(0), long(1), long(2), long(3)]
-        }
-    }
-
     #[test]
     fn revo2_profile_poses_the_hand_as_the_old_model() {
+        // Fingertips (thumb, index, middle, ring, pinky) of the hard-coded Revo2 model this
+        // viewer drew before hand profiles (commit 6879ae8 compared both models directly), at
+        // normalised joint positions in the Revo2 order (thumb flex, thumb abduct, index,
+        // middle, ring, pinky).
+        let golden: [([f32; 6], [[f32; 3]; 5]); 5] = [
+            (
+                [0.0; 6],
+                [
+                    [-0.094, 0.118, -0.012],
+                    [-0.027, 0.19, 0.0],
+                    [-0.008, 0.199, 0.0],
+                    [0.011, 0.19, 0.0],
+                    [0.029, 0.169, 0.0],
+                ],
+            ),
+            (
+                [1.0; 6],
+                [
+                    [0.019_888, 0.037_653, -0.017_740],
+                    [-0.027, 0.058_517, -0.054_570],
+                    [-0.008, 0.059_542, -0.058_883],
+                    [0.011, 0.058_517, -0.054_570],
+                    [0.029, 0.057_443, -0.045_632],
+                ],
+            ),
+            (
+                [0.5; 6],
+                [
+                    [-0.017_146, 0.087_501, -0.083_843],
+                    [-0.027, 0.137_236, -0.075_812],
+                    [-0.008, 0.143_222, -0.080_634],
+                    [0.011, 0.137_236, -0.075_812],
+                    [0.029, 0.124_109, -0.064_173],
+                ],
+            ),
+            (
+                [0.2, 0.9, 0.1, 0.4, 0.7, 1.0],
+                [
+                    [-0.009_149, 0.112_527, -0.077_652],
+                    [-0.027, 0.187_552, -0.019_859],
+                    [-0.008, 0.161_266, -0.071_475],
+                    [0.011, 0.100_982, -0.079_251],
+                    [0.029, 0.057_443, -0.045_632],
+                ],
+            ),
+            (
+                [1.0, 0.0, 0.3, 0.0, 0.6, 0.25],
+                [
+                    [-0.033_740, 0.037_653, -0.059_889],
+                    [-0.027, 0.169_028, -0.054_570],
+                    [-0.008, 0.199, 0.0],
+                    [0.011, 0.119_052, -0.079_821],
+                    [0.029, 0.156_391, -0.039_744],
+                ],
+            ),
+        ];
         let hand = builtin("revo2");
         assert_eq!(hand.profile().joints.len(), 6);
         assert_eq!(hand.tip_fingers(), &[0, 1, 2, 3, 4]);
-        for q in [
-            [0.0; 6],
-            [1.0; 6],
-            [0.5; 6],
-            [0.2, 0.9, 0.1, 0.4, 0.7, 1.0],
-            [1.0, 0.0, 0.3, 0.0, 0.6, 0.25],
-        ] {
+        for (q, old) in golden {
             let new = hand.pose(&at(&hand, &q)).tips();
-            let old = old_revo2::tips(&q);
             for (finger, (n, o)) in new.iter().zip(old).enumerate() {
+                let o = Vec3::from(o);
                 assert!(n.distance(o) < 1e-3, "{q:?} finger {finger}: {n} vs {o}");
             }
         }

@@ -10,7 +10,8 @@ use clap::Parser;
 use teleop_hand_profile::HandProfile;
 use teleop_recording::Filter;
 use teleop_runtime::{
-    init_logging, now_ns, IpcSettings, NodeRuntime, ENV_IPC_PREFIX, ENV_IPC_ROOT,
+    init_logging, now_ns, qualified, IpcSettings, Namespace, NodeRuntime, ENV_IPC_PREFIX,
+    ENV_IPC_ROOT, ENV_NAMESPACE,
 };
 use teleop_viewer::content::SceneConfig;
 use teleop_viewer::kinematics::RobotHand;
@@ -38,6 +39,10 @@ struct Args {
     /// The robot hand's profile (config/hands/<hand>.toml) to draw it with.
     #[arg(long, value_name = "FILE")]
     profile: Option<PathBuf>,
+    /// The namespace of the topics to show (`left` shows `left/glove/state`, ...; a
+    /// recording's channels `left/<topic>`); without it, the topics without a namespace.
+    #[arg(long, value_name = "NS", env = ENV_NAMESPACE)]
+    namespace: Option<Namespace>,
     /// Stream to a running viewer (default: rerun+http://127.0.0.1:9876/proxy).
     #[arg(
         long,
@@ -59,7 +64,7 @@ struct Args {
     /// Recording: seconds from its start to end at.
     #[arg(long, requires = "file")]
     end: Option<f64>,
-    /// Recording: only these topics.
+    /// Recording: only these topics (in --namespace).
     #[arg(long, num_args = 1.., requires = "file")]
     topics: Option<Vec<String>>,
     /// Most samples per second per topic and publisher shown as scalars (0: all).
@@ -117,12 +122,16 @@ fn run(args: &Args) -> anyhow::Result<()> {
                 .map_or_else(|| "recording".into(), |n| n.to_string_lossy().into_owned());
             let rec = open_stream(args, &name)?;
             let logger = RerunLogger::new(rec.clone());
+            let namespace = args.namespace.as_ref();
             let filter = Filter {
-                topics: args.topics.clone(),
+                topics: args
+                    .topics
+                    .as_ref()
+                    .map(|topics| topics.iter().map(|t| qualified(namespace, t)).collect()),
                 start: args.start.map(secs),
                 end: args.end.map(secs),
             };
-            let summary = view_recording(file, &filter, &logger, scene, robot, true)?;
+            let summary = view_recording(file, &filter, namespace, &logger, scene, robot, true)?;
             finish(args, &rec)?;
             eprintln!(
                 "{}: {} messages, {} frames logged{}",

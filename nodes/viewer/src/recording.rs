@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use teleop_hand_profile::HandProfile;
 use teleop_recording::{info, read_messages, Filter, RecordingInfo};
+use teleop_runtime::{split, Namespace};
 
 use crate::content::{Scene, SceneConfig};
 use crate::kinematics::RobotHand;
@@ -23,7 +24,8 @@ pub struct RecordingSummary {
     pub messages: u64,
     /// Frames logged (the rest was decimated).
     pub frames: u64,
-    /// Messages of topics the viewer does not show, or that did not decode.
+    /// Messages of another namespace or of topics the viewer does not show, or that did not
+    /// decode.
     pub skipped: u64,
 }
 
@@ -141,7 +143,8 @@ pub fn recorded_profile(path: &Path, about: &RecordingInfo) -> anyhow::Result<Op
     Ok(Some(RobotHand::new(profile, origin)))
 }
 
-/// Logs the messages of the recording at `path` that `filter` selects to `logger`;
+/// Logs the messages of the recording at `path` that `filter` selects, of the channels of
+/// `namespace` (`NS/<topic>`; `None`: the channels without a namespace), to `logger`;
 /// `config.time_origin_ns` is replaced by the recording's first log time (so times match
 /// `teleop recordings info` and `teleop replay --start`). The robot hand is `robot` when
 /// given, else the profile embedded in the recording, else the builtin profile of the first
@@ -149,6 +152,7 @@ pub fn recorded_profile(path: &Path, about: &RecordingInfo) -> anyhow::Result<Op
 pub fn view_recording(
     path: &Path,
     filter: &Filter,
+    namespace: Option<&Namespace>,
     logger: &RerunLogger,
     config: SceneConfig,
     robot: Option<RobotHand>,
@@ -167,13 +171,24 @@ pub fn view_recording(
         robot,
     );
     logger.log_scene(&scene)?;
-    let mut bar = Progress::new("reading", expected_messages(&about, filter), progress);
+    let mut bar = Progress::new(
+        "reading",
+        expected_messages(&about, filter, namespace),
+        progress,
+    );
     let mut summary = RecordingSummary::default();
     for message in read_messages(path, filter)? {
         let message = message?;
         summary.messages += 1;
         bar.step();
-        let Some(sample) = Sample::decode(&message.topic, &message.payload) else {
+        let topic = match split(&message.topic) {
+            Some((ns, t)) if ns.as_ref() == namespace => t.name,
+            _ => {
+                summary.skipped += 1;
+                continue;
+            }
+        };
+        let Some(sample) = Sample::decode(topic, &message.payload) else {
             summary.skipped += 1;
             continue;
         };
@@ -186,17 +201,19 @@ pub fn view_recording(
     Ok(summary)
 }
 
-/// About how many messages `filter` selects (for the progress bar): the recording's count,
-/// scaled by the share of its duration the time window covers, and by the topics selected.
-fn expected_messages(about: &RecordingInfo, filter: &Filter) -> u64 {
+/// About how many messages `filter` selects in `namespace` (for the progress bar): the
+/// recording's count, scaled by the share of its duration the time window covers, and by the
+/// topics selected.
+fn expected_messages(about: &RecordingInfo, filter: &Filter, namespace: Option<&Namespace>) -> u64 {
     let topics: u64 = about
         .topics
         .iter()
         .filter(|t| {
-            filter
-                .topics
-                .as_ref()
-                .is_none_or(|want| want.contains(&t.topic))
+            split(&t.topic).is_some_and(|(ns, _)| ns.as_ref() == namespace)
+                && filter
+                    .topics
+                    .as_ref()
+                    .is_none_or(|want| want.contains(&t.topic))
         })
         .map(|t| t.messages)
         .sum();

@@ -1,5 +1,6 @@
-//! The live source end to end in one process: a publisher on an isolated iceoryx2 prefix, the
-//! viewer's subscriber and logging threads, and an in-memory rerun sink.
+//! The live source end to end in one process: publishers on an isolated iceoryx2 prefix (in
+//! the namespace `left` and outside it), the viewer's subscriber and logging threads in `left`,
+//! and an in-memory rerun sink.
 
 use std::time::Duration;
 
@@ -54,7 +55,11 @@ fn live_samples_are_decimated_and_logged() {
         .memory()
         .unwrap();
     let logger = RerunLogger::new(rec.clone());
-    let viewer_settings = settings.clone();
+    let viewer_settings = IpcSettings {
+        namespace: Some("left".into()),
+        ..settings.clone()
+    };
+    let hand_settings = viewer_settings.clone();
     let viewer = std::thread::spawn(move || {
         let runtime = NodeRuntime::new("viewer", &viewer_settings).unwrap();
         let options = LiveOptions {
@@ -64,8 +69,11 @@ fn live_samples_are_decimated_and_logged() {
         run_live(&runtime, logger, &options, None).unwrap()
     });
 
-    let runtime = NodeRuntime::new("test-hand", &settings).unwrap();
+    let runtime = NodeRuntime::new("test-hand", &hand_settings).unwrap();
     let mut publisher = runtime.publisher::<HandState>().unwrap();
+    // The same topic outside the namespace: not viewed.
+    let other_runtime = NodeRuntime::new("other-hand", &settings).unwrap();
+    let mut other = other_runtime.publisher::<HandState>().unwrap();
     std::thread::sleep(Duration::from_millis(500)); // the viewer subscribes meanwhile
     let mut state = HandState {
         hand_model: hand_model::REVO2,
@@ -74,14 +82,17 @@ fn live_samples_are_decimated_and_logged() {
         ..Default::default()
     };
     state.joints[2].position = 0.25;
+    let mut outside = state;
+    outside.joints[2].position = 0.75;
     for i in 0..300 {
         state.link_errors = i;
         publisher.publish(&state).unwrap();
+        other.publish(&outside).unwrap();
         std::thread::sleep(Duration::from_millis(1));
     }
     let summary = viewer.join().unwrap();
-    drop(publisher);
-    drop(runtime);
+    drop((publisher, other));
+    drop((runtime, other_runtime));
     settings.remove_shared_memory();
 
     // ~1 kHz thinned to <= 100 Hz by the samples' stamps; nothing dropped.
@@ -89,6 +100,7 @@ fn live_samples_are_decimated_and_logged() {
         summary.forwarded >= 2 && summary.decimated > 0,
         "{summary:?}"
     );
+    // The 300 samples in `left`; the 300 outside it are not subscribed.
     assert_eq!(summary.forwarded + summary.decimated, 300, "{summary:?}");
     assert_eq!((summary.queue_full, summary.missed), (0, 0), "{summary:?}");
     assert_eq!(summary.frames, summary.forwarded);

@@ -2,12 +2,17 @@
 //! chunks are decoded back and their entity paths and component values checked.
 
 use std::collections::BTreeMap;
+use std::path::Path;
 
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    hand_model, Fingertip, GloveState, HandState, NodeHealth, SampleHeader, Tactile,
+    hand_model, units, Fingertip, GloveState, HandState, Message, NodeHealth, SampleHeader, Tactile,
 };
+use teleop_recording::{Filter, RecordedMessage, Recorder, WriterOptions};
+use teleop_runtime::Namespace;
 use teleop_viewer::content::{contact_radius, Scene, SceneConfig, RECORDING_TIME, SAMPLE_TIME};
 use teleop_viewer::logger::RerunLogger;
+use teleop_viewer::recording::{view_recording, RecordingSummary};
 use teleop_viewer::rerun::components::{Position3D, Radius, Scalar, TensorData};
 use teleop_viewer::rerun::datatypes::TensorBuffer;
 use teleop_viewer::rerun::log::{Chunk, LogMsg};
@@ -304,5 +309,130 @@ fn health_logs_counters_per_node() {
     assert_eq!(
         logged.scalars("health/nodes/retarget/dropped"),
         vec![17.0, 20.0]
+    );
+}
+
+/// Writes hand states to `path`, each on its channel (`hand/state` or `NS/hand/state`).
+fn write_recording(
+    path: &Path,
+    metadata: &[(String, BTreeMap<String, String>)],
+    states: &[(&str, HandState)],
+) {
+    let mut rec = Recorder::create(path, WriterOptions::default(), metadata).expect("create");
+    for (i, (channel, state)) in states.iter().enumerate() {
+        let id = rec
+            .add_topic(channel, HandState::SCHEMA_NAME, &HandState::schema())
+            .expect("topic");
+        let msg = RecordedMessage {
+            topic: channel,
+            ..RecordedMessage::from_sample(state, ORIGIN + i as u64 * MS)
+        };
+        rec.write(id, &msg).expect("write");
+    }
+    rec.finish().expect("finish");
+}
+
+/// The recording at `path` through the recording source into memory.
+fn view(path: &Path, namespace: Option<&str>) -> anyhow::Result<(RecordingSummary, Logged)> {
+    let (rec, storage) = RecordingStreamBuilder::new("teleop_viewer_test")
+        .memory()
+        .expect("memory sink");
+    let namespace = namespace.map(|n| Namespace::new(n).expect("a namespace"));
+    let summary = view_recording(
+        path,
+        &Filter::all(),
+        namespace.as_ref(),
+        &RerunLogger::new(rec.clone()),
+        SceneConfig::default(),
+        None,
+        false,
+    )?;
+    rec.flush_blocking().expect("flush");
+    Ok((summary, Logged::from(storage.take())))
+}
+
+fn hand_state(model: u8, joints: u8, unit: u8, index_position: (usize, f32)) -> HandState {
+    let mut state = HandState {
+        header: header(ORIGIN),
+        hand_model: model,
+        joint_count: joints,
+        units: unit,
+        ..Default::default()
+    };
+    state.joints[index_position.0].position = index_position.1;
+    state
+}
+
+const ALLEGRO_TOML: &str = include_str!("../../../config/hands/allegro.toml");
+
+fn profile_metadata(text: &str) -> Vec<(String, BTreeMap<String, String>)> {
+    vec![(
+        "hand_profile".to_string(),
+        BTreeMap::from([
+            ("file".to_string(), "config/hands/allegro.toml".to_string()),
+            ("text".to_string(), text.to_string()),
+        ]),
+    )]
+}
+
+#[test]
+fn a_recording_is_drawn_with_its_profile_in_its_namespace() {
+    let dir = tempfile::tempdir().unwrap();
+    let allegro = HandProfile::builtin("allegro").unwrap();
+    let index_1 = allegro.joint_index("index_1").unwrap();
+    let states = [
+        (
+            "left/hand/state",
+            hand_state(hand_model::ALLEGRO, 16, units::PHYSICAL, (index_1, 0.4)),
+        ),
+        (
+            "hand/state",
+            hand_state(hand_model::REVO2, 6, units::NORMALISED, (2, 0.5)),
+        ),
+    ];
+
+    // The profile the recorder embedded, the channels of `left` only.
+    let with_profile = dir.path().join("left.mcap");
+    write_recording(&with_profile, &profile_metadata(ALLEGRO_TOML), &states);
+    let (summary, logged) = view(&with_profile, Some("left")).unwrap();
+    assert_eq!((summary.messages, summary.skipped), (2, 1), "{summary:?}");
+    let q = logged.scalars("robot/index/index_1/measured");
+    assert_eq!(q.len(), 1);
+    assert!((q[0] - f64::from(allegro.joints[index_1].normalised(0.4))).abs() < 1e-6);
+    assert!(!logged.chunks.contains_key("robot/index/index/measured"));
+    assert!(logged
+        .chunks("devices/hand_profile")
+        .iter()
+        .all(Chunk::is_static));
+
+    // No profile embedded: the builtin profile of the first hand sample's model, here the
+    // Revo2 outside any namespace.
+    let without = dir.path().join("root.mcap");
+    write_recording(&without, &[], &states);
+    let (summary, logged) = view(&without, None).unwrap();
+    assert_eq!((summary.messages, summary.skipped), (2, 1), "{summary:?}");
+    assert_eq!(logged.scalars("robot/index/index/measured"), vec![0.5]);
+    assert_eq!(
+        logged.activations, 2,
+        "a layout before, and one for the Revo2"
+    );
+}
+
+#[test]
+fn a_recording_whose_profile_does_not_load_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("broken.mcap");
+    let broken = ALLEGRO_TOML.replacen("limits = [-0.47, 0.47]", "limits = [0.47, -0.47]", 1);
+    assert_ne!(broken, ALLEGRO_TOML);
+    write_recording(&path, &profile_metadata(&broken), &[]);
+    let Err(e) = view(&path, None) else {
+        panic!("a broken profile was accepted");
+    };
+    let text = format!("{e:#}");
+    assert!(
+        text.contains("metadata hand_profile, from config/hands/allegro.toml):")
+            && text.contains("joint[0].limits")
+            && text.contains("--profile"),
+        "{text}"
     );
 }

@@ -86,3 +86,33 @@ fn spawn_without_rerun_says_how_to_install_it() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_bad_profile_is_refused_with_the_loaders_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = include_str!("../../../config/hands/revo2.toml");
+    let line = 1 + good
+        .lines()
+        .position(|l| l.starts_with("limits = "))
+        .expect("a limits line");
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad,
+        good.replacen("limits = [0.0, 1.5707964]", "limits = [1.5707964, 0.0]", 1),
+    )
+    .unwrap();
+    let out = dir.path().join("never.rrd");
+    let run = Command::new(env!("CARGO_BIN_EXE_teleop-viewer"))
+        .arg(sample_recording())
+        .arg("--profile")
+        .arg(&bad)
+        .arg("--save")
+        .arg(&out)
+        .output()
+        .expect("running teleop-viewer");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "{stderr}");
+    let expect = format!("{}:{line}: joint[0].limits: lower", bad.display());
+    assert!(stderr.contains(&expect), "{expect} not in:\n{stderr}");
+    assert!(!out.exists(), "nothing is written");
+}
