@@ -181,7 +181,8 @@ enum Command {
     /// Show the live pipeline or a recording in a rerun viewer (`teleop view --help`).
     ///
     /// Runs `teleop-viewer` with these arguments:
-    /// `teleop view [FILE.mcap] [--spawn | --connect [URL] | --save FILE.rrd]`.
+    /// `teleop view [FILE.mcap] [--spawn | --connect [URL] | --save FILE.rrd] [--profile FILE]
+    /// [--namespace NS]`.
     #[command(disable_help_flag = true)]
     View {
         /// Arguments for `teleop-viewer`.
