@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use serde::Deserialize;
 use teleop_runtime::{qualified, Namespace};
@@ -52,7 +53,13 @@ struct RawProcess {
     #[serde(default = "default_max_restarts")]
     max_restarts: u32,
     #[serde(default = "default_restart_delay_ms")]
-    restart_delay_ms: u64,
+    restart_delay_ms: Spanned<u64>,
+    #[serde(default = "default_restart_backoff_max_ms")]
+    restart_backoff_max_ms: Spanned<u64>,
+    #[serde(default = "default_restart_window_s")]
+    restart_window_s: Spanned<u64>,
+    #[serde(default = "default_health_timeout_ms")]
+    health_timeout_ms: Spanned<u64>,
     #[serde(default = "default_true")]
     required: bool,
     node: Option<String>,
@@ -67,9 +74,22 @@ fn default_restart() -> Restart {
 fn default_max_restarts() -> u32 {
     5
 }
-fn default_restart_delay_ms() -> u64 {
-    500
+fn default_restart_delay_ms() -> Spanned<u64> {
+    Spanned::new(0..0, 500)
 }
+fn default_restart_backoff_max_ms() -> Spanned<u64> {
+    Spanned::new(0..0, 10_000)
+}
+fn default_restart_window_s() -> Spanned<u64> {
+    Spanned::new(0..0, 60)
+}
+fn default_health_timeout_ms() -> Spanned<u64> {
+    Spanned::new(0..0, 3000)
+}
+
+/// Longest accepted time setting (one day): larger values are surely typos, and would overflow
+/// the clock arithmetic.
+pub const MAX_TIME_MS: u64 = 24 * 3600 * 1000;
 fn default_true() -> bool {
     true
 }
@@ -95,10 +115,17 @@ pub struct Process {
     pub args: Vec<String>,
     /// Restart policy.
     pub restart: Restart,
-    /// Most restarts before giving up.
+    /// Most restarts within `restart_window_s` before giving up.
     pub max_restarts: u32,
-    /// Pause before a restart.
+    /// Pause before the first restart; it doubles with every further restart in the window.
     pub restart_delay_ms: u64,
+    /// The longest pause before a restart.
+    pub restart_backoff_max_ms: u64,
+    /// Restarts older than this no longer count against `max_restarts`, nor for the backoff.
+    pub restart_window_s: u64,
+    /// A process whose node published health and then published none for this long is hung:
+    /// it is killed and restarted per its policy (0: never).
+    pub health_timeout_ms: u64,
     /// When it fails for good, the whole session stops with a failure.
     pub required: bool,
     /// The iceoryx2 node name it creates, with its namespace (`left/glove`; None: it creates
@@ -138,6 +165,14 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
     if raw.process.is_empty() {
         anyhow::bail!("{origin}: no [[process]] entries: nothing to launch");
     }
+    for (field, ms) in [
+        ("session.stop_timeout_ms", raw.session.stop_timeout_ms),
+        ("session.liveness_grace_ms", raw.session.liveness_grace_ms),
+    ] {
+        if ms > MAX_TIME_MS {
+            anyhow::bail!("{origin}: {field} = {ms}: at most {MAX_TIME_MS} (one day)");
+        }
+    }
     let mut processes: Vec<Process> = Vec::new();
     for p in raw.process {
         let name = p.name.get_ref().trim().to_string();
@@ -164,6 +199,17 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
                 at(p.program.span())
             );
         }
+        // A time setting in `unit_ms` milliseconds per unit, at most a day.
+        let time = |v: &Spanned<u64>, field: &str, unit_ms: u64| -> anyhow::Result<u64> {
+            let value = *v.get_ref();
+            if value.saturating_mul(unit_ms) > MAX_TIME_MS {
+                anyhow::bail!(
+                    "{origin}:{}: process.{field} of {name:?} = {value}: at most one day",
+                    at(v.span())
+                );
+            }
+            Ok(value)
+        };
         let namespace = match &p.namespace {
             None => None,
             Some(ns) => Some(Namespace::new(ns.get_ref()).map_err(|e| {
@@ -173,6 +219,10 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
                 )
             })?),
         };
+        let restart_delay_ms = time(&p.restart_delay_ms, "restart_delay_ms", 1)?;
+        let restart_backoff_max_ms = time(&p.restart_backoff_max_ms, "restart_backoff_max_ms", 1)?;
+        let restart_window_s = time(&p.restart_window_s, "restart_window_s", 1000)?;
+        let health_timeout_ms = time(&p.health_timeout_ms, "health_timeout_ms", 1)?;
         processes.push(Process {
             node: match p.node {
                 Some(n) if n.is_empty() => None,
@@ -185,7 +235,10 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
             args: p.args,
             restart: p.restart,
             max_restarts: p.max_restarts,
-            restart_delay_ms: p.restart_delay_ms,
+            restart_delay_ms,
+            restart_backoff_max_ms,
+            restart_window_s,
+            health_timeout_ms,
             required: p.required,
             env: p.env,
         });
@@ -199,6 +252,28 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
 
 fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+impl Process {
+    /// The pause before a restart when `recent` restarts already happened within the window:
+    /// `restart_delay_ms` doubled per earlier restart, at most `restart_backoff_max_ms` (and at
+    /// least `restart_delay_ms`).
+    pub fn restart_delay(&self, recent: usize) -> Duration {
+        let factor = u32::try_from(recent)
+            .ok()
+            .and_then(|n| 1u64.checked_shl(n))
+            .unwrap_or(u64::MAX);
+        let ms = self
+            .restart_delay_ms
+            .saturating_mul(factor)
+            .min(self.restart_backoff_max_ms.max(self.restart_delay_ms));
+        Duration::from_millis(ms)
+    }
+
+    /// The restart window.
+    pub fn restart_window(&self) -> Duration {
+        Duration::from_secs(self.restart_window_s)
+    }
 }
 
 impl Launch {
@@ -304,6 +379,55 @@ mod tests {
 
         let e = parse_str("[session]\n").unwrap_err().to_string();
         assert!(e.contains("no [[process]]"), "{e}");
+    }
+
+    #[test]
+    fn restart_backoff_doubles_up_to_its_maximum() {
+        let l = parse_str(
+            "[[process]]\nname = \"a\"\nprogram = \"x\"\nrestart_delay_ms = 100\nrestart_backoff_max_ms = 1000\nrestart_window_s = 30\nhealth_timeout_ms = 0\n",
+        )
+        .unwrap();
+        let p = &l.processes[0];
+        let ms: Vec<u128> = (0..7).map(|n| p.restart_delay(n).as_millis()).collect();
+        assert_eq!(ms, [100, 200, 400, 800, 1000, 1000, 1000]);
+        assert_eq!(p.restart_delay(usize::MAX).as_millis(), 1000);
+        assert_eq!(p.restart_window(), Duration::from_secs(30));
+        assert_eq!(p.health_timeout_ms, 0);
+        // Defaults: 500 ms doubling to 10 s, a 60 s window, hung after 3 s without health.
+        let d = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\n").unwrap();
+        let d = &d.processes[0];
+        assert_eq!(d.restart_delay(0).as_millis(), 500);
+        assert_eq!(d.restart_delay(9).as_millis(), 10_000);
+        assert_eq!((d.restart_window_s, d.health_timeout_ms), (60, 3000));
+    }
+
+    #[test]
+    fn huge_times_are_refused_not_overflowed() {
+        for (field, value) in [
+            ("restart_delay_ms", "18446744073709551615"),
+            ("restart_backoff_max_ms", "86400001"),
+            ("restart_window_s", "86401"),
+            ("health_timeout_ms", "9999999999999"),
+        ] {
+            let e = parse_str(&format!(
+                "[[process]]\nname = \"a\"\nprogram = \"x\"\n{field} = {value}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.starts_with(&format!("dir/launch.toml:4: process.{field} of \"a\" = ")),
+                "{e}"
+            );
+        }
+        let e = parse_str("[session]\nstop_timeout_ms = 18446744073709551615\n[[process]]\nname = \"a\"\nprogram = \"x\"\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("session.stop_timeout_ms"), "{e}");
+        // Negative numbers are type errors, with their line.
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nrestart_delay_ms = -1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4"), "{e}");
     }
 
     #[test]

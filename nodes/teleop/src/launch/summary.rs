@@ -6,7 +6,7 @@
 //! has others (the recorder of a two-sided session runs without a namespace, for instance).
 
 use std::collections::BTreeMap;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use teleop_msgs::{topics, visit_topic, Message, NodeHealth, TopicVisitor};
 use teleop_runtime::{qualified, Namespace, NodeRuntime, Subscriber};
@@ -137,6 +137,8 @@ pub struct SessionWatch {
     probes: Vec<Vec<Box<dyn Probe>>>,
     health: Vec<Subscriber<NodeHealth>>,
     latest: BTreeMap<String, NodeHealth>,
+    /// When each node's newest health report arrived.
+    health_at: BTreeMap<String, Instant>,
     _runtime: NodeRuntime,
 }
 
@@ -163,6 +165,7 @@ impl SessionWatch {
             probes,
             health,
             latest: BTreeMap::new(),
+            health_at: BTreeMap::new(),
             _runtime: runtime,
         })
     }
@@ -172,12 +175,20 @@ impl SessionWatch {
         for p in self.probes.iter_mut().flatten() {
             p.poll();
         }
-        let latest = &mut self.latest;
+        let (latest, health_at) = (&mut self.latest, &mut self.health_at);
+        let now = Instant::now();
         for health in &self.health {
             health.drain(|h| {
-                latest.insert(h.name(), *h);
+                let name = h.name();
+                health_at.insert(name.clone(), now);
+                latest.insert(name, *h);
             });
         }
+    }
+
+    /// When the node called `node` (with its namespace) last reported its health.
+    pub fn last_health(&self, node: &str) -> Option<Instant> {
+        self.health_at.get(node).copied()
     }
 
     /// The summary text.

@@ -1,6 +1,8 @@
-//! The process supervisor behind `teleop launch`: starts every process of the launch file, tags
-//! and forwards their output, restarts them per policy, watches their iceoryx2 nodes, and stops
-//! them in reverse start order.
+//! The process supervisor behind `teleop launch`: starts every process of the launch file (and
+//! stops the ones already started when one cannot be started), tags and forwards their output,
+//! restarts them per policy (a budget of restarts per window, with exponential backoff), kills
+//! and restarts a process whose node stopped reporting its health (hung), watches their iceoryx2
+//! nodes, and stops them in reverse start order.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
@@ -27,7 +29,10 @@ struct Slot<'a> {
     process: &'a Process,
     child: Option<Child>,
     started: Instant,
+    /// Restarts since the session started (for the summary).
     restarts: u32,
+    /// When the restarts within the process's window happened.
+    recent_restarts: Vec<Instant>,
     restart_at: Option<Instant>,
     node_seen: bool,
     warned_no_node: bool,
@@ -46,13 +51,24 @@ pub fn run(
     let recordings: Arc<Mutex<Vec<String>>> = Arc::default();
     let started = Instant::now();
     let mut slots: Vec<Slot> = Vec::with_capacity(launch.processes.len());
+    let stop_timeout = Duration::from_millis(launch.session.stop_timeout_ms);
     for process in &launch.processes {
-        let child = spawn(launch, process, ipc, &recordings)?;
+        let child = match spawn(launch, process, ipc, &recordings) {
+            Ok(child) => child,
+            Err(e) => {
+                // Never leave the processes started so far running unsupervised.
+                tracing::error!("{e:#}: stopping the processes already started");
+                stop_all(&mut slots, stop_timeout);
+                clean_dead_nodes(&config);
+                return Err(e);
+            }
+        };
         slots.push(Slot {
             process,
             child: Some(child),
             started: Instant::now(),
             restarts: 0,
+            recent_restarts: Vec::new(),
             restart_at: None,
             node_seen: false,
             warned_no_node: false,
@@ -77,6 +93,7 @@ pub fn run(
         if duration.is_some_and(|d| started.elapsed() >= d) {
             break Outcome::Stopped("--duration elapsed");
         }
+        kill_hung(&watch, &mut slots);
         if let Some(failure) = reap(&mut slots) {
             break Outcome::Failed(failure);
         }
@@ -113,12 +130,7 @@ pub fn run(
         Outcome::Stopped(why) => tracing::info!("stopping ({why})"),
         Outcome::Failed(why) => tracing::error!("stopping: {why}"),
     }
-    let timeout = Duration::from_millis(launch.session.stop_timeout_ms);
-    for slot in slots.iter_mut().rev() {
-        if let Some(child) = slot.child.take() {
-            stop(&slot.process.name, child, timeout);
-        }
-    }
+    stop_all(&mut slots, stop_timeout);
     clean_dead_nodes(&config);
     watch.poll();
     let restarts: Vec<(String, u32)> = slots
@@ -128,6 +140,51 @@ pub fn run(
     let recorded = recordings.lock().map(|r| r.clone()).unwrap_or_default();
     print!("{}", watch.report(started.elapsed(), &restarts, &recorded));
     Ok(outcome)
+}
+
+/// Stops every running process, in reverse start order.
+fn stop_all(slots: &mut [Slot], timeout: Duration) {
+    for slot in slots.iter_mut().rev() {
+        if let Some(child) = slot.child.take() {
+            stop(&slot.process.name, child, timeout);
+        }
+    }
+}
+
+/// Kills (SIGKILL) every process whose node reported its health since it started and then went
+/// silent for longer than its `health_timeout_ms`: alive but hung. `reap` then restarts it per
+/// its policy, as any process killed by a signal.
+fn kill_hung(watch: &super::summary::SessionWatch, slots: &mut [Slot]) {
+    for slot in slots.iter_mut() {
+        let p = slot.process;
+        let (Some(child), Some(node)) = (&slot.child, &p.node) else {
+            continue;
+        };
+        if p.health_timeout_ms == 0 {
+            continue;
+        }
+        let Some(last) = watch.last_health(node).filter(|&t| t >= slot.started) else {
+            continue;
+        };
+        let silent = last.elapsed();
+        if silent > Duration::from_millis(p.health_timeout_ms) {
+            let pid = child.id();
+            tracing::error!(
+                process = %p.name,
+                pid,
+                node = %node,
+                "hung: no health report for {} ms (health_timeout_ms = {}): killing it",
+                silent.as_millis(),
+                p.health_timeout_ms
+            );
+            // SAFETY: plain kill(2) on our own child's pid, which has not been reaped yet.
+            unsafe {
+                libc::kill(pid as libc::pid_t, libc::SIGKILL);
+            }
+            // Do not judge it again until it has been reaped and restarted.
+            slot.started = Instant::now() + Duration::from_secs(3600);
+        }
+    }
 }
 
 /// Notices processes that ended; schedules restarts; returns why the session must stop if a
@@ -160,21 +217,29 @@ fn reap(slots: &mut [Slot]) -> Option<String> {
             Restart::OnFailure => failed,
             Restart::Always => true,
         };
-        if wants_restart && slot.restarts < p.max_restarts {
+        let now = Instant::now();
+        let window = p.restart_window();
+        slot.recent_restarts
+            .retain(|&t| now.saturating_duration_since(t) < window);
+        let recent = slot.recent_restarts.len();
+        if wants_restart && recent < p.max_restarts as usize {
+            let delay = p.restart_delay(recent);
             slot.restarts += 1;
-            slot.restart_at = Some(Instant::now() + Duration::from_millis(p.restart_delay_ms));
+            slot.recent_restarts.push(now);
+            slot.restart_at = Some(now + delay);
             tracing::warn!(
                 process = %p.name,
-                "restarting in {} ms (restart {}/{})",
-                p.restart_delay_ms,
-                slot.restarts,
-                p.max_restarts
+                "restarting in {} ms (restart {}/{} within {} s)",
+                delay.as_millis(),
+                recent + 1,
+                p.max_restarts,
+                p.restart_window_s
             );
         } else if failed && p.required {
             let why = if wants_restart {
                 format!(
-                    "required process {} failed ({what}) after {} restarts",
-                    p.name, slot.restarts
+                    "required process {} failed ({what}) after {recent} restarts within {} s",
+                    p.name, p.restart_window_s
                 )
             } else {
                 format!("required process {} failed ({what})", p.name)
