@@ -209,6 +209,7 @@ impl NodeRuntime {
     /// Creates the iceoryx2 node `name` (visible in `teleop nodes`). In a namespace the node is
     /// called `<namespace>/<name>` and its ports use the namespace's topics.
     pub fn new(name: &str, settings: &IpcSettings) -> Result<Self, RuntimeError> {
+        crate::signals::follow_supervisor();
         let namespace = settings.namespace()?;
         let config = settings.config()?;
         let name = qualified(namespace.as_ref(), name);
@@ -411,6 +412,48 @@ pub fn discover_namespaces(settings: &IpcSettings) -> Result<Vec<Namespace>, Run
     Ok(namespaces_of(names.iter().map(String::as_str)))
 }
 
+/// Why `M`'s publish-subscribe service could not be opened: a contract version mismatch when it
+/// exists with another payload type (iceoryx2 compares type names, which carry the contract
+/// version, and sizes), else iceoryx2's error.
+fn pubsub_error<M: Message>(
+    node: &Node<Service>,
+    service: &ServiceName,
+    topic: &str,
+    error: PublishSubscribeOpenOrCreateError,
+) -> RuntimeError {
+    if !matches!(
+        error,
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::IncompatibleTypes
+        )
+    ) {
+        return RuntimeError::ipc("opening publish-subscribe service", topic, error);
+    }
+    let theirs = <Service as iceoryx2::service::Service>::details(
+        service,
+        node.config(),
+        iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
+    )
+    .ok()
+    .flatten()
+    .and_then(|details| match details.static_details.messaging_pattern() {
+        StaticPattern::PublishSubscribe(config) => {
+            let payload = config.message_type_details().payload;
+            Some(format!(
+                "{} ({} bytes)",
+                payload.type_name(),
+                payload.size()
+            ))
+        }
+        _ => None,
+    });
+    RuntimeError::ContractMismatch {
+        service: service.as_str().to_string(),
+        ours: format!("{} ({} bytes)", M::TYPE_NAME, core::mem::size_of::<M>()),
+        theirs: theirs.unwrap_or_else(|| "unknown".to_string()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -469,47 +512,5 @@ mod tests {
             ..IpcSettings::default()
         };
         assert_eq!(settings.namespace().unwrap().unwrap().as_str(), "left");
-    }
-}
-
-/// Why `M`'s publish-subscribe service could not be opened: a contract version mismatch when it
-/// exists with another payload type (iceoryx2 compares type names, which carry the contract
-/// version, and sizes), else iceoryx2's error.
-fn pubsub_error<M: Message>(
-    node: &Node<Service>,
-    service: &ServiceName,
-    topic: &str,
-    error: PublishSubscribeOpenOrCreateError,
-) -> RuntimeError {
-    if !matches!(
-        error,
-        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-            PublishSubscribeOpenError::IncompatibleTypes
-        )
-    ) {
-        return RuntimeError::ipc("opening publish-subscribe service", topic, error);
-    }
-    let theirs = <Service as iceoryx2::service::Service>::details(
-        service,
-        node.config(),
-        iceoryx2::service::messaging_pattern::MessagingPattern::PublishSubscribe,
-    )
-    .ok()
-    .flatten()
-    .and_then(|details| match details.static_details.messaging_pattern() {
-        StaticPattern::PublishSubscribe(config) => {
-            let payload = config.message_type_details().payload;
-            Some(format!(
-                "{} ({} bytes)",
-                payload.type_name(),
-                payload.size()
-            ))
-        }
-        _ => None,
-    });
-    RuntimeError::ContractMismatch {
-        service: service.as_str().to_string(),
-        ours: format!("{} ({} bytes)", M::TYPE_NAME, core::mem::size_of::<M>()),
-        theirs: theirs.unwrap_or_else(|| "unknown".to_string()),
     }
 }
