@@ -3,6 +3,7 @@
 //! both counted from the recording's first message), with the robot hand of the profile the
 //! recorder embedded ([`recorded_profile`]) unless the caller gives one.
 
+use std::collections::BTreeSet;
 use std::io::{IsTerminal, Write};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -159,6 +160,7 @@ pub fn view_recording(
     progress: bool,
 ) -> anyhow::Result<RecordingSummary> {
     let about = info(path)?;
+    check_namespace(path, &about, namespace)?;
     let robot = match robot {
         Some(robot) => Some(robot),
         None => recorded_profile(path, &about)?,
@@ -199,6 +201,33 @@ pub fn view_recording(
     }
     bar.finish();
     Ok(summary)
+}
+
+/// Fails, naming the namespaces there are, when the recording has channels but none in
+/// `namespace` (a namespaced session viewed without `--namespace`, or a wrong one).
+fn check_namespace(
+    path: &Path,
+    about: &RecordingInfo,
+    namespace: Option<&Namespace>,
+) -> anyhow::Result<()> {
+    let present: BTreeSet<Option<Namespace>> = about
+        .topics
+        .iter()
+        .filter_map(|t| split(&t.topic).map(|(ns, _)| ns))
+        .collect();
+    if present.is_empty() || present.contains(&namespace.cloned()) {
+        return Ok(());
+    }
+    let name = |ns: &Option<Namespace>| match ns {
+        Some(ns) => format!("`{ns}`"),
+        None => "none (no --namespace)".to_string(),
+    };
+    anyhow::bail!(
+        "{}: no channels in namespace {}; its namespaces: {}",
+        path.display(),
+        name(&namespace.cloned()),
+        present.iter().map(name).collect::<Vec<_>>().join(", ")
+    )
 }
 
 /// About how many messages `filter` selects in `namespace` (for the progress bar): the

@@ -416,6 +416,18 @@ fn a_recording_is_drawn_with_its_profile_in_its_namespace() {
         logged.activations, 2,
         "a layout before, and one for the Revo2"
     );
+
+    // A namespace the recording does not have: refused, naming those it has.
+    let Err(e) = view(&without, Some("right")) else {
+        panic!("a missing namespace was accepted");
+    };
+    let text = e.to_string();
+    assert!(
+        text.contains(
+            "no channels in namespace `right`; its namespaces: none (no --namespace), `left`"
+        ),
+        "{text}"
+    );
 }
 
 #[test]
