@@ -13,7 +13,7 @@
 //! Pure geometry with `glam`: no I/O, no rerun.
 
 use glam::{Quat, Vec3};
-use teleop_hand_profile::{HandProfile, TipSensor};
+use teleop_hand_profile::HandProfile;
 
 /// The operator's (glove) fingers in anatomical order, the order of the operator model's
 /// per-finger arrays.
@@ -251,12 +251,10 @@ impl RobotHand {
                 (Vec3::from(f.base), rotation)
             })
             .collect();
+        // Finger names are unique (the loader checks), so a fingertip's name finds its finger.
         let tip_fingers = profile
-            .fingers
-            .iter()
-            .enumerate()
-            .filter(|(_, f)| f.tip_sensor != TipSensor::None)
-            .map(|(i, _)| i)
+            .fingertips()
+            .filter_map(|tip| profile.fingers.iter().position(|f| f.name == tip.name))
             .collect();
         // The palm: the bases in front of the wrist, by their angle around it from the thumb
         // side (-X) to the little finger side (+X). A chain behind the wrist (the Shadow Hand's
