@@ -174,6 +174,28 @@ fn replay_reproduces_the_recorded_timing_and_max_speed_is_far_faster() {
 }
 
 #[test]
+fn info_says_which_topics_of_a_contract_version_1_recording_are_converted() {
+    let sandbox = Sandbox::new();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let sample = root.join("recordings/grasp.sample.mcap");
+    let r = sandbox.run_teleop(&["recordings", "info", sample.to_str().unwrap()]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let text = String::from_utf8(r.stdout).unwrap();
+    let converted: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("converted"))
+        .collect();
+    assert_eq!(
+        converted,
+        [
+            "converted  hand/state: recorded with contract version 1, read as version 2",
+            "converted  hand/tactile: recorded with contract version 1, read as version 2",
+        ],
+        "{text}"
+    );
+}
+
+#[test]
 fn reprocess_is_deterministic_and_detects_a_changed_gain() {
     let sandbox = Sandbox::new();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");

@@ -68,6 +68,14 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
             t.drops.map_or("?".to_string(), |d| d.to_string())
         );
     }
+    for t in info.topics.iter().filter(|t| t.converted_from.is_some()) {
+        println!(
+            "converted  {}: recorded with contract version {}, read as version {}",
+            t.topic,
+            t.converted_from.unwrap_or_default(),
+            teleop_msgs::CONTRACT_VERSION
+        );
+    }
     for (name, fields) in &info.metadata {
         let shown: Vec<String> = fields
             .iter()

@@ -409,6 +409,20 @@ pub(crate) fn check_channel(
     })
 }
 
+/// The earlier contract version whose layout a channel of `topic` was recorded with, when
+/// [`check_channel`] would read it converted.
+pub(crate) fn converted_from(
+    path: &Path,
+    topic: &str,
+    schema: Option<&RecordedSchema<'_>>,
+    message_encoding: &str,
+) -> Option<u32> {
+    match check_channel(path, topic, schema, message_encoding) {
+        Ok(ChannelKind::Converted(legacy)) => Some(legacy.version()),
+        _ => None,
+    }
+}
+
 /// The payload of a message: without its CDR header, checked against the contract, and
 /// converted to the current contract when recorded with an earlier one.
 pub(crate) fn payload<'a>(

@@ -17,8 +17,8 @@ use mcap::{
 
 use crate::{
     file::{
-        check_channel, open, payload, read_record_at, read_summary, record_limit, ChannelKind,
-        OpenFile, RecordStream, RecordedSchema,
+        check_channel, converted_from, open, payload, read_record_at, read_summary, record_limit,
+        ChannelKind, OpenFile, RecordStream, RecordedSchema,
     },
     write::DROPS_METADATA,
     RecordingError,
@@ -44,6 +44,10 @@ pub struct TopicInfo {
     /// Drops recorded in the `drops` metadata record; `None` when the file has none (a killed
     /// recorder writes it only when finishing).
     pub drops: Option<u64>,
+    /// `Some(version)`: recorded with the layout of that earlier contract version, which
+    /// [`read_messages`] converts to the current payload. `None`: the current layout, a topic
+    /// outside the contract, or a schema that reading refuses.
+    pub converted_from: Option<u32>,
 }
 
 /// What a recording holds.
@@ -137,6 +141,7 @@ struct ChannelStats {
     topic: String,
     schema_name: String,
     message_encoding: String,
+    converted_from: Option<u32>,
     messages: u64,
     first: Option<u64>,
     last: Option<u64>,
@@ -189,6 +194,7 @@ fn assemble(
                 drops: drops
                     .as_ref()
                     .map(|d| d.get(&c.topic).copied().unwrap_or(0)),
+                converted_from: c.converted_from,
             });
         entry.messages += c.messages;
         entry.first_log_ns = min_opt(entry.first_log_ns, c.first);
@@ -288,6 +294,19 @@ fn info_from_summary(
                         .map(|s| s.name.clone())
                         .unwrap_or_default(),
                     message_encoding: c.message_encoding.clone(),
+                    converted_from: converted_from(
+                        &file.path,
+                        &c.topic,
+                        c.schema
+                            .as_ref()
+                            .map(|s| RecordedSchema {
+                                name: &s.name,
+                                encoding: &s.encoding,
+                                data: &s.data,
+                            })
+                            .as_ref(),
+                        &c.message_encoding,
+                    ),
                     ..ChannelStats::default()
                 },
             )
@@ -383,7 +402,7 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
     let path = file.path.clone();
     let len = file.len;
     let mut stream = RecordStream::new(file)?;
-    let mut schemas: HashMap<u16, String> = HashMap::new();
+    let mut schemas: HashMap<u16, StreamSchema> = HashMap::new();
     let mut channels: BTreeMap<u16, ChannelStats> = BTreeMap::new();
     let mut metadata = Vec::new();
     let mut in_data = true;
@@ -396,13 +415,33 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
             Err(_) => break,
         };
         match record {
-            Record::Schema { header, .. } => {
-                schemas.insert(header.id, header.name);
+            Record::Schema { header, data } => {
+                schemas.insert(
+                    header.id,
+                    StreamSchema {
+                        name: header.name,
+                        encoding: header.encoding,
+                        data: data.into_owned(),
+                    },
+                );
             }
             Record::Channel(c) => {
+                let schema = schemas.get(&c.schema_id);
                 let entry = channels.entry(c.id).or_default();
+                entry.converted_from = converted_from(
+                    &path,
+                    &c.topic,
+                    schema
+                        .map(|s| RecordedSchema {
+                            name: &s.name,
+                            encoding: &s.encoding,
+                            data: &s.data,
+                        })
+                        .as_ref(),
+                    &c.message_encoding,
+                );
                 entry.topic = c.topic;
-                entry.schema_name = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                entry.schema_name = schema.map(|s| s.name.clone()).unwrap_or_default();
                 entry.message_encoding = c.message_encoding;
             }
             Record::Message { header, .. } if in_data => {

@@ -160,11 +160,22 @@ fn check_against_raw(path: &Path, messages: &[OwnedMessage]) -> HashMap<String, 
     converted
 }
 
+/// The topics `info` says are converted, each from version 1.
+fn converted_topics(info: &RecordingInfo) -> Vec<&str> {
+    info.topics
+        .iter()
+        .filter(|t| t.converted_from.is_some())
+        .inspect(|t| assert_eq!(t.converted_from, Some(1), "{}", t.topic))
+        .map(|t| t.topic.as_str())
+        .collect()
+}
+
 #[test]
 fn the_version_1_sample_recording_reads_converted() {
     let path = Path::new(SAMPLE);
     let info = info(path).unwrap();
     assert!(info.complete);
+    assert_eq!(converted_topics(&info), ["hand/state", "hand/tactile"]);
     assert!(
         !info.metadata.iter().any(|(n, _)| n == CONTRACT_METADATA),
         "written before contract version 2"
@@ -206,6 +217,9 @@ fn a_killed_version_1_recording_reads_converted_too() {
     let dir = tempfile::tempdir().unwrap();
     let bytes = std::fs::read(SAMPLE).unwrap();
     let cut = write(dir.path(), "cut.mcap", &bytes[..bytes.len() / 2]);
+    let cut_info = info(&cut).unwrap();
+    assert!(!cut_info.complete);
+    assert_eq!(converted_topics(&cut_info), ["hand/state", "hand/tactile"]);
     let messages: Vec<OwnedMessage> = read_messages(&cut, &Filter::topics(["hand/state"]))
         .unwrap()
         .collect::<Result<_, _>>()
@@ -396,6 +410,7 @@ fn the_current_version_round_trips_and_is_recorded() {
     rec.finish().unwrap();
 
     let info = info(&path).unwrap();
+    assert!(converted_topics(&info).is_empty());
     let contract: Vec<_> = info
         .metadata
         .iter()
