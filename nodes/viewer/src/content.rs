@@ -42,6 +42,7 @@ use teleop_msgs::{
 
 use crate::kinematics::{
     OperatorHand, OperatorPose, RobotHand, Skeleton, FINGERS, GLOVE_CHANNEL_OF_FINGER,
+    GLOVE_THUMB_ROTATION,
 };
 use crate::sample::Sample;
 
@@ -801,7 +802,7 @@ impl Scene {
             ));
         }
         out.push(Entry::scalar(
-            glove_position_path("thumb_rotation"),
+            glove_position_path(GLOVE_CHANNELS[GLOVE_THUMB_ROTATION]),
             f64::from(pose.thumb_opposition),
         ));
         out.push(Entry::scalar("health/glove/errors", f64::from(m.errors)));
