@@ -219,6 +219,13 @@ impl Session {
         std::fs::read_to_string(&self.log_path).unwrap_or_default()
     }
 
+    /// Kills the launcher with SIGKILL (no chance to stop its processes) and reaps it.
+    pub fn kill(&mut self) {
+        let mut child = self.child.take().expect("session still running");
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+
     /// Sends SIGINT (as Ctrl-C would) and waits for the exit status.
     pub fn stop(&mut self) -> std::process::ExitStatus {
         let mut child = self.child.take().expect("session still running");

@@ -164,3 +164,44 @@ node = ""
         "{log}"
     );
 }
+
+#[test]
+fn a_node_whose_parent_death_signal_was_cleared_still_dies_with_the_launcher() {
+    // The kernel clears the parent-death signal when it executes a binary with file
+    // capabilities (`setcap cap_net_raw+ep`, as raw-socket EtherCAT needs); `setpriv
+    // --pdeathsig clear` does the same, deterministically and without privileges.
+    if std::process::Command::new("setpriv")
+        .args(["--pdeathsig", "clear", "true"])
+        .status()
+        .map_or(true, |s| !s.success())
+    {
+        eprintln!("skipped: no setpriv with --pdeathsig (util-linux 2.33 or newer)");
+        return;
+    }
+    let sandbox = Sandbox::new();
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    let retarget = teleop_e2e::bin("teleop-retarget");
+    let launch = sandbox.write(
+        "launch.toml",
+        &format!(
+            r#"
+[[process]]
+name = "retarget"
+program = "setpriv"
+args = ["--pdeathsig", "clear", "--", {:?}, "--profile", {:?}, "--name", "orphan-check"]
+node = "orphan-check"
+"#,
+            retarget.display().to_string(),
+            profile.display().to_string()
+        ),
+    );
+    let mut session = sandbox.launch(&launch);
+    let node = wait_for(Duration::from_secs(20), "retarget node", || {
+        sandbox.pid_of("orphan-check")
+    });
+    // The launcher dies without a chance to stop anything.
+    session.kill();
+    wait_for(Duration::from_secs(5), "the orphaned node to stop", || {
+        (!alive(node)).then_some(())
+    });
+}

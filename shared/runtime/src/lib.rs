@@ -37,7 +37,7 @@ pub use ipc::{
 };
 pub use logging::init_logging;
 pub use ports::{Publisher, Subscriber};
-pub use signals::{install_stop_handlers, stop_signal};
+pub use signals::{follow_supervisor, install_stop_handlers, stop_signal, ENV_SUPERVISOR_PID};
 pub use teleop_namespace::{qualified, split, Namespace, NamespaceError};
 
 /// iceoryx2 service type used everywhere (inter-process, shared memory).

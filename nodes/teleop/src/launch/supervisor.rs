@@ -285,6 +285,13 @@ fn spawn(
             std::fs::canonicalize(&launch.path).unwrap_or_else(|_| launch.path.clone()),
         )
         .envs(&process.env)
+        // The child arms its parent-death signal again after exec (see
+        // `teleop_runtime::follow_supervisor`): the kernel drops ours for binaries with file
+        // capabilities.
+        .env(
+            teleop_runtime::ENV_SUPERVISOR_PID,
+            std::process::id().to_string(),
+        )
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
