@@ -399,13 +399,12 @@ impl Loop<'_> {
             .enumerate()
         {
             let finger = teleop_msgs::GLOVE_FINGERS[f];
-            if t >= limit && !*hot {
-                tracing::warn!(finger, temperature_c = t, limit, "actuator hot");
-                *hot = true;
-            } else if t + 5 < limit && *hot {
-                tracing::info!(finger, temperature_c = t, "actuator cooled down");
-                *hot = false;
+            match hot_change(t, limit, *hot) {
+                Some(true) => tracing::warn!(finger, temperature_c = t, limit, "actuator hot"),
+                Some(false) => tracing::info!(finger, temperature_c = t, "actuator cooled down"),
+                None => continue,
             }
+            *hot = !*hot;
         }
     }
 
@@ -419,7 +418,8 @@ impl Loop<'_> {
                 bad_frames = now.bad_frames - last.bad_frames,
                 garbage = now.garbage - last.garbage,
                 other_id = now.other_id - last.other_id,
-                late_answers = now.unexpected - last.unexpected,
+                unexpected = now.unexpected - last.unexpected,
+                late = now.late - last.late,
                 "line errors since the last report (exchanges go on)"
             );
         }
@@ -441,5 +441,41 @@ impl Loop<'_> {
         self.ports.health.set_dropped(self.ports.forces.dropped());
         self.ports.health.publish(&[age])?;
         Ok(())
+    }
+}
+
+/// Degrees below the warning limit an actuator must cool to before it counts as cool again.
+const COOL_HYSTERESIS_C: u8 = 5;
+
+/// Whether an actuator at `t` degrees becomes hot (`Some(true)`) or cool again (`Some(false)`),
+/// given the warning `limit` and whether it was `hot`. Any byte the glove sends is a
+/// temperature here, up to 255 (the register's range is 0..=100).
+fn hot_change(t: u8, limit: u8, hot: bool) -> Option<bool> {
+    if !hot && t >= limit {
+        Some(true)
+    } else if hot && t.saturating_add(COOL_HYSTERESIS_C) < limit {
+        Some(false)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_temperature_byte_gives_a_hysteresis_decision() {
+        for limit in 0..=u8::MAX {
+            for t in 0..=u8::MAX {
+                let cool = u16::from(t) + u16::from(COOL_HYSTERESIS_C) < u16::from(limit);
+                assert_eq!(hot_change(t, limit, false), (t >= limit).then_some(true));
+                assert_eq!(hot_change(t, limit, true), cool.then_some(false));
+            }
+        }
+        // The glove's 255 (out of the register's range) is hot, and stays hot.
+        assert_eq!(hot_change(255, 65, false), Some(true));
+        assert_eq!(hot_change(255, 65, true), None);
+        assert_eq!(hot_change(59, 65, true), Some(false));
     }
 }
