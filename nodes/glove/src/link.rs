@@ -1,13 +1,22 @@
 //! The serial link to one glove: request/answer exchanges over `serialport` with timeouts,
 //! resynchronisation and counters. Used by the glove node and by `teleop glove`.
+//!
+//! The protocol's answers carry no request number: the force-control answer to one request
+//! looks like the answer to the next. So after a timeout the link resynchronises before the
+//! next request: it reads and discards until the line is quiet, so that an answer arriving
+//! after its exchange gave up is never taken for the answer to the next request (see
+//! [`GloveLink::exchange`]).
 
 use std::io::{Read, Write};
+use std::os::fd::AsRawFd;
+use std::path::Path;
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
 use teleop_glove_protocol::{
-    decode_values, encode_request, read_request, write_request, DecodeError, Register, Request,
-    Response, ResponseDecoder, Values, MAX_FRAME,
+    decode_values, encode_request, read_request, wire_time, write_request, DecodeError, Register,
+    Request, Response, ResponseDecoder, Values, MAX_FRAME,
 };
 
 /// Why an exchange failed.
@@ -59,30 +68,46 @@ pub struct LinkStats {
     pub garbage: u64,
     /// Well-formed frames from another device id.
     pub other_id: u64,
-    /// Answers that did not match the request (late answers to an earlier request).
+    /// Answers that did not match the request (of another kind or register).
     pub unexpected: u64,
+    /// Answers that arrived after their exchange had timed out, discarded while resynchronising.
+    pub late: u64,
 }
 
 impl LinkStats {
     /// All problems together.
     pub fn errors(&self) -> u64 {
-        self.timeouts + self.bad_frames + self.garbage + self.other_id + self.unexpected
+        self.timeouts + self.bad_frames + self.garbage + self.other_id + self.unexpected + self.late
     }
 }
+
+/// Character times without a byte after which the line counts as quiet again once bytes came
+/// in after a timeout. (A USB-serial adapter passes bytes on in bursts every latency-timer
+/// period; at 1 ms, see [`crate::latency`], a burst gap is shorter than this at 115200 baud.
+/// Should a slower adapter split a late answer anyway, its tail has no header and cannot be
+/// taken for an answer.)
+const QUIET_CHARS: usize = 12;
+
+/// Sysfs latency-timer files already warned about: once per process, not on every reopen.
+static WARNED: Mutex<Vec<std::path::PathBuf>> = Mutex::new(Vec::new());
 
 /// An open serial link to the glove with device id `id`.
 pub struct GloveLink {
     port: TTYPort,
     path: String,
     id: u8,
+    baud: u32,
     timeout: Duration,
+    low_latency: bool,
     decoder: ResponseDecoder,
     stats: LinkStats,
 }
 
 impl GloveLink {
     /// Opens `path` (USB serial, Bluetooth SPP such as /dev/rfcomm0, or a pseudo-terminal) at
-    /// `baud`, 8N1, exclusively.
+    /// `baud`, 8N1, exclusively, and asks the driver for low latency: `ASYNC_LOW_LATENCY` (a
+    /// refusal, as from a pseudo-terminal, is only a debug note), and a warning, once per
+    /// adapter, naming the fix when a USB-serial adapter's latency timer is above 1 ms.
     pub fn open(path: &str, baud: u32, id: u8, timeout: Duration) -> Result<Self, LinkError> {
         let port = serialport::new(path, baud)
             .data_bits(serialport::DataBits::Eight)
@@ -96,11 +121,21 @@ impl GloveLink {
                 detail: e.to_string(),
             })?;
         let _ = port.clear(serialport::ClearBuffer::All);
+        let low_latency = match crate::latency::request_low_latency(port.as_raw_fd()) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::debug!(port = %path, "no low-latency mode: {e}");
+                false
+            }
+        };
+        warn_slow_latency_timer(Path::new(path));
         Ok(Self {
             port,
             path: path.to_string(),
             id,
+            baud,
             timeout,
+            low_latency,
             decoder: ResponseDecoder::new(Some(id)),
             stats: LinkStats::default(),
         })
@@ -127,7 +162,14 @@ impl GloveLink {
         self.port.set_baud_rate(baud).map_err(|e| LinkError::Open {
             port: self.path.clone(),
             detail: e.to_string(),
-        })
+        })?;
+        self.baud = baud;
+        Ok(())
+    }
+
+    /// Whether the driver accepted low-latency mode (`ASYNC_LOW_LATENCY`) for the port.
+    pub fn low_latency(&self) -> bool {
+        self.low_latency
     }
 
     /// Counters so far.
@@ -137,7 +179,8 @@ impl GloveLink {
 
     /// Sends `request` and waits for its answer. Returns the answer and the CLOCK_MONOTONIC
     /// time its last byte was read. Frames that do not answer this request are counted and
-    /// skipped; a timeout is counted and returned.
+    /// skipped. A timeout is counted, the line resynchronised (see [`Self::resync`]), and the
+    /// timeout returned.
     pub fn exchange(&mut self, request: &Request) -> Result<(Response, u64), LinkError> {
         let mut frame = [0u8; MAX_FRAME];
         let n = encode_request(self.id, request, &mut frame)?;
@@ -177,22 +220,97 @@ impl GloveLink {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
                 self.stats.timeouts += 1;
-                self.decoder.clear();
+                self.resync()?;
                 return Err(LinkError::Timeout(self.timeout));
             }
-            let _ = self.port.set_timeout(left);
-            match self.port.read(&mut buf) {
-                Ok(0) => {
-                    return Err(self.io(std::io::Error::new(
-                        std::io::ErrorKind::UnexpectedEof,
-                        "port closed",
-                    )))
-                }
-                Ok(n) => (start, end) = (0, n),
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(self.io(e)),
+            end = self.read(&mut buf, left)?;
+            start = 0;
+        }
+    }
+
+    /// After a timeout: reads and discards until the line is quiet, so that the answer to the
+    /// request that timed out cannot be taken for the answer to the next one.
+    ///
+    /// Quiet means no byte for [`QUIET_CHARS`] character times at the current baud rate after
+    /// the last byte, or no byte at all for one more answer timeout: a late answer usually has
+    /// not begun when the exchange gives up, and one that does not begin within twice the
+    /// answer timeout cannot be told from a lost one. (So a lost answer costs two answer
+    /// timeouts.) Whole frames read meanwhile are counted as [`LinkStats::late`], other bytes
+    /// as line errors. Bounded: a line still busy after two answer timeouts is flushed with a
+    /// warning.
+    fn resync(&mut self) -> Result<(), LinkError> {
+        self.decoder.clear();
+        let begin = Instant::now();
+        let limit = begin + 2 * self.timeout;
+        let quiet = wire_time(QUIET_CHARS, self.baud);
+        let mut quiet_at = begin + self.timeout;
+        let (mut bytes, late_before) = (0usize, self.stats.late);
+        let mut buf = [0u8; 256];
+        let settled = loop {
+            let now = Instant::now();
+            if now >= quiet_at {
+                break true;
             }
+            if now >= limit {
+                break false;
+            }
+            let n = self.read(&mut buf, quiet_at.min(limit) - now)?;
+            if n == 0 {
+                continue;
+            }
+            quiet_at = Instant::now() + quiet;
+            bytes += n;
+            let mut taken = 0;
+            while taken < n {
+                taken += self.decoder.push(&buf[taken..n]);
+                while let Some(item) = self.decoder.next() {
+                    match item {
+                        Ok(_) => self.stats.late += 1,
+                        Err(e) => self.count(e),
+                    }
+                }
+            }
+        };
+        self.decoder.clear();
+        let late = self.stats.late - late_before;
+        if !settled {
+            let _ = self.port.clear(serialport::ClearBuffer::Input);
+            tracing::warn!(
+                port = %self.path,
+                bytes,
+                late,
+                "the line did not go quiet within {:?} after a timeout; input flushed",
+                2 * self.timeout
+            );
+        } else if bytes > 0 {
+            tracing::debug!(
+                port = %self.path,
+                bytes,
+                late,
+                "resynchronised after a timeout: discarded what arrived late"
+            );
+        }
+        Ok(())
+    }
+
+    /// One read of at most `buf.len()` bytes, waiting up to `wait`; 0 when nothing came.
+    fn read(&mut self, buf: &mut [u8], wait: Duration) -> Result<usize, LinkError> {
+        let _ = self.port.set_timeout(wait);
+        match self.port.read(buf) {
+            Ok(0) => Err(self.io(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                "port closed",
+            ))),
+            Ok(n) => Ok(n),
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                Ok(0)
+            }
+            Err(e) => Err(self.io(e)),
         }
     }
 
@@ -240,6 +358,29 @@ impl GloveLink {
             source,
         }
     }
+}
+
+/// Warns once per latency-timer file when the USB-serial adapter behind `port` is slow.
+fn warn_slow_latency_timer(port: &Path) {
+    let Some(tty) = crate::latency::tty_name(port) else {
+        return;
+    };
+    let Some(slow) = crate::latency::slow_latency_timer(Path::new("/sys"), &tty) else {
+        return;
+    };
+    let mut warned = WARNED.lock().unwrap_or_else(|e| e.into_inner());
+    if warned.contains(&slow.path) {
+        return;
+    }
+    tracing::warn!(
+        port = %port.display(),
+        "the USB-serial adapter's latency timer is {} ms ({}): every answer waits for it; \
+         for 1 ms run `{}`",
+        slow.ms,
+        slow.path.display(),
+        slow.fix()
+    );
+    warned.push(slow.path);
 }
 
 /// True when `answer` is the answer to `request` (same command, same register address).

@@ -6,8 +6,8 @@
 //! ID and baud changes after the acknowledge, paces every byte at 10 bit times of the current
 //! baud rate, and moves a simulated operator hand that the actuators push on (measured forces,
 //! currents and temperatures follow the load; sustained overload sets error bits). Faults
-//! (garbage, dropped answers, corrupted checksums, answers from another id, unplug/replug) are
-//! selectable at start and at run time.
+//! (garbage, dropped answers, corrupted checksums, answers from another id, late answers,
+//! unplug/replug) are selectable at start and at run time.
 //!
 //! - [`hand`]: the operator's hand and the actuators (pure);
 //! - [`device`]: the firmware's behaviour on the wire (pure);

@@ -5,6 +5,7 @@
 //! echo "fault drop=0.2" | socat - UNIX-CONNECT:/tmp/glove.ctl
 //! ```
 //! Commands: `fault NAME=P` (garbage, drop, corrupt, other-id), `clear`, `unplug SECONDS`,
+//! `late MS` (the next answer comes MS milliseconds late, e.g. past the host's timeout),
 //! `stats`, `state` (the force set-points the device has and the positions it reports).
 
 use std::io::{BufRead, BufReader, Write};
@@ -121,6 +122,9 @@ fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Longest `late` delay: the simulator serves nothing else meanwhile (not even a stop).
+const MAX_LATE_MS: u64 = 10_000;
+
 fn command(sim: &SimGlove, line: &str) -> String {
     let (word, rest) = line.split_once(' ').unwrap_or((line, ""));
     match word {
@@ -146,6 +150,13 @@ fn command(sim: &SimGlove, line: &str) -> String {
             }
             _ => "error: unplug SECONDS".into(),
         },
+        "late" => match rest.trim().parse::<u64>() {
+            Ok(ms) if ms <= MAX_LATE_MS => {
+                sim.answer_late(Duration::from_millis(ms));
+                "ok".into()
+            }
+            _ => format!("error: late MS (0..={MAX_LATE_MS})"),
+        },
         "stats" => format!("{:?}", sim.stats()),
         "state" => match sim.device() {
             Some(d) => format!(
@@ -158,7 +169,7 @@ fn command(sim: &SimGlove, line: &str) -> String {
             None => "no exchange yet".into(),
         },
         _ => format!(
-            "error: unknown command {word:?}: fault NAME=P, clear, unplug SECONDS, stats, state"
+            "error: unknown command {word:?}: fault NAME=P, clear, unplug SECONDS, late MS, stats, state"
         ),
     }
 }

@@ -76,6 +76,8 @@ pub struct SimStats {
     pub bad_requests: u64,
     /// Times the cable was pulled.
     pub unplugs: u64,
+    /// Answers sent late on purpose ([`SimGlove::answer_late`]).
+    pub late: u64,
 }
 
 /// Start options.
@@ -99,6 +101,7 @@ pub struct SimOptions {
 struct Shared {
     faults: Mutex<Faults>,
     unplug: Mutex<Option<Duration>>,
+    late: Mutex<Option<Duration>>,
     stop: AtomicBool,
     stats: Mutex<SimStats>,
     last_answer_ns: AtomicU64,
@@ -191,6 +194,13 @@ impl SimGlove {
     /// Pulls the cable for `duration`, then plugs it back in (as a new pty behind the same link).
     pub fn unplug(&self, duration: Duration) {
         *lock(&self.shared.unplug) = Some(duration);
+    }
+
+    /// Sends the next answer `by` later than usual, as a busy device would (for instance past
+    /// the host's answer timeout). The device goes on as usual otherwise: requests that arrive
+    /// meanwhile wait in the line's buffer and are answered in order afterwards.
+    pub fn answer_late(&self, by: Duration) {
+        *lock(&self.shared.late) = Some(by);
     }
 
     /// Counters so far.
@@ -415,8 +425,12 @@ fn connection(
                     out[len + n - 1] ^= 0x5A;
                 }
                 len += n;
-                // Processing, then the answer's own wire time.
-                let done = Instant::now() + options.response_delay + wire_time(len, bps);
+                let late = lock(&shared.late).take();
+                // Processing (and a delay on purpose), then the answer's own wire time.
+                let done = Instant::now()
+                    + options.response_delay
+                    + late.unwrap_or_default()
+                    + wire_time(len, bps);
                 teleop_runtime::sleep_until(done);
                 if master.write_all(&out[..len]).is_err() {
                     continue;
@@ -433,25 +447,25 @@ fn connection(
                     }
                 }
                 rx_line_free = Instant::now();
-                {
-                    let mut s = lock(&shared.stats);
-                    s.answers += 1;
-                    s.garbage += u64::from(garbage);
-                    s.corrupted += u64::from(corrupt);
-                    s.other_id += u64::from(other);
-                }
                 if let Some(baud) = device.after_answer() {
                     note(
                         shared,
                         format!("baud rate now {} bit/s", baud.bits_per_second()),
                     );
                 }
+                // The view before the counters: whoever sees an answer counted sees its state.
                 *lock(&shared.device) = Some(DeviceView {
                     id: device.id(),
                     force_set: device.force_set(),
                     positions: device.hand().positions(),
                     baud: device.baud(),
                 });
+                let mut s = lock(&shared.stats);
+                s.answers += 1;
+                s.garbage += u64::from(garbage);
+                s.corrupted += u64::from(corrupt);
+                s.other_id += u64::from(other);
+                s.late += u64::from(late.is_some());
             }
         }
     }
