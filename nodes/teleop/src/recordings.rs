@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use node_feedback::{Event, FeedbackEngine};
 use node_retarget::RetargetEngine;
-use teleop_hand_profile::HandProfile;
+use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_msgs::{
     source_id, visit_topic, EStop, GloveForceCommand, GloveState, HandCommand, HandState, Message,
     Tactile, TopicVisitor,
@@ -280,9 +280,6 @@ pub struct ReprocessOptions {
     pub profile: Option<PathBuf>,
 }
 
-/// The metadata record the recorder embeds the hand profile in (`--metadata hand_profile=FILE`).
-pub const PROFILE_METADATA: &str = "hand_profile";
-
 /// The hand a recording was made with: `--profile` when given; else the profile embedded in the
 /// recording's metadata; else (recordings made before profiles existed) the shipped profile of
 /// the recorded hand commands' model. Says which on stderr.
@@ -295,19 +292,9 @@ fn recording_profile(
         return Ok(HandProfile::load(path)?);
     }
     let info = recording_info(input)?;
-    if let Some((_, fields)) = info.metadata.iter().find(|(n, _)| n == PROFILE_METADATA) {
-        let text = fields.get("text").ok_or_else(|| {
-            anyhow::anyhow!(
-                "{}: metadata `{PROFILE_METADATA}` has no `text` field",
-                input.display()
-            )
-        })?;
-        let origin = format!(
-            "{} (metadata {PROFILE_METADATA}, from {})",
-            input.display(),
-            fields.get("file").map_or("?", String::as_str)
-        );
-        let profile = HandProfile::from_toml_str(text, &origin)?;
+    let recording = input.display().to_string();
+    if let Some(profile) = HandProfile::from_recording_metadata(&recording, &info.metadata) {
+        let profile = profile?;
         eprintln!(
             "hand profile `{}` from the recording's metadata",
             profile.name
@@ -321,17 +308,14 @@ fn recording_profile(
         .map(|c| c.hand_model)
         .ok_or_else(|| {
             anyhow::anyhow!(
-                "{}: no `{PROFILE_METADATA}` metadata and no hand command to tell the hand by: \
+                "{}: no `{RECORDING_METADATA}` metadata and no hand command to tell the hand by: \
                  pass --profile",
                 input.display()
             )
         })?;
-    let profile = HandProfile::builtin_names()
-        .filter_map(HandProfile::builtin)
-        .find(|p| p.model_id == model)
-        .ok_or_else(|| {
+    let profile = HandProfile::builtin_for_model(model).ok_or_else(|| {
             anyhow::anyhow!(
-                "{}: no `{PROFILE_METADATA}` metadata and no shipped profile for hand model {model}: \
+                "{}: no `{RECORDING_METADATA}` metadata and no shipped profile for hand model {model}: \
                  pass --profile",
                 input.display()
             )
@@ -392,7 +376,7 @@ pub fn reprocess_cmd(
         ("retarget_config", &opts.retarget_config),
         ("calibration", &opts.calibration),
         ("feedback_config", &opts.feedback_config),
-        (PROFILE_METADATA, &opts.profile),
+        (RECORDING_METADATA, &opts.profile),
     ] {
         if let Some(m) = path.as_deref().and_then(teleop_recorder::file_metadata) {
             metadata.push((name.to_string(), m));

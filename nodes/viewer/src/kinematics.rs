@@ -278,13 +278,10 @@ impl RobotHand {
     /// The builtin profile of a contract hand model id (`hand_model` fields), if one is
     /// compiled in.
     pub fn builtin_for_model(model_id: u8) -> Option<Self> {
-        HandProfile::builtin_names()
-            .filter_map(HandProfile::builtin)
-            .find(|p| p.model_id == model_id)
-            .map(|p| {
-                let source = format!("builtin `{}`", p.name);
-                Self::new(p, source)
-            })
+        HandProfile::builtin_for_model(model_id).map(|p| {
+            let source = format!("builtin `{}`", p.name);
+            Self::new(p, source)
+        })
     }
 
     /// The profile.

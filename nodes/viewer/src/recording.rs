@@ -9,7 +9,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use teleop_hand_profile::HandProfile;
+use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_recording::{info, read_messages, Filter, RecordingInfo};
 use teleop_runtime::{split, Namespace};
 
@@ -116,32 +116,19 @@ impl Progress {
     }
 }
 
-/// The metadata record in which the recorder embeds the hand profile
-/// (`teleop-recorder --metadata hand_profile=FILE`): fields `file` (its path) and `text`.
-pub const PROFILE_METADATA: &str = "hand_profile";
-
 /// The hand profile embedded in a recording's metadata, `None` when it has none (recordings
 /// made before profiles existed). An embedded profile that does not load is an error naming
 /// the recording, the embedded file, the line and the field.
 pub fn recorded_profile(path: &Path, about: &RecordingInfo) -> anyhow::Result<Option<RobotHand>> {
-    let Some((_, fields)) = about.metadata.iter().find(|(n, _)| n == PROFILE_METADATA) else {
+    let recording = path.display().to_string();
+    let Some(profile) = HandProfile::from_recording_metadata(&recording, &about.metadata) else {
         return Ok(None);
     };
-    let text = fields.get("text").ok_or_else(|| {
-        anyhow::anyhow!(
-            "{}: metadata `{PROFILE_METADATA}` has no `text` field",
-            path.display()
-        )
-    })?;
-    let origin = format!(
-        "{} (metadata {PROFILE_METADATA}, from {})",
-        path.display(),
-        fields.get("file").map_or("?", String::as_str)
-    );
-    let profile = HandProfile::from_toml_str(text, &origin).context(
+    let profile = profile.context(
         "the recording's hand profile does not load; pass --profile FILE to use another",
     )?;
-    Ok(Some(RobotHand::new(profile, origin)))
+    let source = format!("{recording} (metadata {RECORDING_METADATA})");
+    Ok(Some(RobotHand::new(profile, source)))
 }
 
 /// Logs the messages of the recording at `path` that `filter` selects, of the channels of

@@ -36,6 +36,7 @@
 mod error;
 mod raw;
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 pub use error::ProfileError;
@@ -250,6 +251,10 @@ pub struct HandProfile {
     pub feedback: [FeedbackSource; 5],
 }
 
+/// The metadata record in which the recorder embeds the hand profile of a session
+/// (`teleop-recorder --metadata hand_profile=FILE`): fields `file` (its path) and `text`.
+pub const RECORDING_METADATA: &str = "hand_profile";
+
 /// The profiles shipped in `config/hands/`, compiled in: `(name, file name, text)`.
 const BUILTIN: [(&str, &str, &str); 3] = [
     (
@@ -291,6 +296,36 @@ impl HandProfile {
         // The shipped files are checked by this crate's tests; a broken one is reported by
         // `builtin_names` users as missing rather than by a panic.
         Self::from_toml_str(text, file).ok()
+    }
+
+    /// The shipped profile of a contract hand model id (`hand_model` fields), if there is one.
+    pub fn builtin_for_model(model_id: u8) -> Option<Self> {
+        Self::builtin_names()
+            .filter_map(Self::builtin)
+            .find(|p| p.model_id == model_id)
+    }
+
+    /// The profile embedded in a recording's metadata records (`(name, fields)` pairs) under
+    /// [`RECORDING_METADATA`]; `None` when there is none (recordings made before profiles). Errors
+    /// name the recording, the embedded file, the line and the field.
+    pub fn from_recording_metadata<'a>(
+        recording: &str,
+        metadata: impl IntoIterator<Item = &'a (String, BTreeMap<String, String>)>,
+    ) -> Option<Result<Self, ProfileError>> {
+        let (_, fields) = metadata
+            .into_iter()
+            .find(|(name, _)| name == RECORDING_METADATA)?;
+        let Some(text) = fields.get("text") else {
+            return Some(Err(ProfileError::Read {
+                origin: recording.to_string(),
+                reason: format!("metadata `{RECORDING_METADATA}` has no `text` field"),
+            }));
+        };
+        let origin = format!(
+            "{recording} (metadata {RECORDING_METADATA}, from {})",
+            fields.get("file").map_or("?", String::as_str)
+        );
+        Some(Self::from_toml_str(text, &origin))
     }
 
     /// Names of the shipped profiles.

@@ -292,3 +292,51 @@ proptest! {
         let _ = HandProfile::from_toml_str(&text, "p.toml");
     }
 }
+
+#[test]
+fn builtins_by_model_and_profiles_embedded_in_recordings() {
+    use std::collections::BTreeMap;
+    use teleop_hand_profile::RECORDING_METADATA;
+    for (id, name) in [(1, "revo2"), (2, "allegro"), (3, "shadow")] {
+        assert_eq!(HandProfile::builtin_for_model(id).unwrap().name, name);
+    }
+    assert!(HandProfile::builtin_for_model(0).is_none());
+
+    let record = |fields: &[(&str, &str)]| {
+        vec![
+            ("software".to_string(), BTreeMap::new()),
+            (
+                RECORDING_METADATA.to_string(),
+                fields
+                    .iter()
+                    .map(|(k, v)| (k.to_string(), v.to_string()))
+                    .collect::<BTreeMap<_, _>>(),
+            ),
+        ]
+    };
+    let none: Vec<(String, BTreeMap<String, String>)> = Vec::new();
+    assert!(HandProfile::from_recording_metadata("r.mcap", &none).is_none());
+    let good = record(&[("file", "config/hands/x.toml"), ("text", GOOD)]);
+    let p = HandProfile::from_recording_metadata("r.mcap", &good)
+        .unwrap()
+        .unwrap();
+    assert_eq!(p.name, "two");
+    let bad_text = with("limits = [0.0, 1.0]", "limits = [1.0, 0.0]");
+    let bad = record(&[("file", "config/hands/x.toml"), ("text", &bad_text)]);
+    let e = HandProfile::from_recording_metadata("r.mcap", &bad)
+        .unwrap()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with(
+            "r.mcap (metadata hand_profile, from config/hands/x.toml):11: joint[0].limits"
+        ),
+        "{e}"
+    );
+    let no_text = record(&[("file", "x")]);
+    let e = HandProfile::from_recording_metadata("r.mcap", &no_text)
+        .unwrap()
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no `text` field"), "{e}");
+}
