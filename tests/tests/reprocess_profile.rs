@@ -137,3 +137,91 @@ fn a_recording_without_a_profile_uses_the_shipped_profile_of_its_hand() {
         .iter()
         .all(|c| c.hand_model == hand_model::REVO2 && c.joint_count == 6));
 }
+
+#[test]
+fn one_side_of_a_two_sided_recording_is_reprocessed_with_namespace() {
+    let sandbox = Sandbox::new();
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    let input = sandbox.dir.path().join("bimanual.mcap");
+    let metadata = vec![(
+        "hand_profile".to_string(),
+        BTreeMap::from([
+            ("file".to_string(), profile.display().to_string()),
+            (
+                "text".to_string(),
+                std::fs::read_to_string(&profile).unwrap(),
+            ),
+        ]),
+    )];
+    let mut rec = Recorder::create(&input, WriterOptions::default(), &metadata).unwrap();
+    let left = rec
+        .add_topic(
+            "left/glove/state",
+            GloveState::SCHEMA_NAME,
+            &GloveState::schema(),
+        )
+        .unwrap();
+    let right = rec
+        .add_topic(
+            "right/glove/state",
+            GloveState::SCHEMA_NAME,
+            &GloveState::schema(),
+        )
+        .unwrap();
+    let mut n = 0;
+    for m in read_messages(&sample(), &Filter::topics([GloveState::TOPIC])).unwrap() {
+        let m = m.unwrap();
+        let s: GloveState = m.decode().unwrap();
+        // The left operator grasps as recorded; the right one keeps the hand open.
+        let open = GloveState {
+            raw_position: [1000; 6],
+            ..s
+        };
+        for (id, topic, sample) in [
+            (left, "left/glove/state", &s),
+            (right, "right/glove/state", &open),
+        ] {
+            let msg = RecordedMessage {
+                topic,
+                ..RecordedMessage::from_sample(sample, m.log_time_ns)
+            };
+            rec.write(id, &msg).unwrap();
+        }
+        n += 1;
+    }
+    rec.finish().unwrap();
+
+    let reprocess = |args: &[&str]| {
+        let out = sandbox.dir.path().join("out.mcap");
+        let mut all = vec![
+            "reprocess",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        let r = sandbox.run_teleop(&all);
+        (r, out)
+    };
+    let closes = |cmds: &[HandCommand]| cmds.iter().any(|c| c.joints[2].target > 0.3);
+    let (r, out) = reprocess(&["--namespace", "left"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let cmds = commands(&out);
+    assert_eq!(cmds.len(), n);
+    assert!(closes(&cmds), "the left operator closes the hand");
+    let (r, out) = reprocess(&["--namespace", "right"]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let cmds = commands(&out);
+    assert_eq!(cmds.len(), n);
+    assert!(!closes(&cmds), "the right operator keeps it open");
+    // Without a side, or with one that is not there: refused, naming the sides there are.
+    for args in [&[][..], &["--namespace", "top"][..]] {
+        let (r, _) = reprocess(args);
+        let stderr = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success());
+        assert!(
+            stderr.contains("choose a side with --namespace (left, right)"),
+            "{stderr}"
+        );
+    }
+}

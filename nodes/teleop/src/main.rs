@@ -177,6 +177,10 @@ enum Command {
         /// the recorded hand model).
         #[arg(long)]
         profile: Option<PathBuf>,
+        /// The side to reprocess in a recording of several (channels `NS/<topic>`); without it,
+        /// the channels without a namespace.
+        #[arg(long, value_name = "NS")]
+        namespace: Option<Namespace>,
     },
     /// Show the live pipeline or a recording in a rerun viewer (`teleop view --help`).
     ///
@@ -293,6 +297,7 @@ fn main() -> ExitCode {
             calibration,
             feedback_config,
             profile,
+            namespace,
         } => recordings::reprocess_cmd(
             &file,
             &out,
@@ -301,6 +306,7 @@ fn main() -> ExitCode {
                 calibration,
                 feedback_config,
                 profile,
+                namespace,
             },
         ),
         Command::Revo2 { target, command } => revo2::run(&target, &command),

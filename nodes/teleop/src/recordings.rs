@@ -278,6 +278,8 @@ pub struct ReprocessOptions {
     pub calibration: Option<PathBuf>,
     pub feedback_config: Option<PathBuf>,
     pub profile: Option<PathBuf>,
+    /// The side to reprocess in a recording of several (`None`: the topics without one).
+    pub namespace: Option<Namespace>,
 }
 
 /// The hand a recording was made with: `--profile` when given; else the profile embedded in the
@@ -353,8 +355,33 @@ pub fn reprocess_cmd(
             out.display()
         );
     }
-    let messages: Vec<OwnedMessage> =
-        read_messages(input, &Filter::all())?.collect::<Result<_, _>>()?;
+    // The chosen side's messages, under their contract topic names.
+    let mut messages: Vec<OwnedMessage> = Vec::new();
+    let mut sides: Vec<String> = Vec::new();
+    for msg in read_messages(input, &Filter::all())? {
+        let mut msg = msg?;
+        let Some((ns, topic)) = split(&msg.topic) else {
+            continue;
+        };
+        if ns == opts.namespace {
+            msg.topic = topic.name.to_string();
+            messages.push(msg);
+        } else if let Some(ns) = ns.map(|n| n.to_string()).filter(|n| !sides.contains(n)) {
+            sides.push(ns);
+        }
+    }
+    if messages.is_empty() && !sides.is_empty() {
+        anyhow::bail!(
+            "{}: nothing recorded {}; choose a side with --namespace ({})",
+            input.display(),
+            opts.namespace
+                .as_ref()
+                .map_or("without a namespace".to_string(), |ns| format!(
+                    "in namespace `{ns}`"
+                )),
+            sides.join(", ")
+        );
+    }
     let profile = recording_profile(input, opts.profile.as_deref(), &messages)?;
     let loaded = node_retarget::load(
         opts.retarget_config.as_deref(),
