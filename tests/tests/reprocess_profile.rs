@@ -20,23 +20,28 @@ fn commands(path: &std::path::Path) -> Vec<HandCommand> {
         .collect()
 }
 
-#[test]
-fn the_profile_embedded_in_a_recording_drives_reprocessing() {
-    let sandbox = Sandbox::new();
-    // An operator recording (the sample's glove samples) made with the Allegro profile.
-    let profile = Sandbox::repo().join("config/hands/allegro.toml");
-    let input = sandbox.dir.path().join("allegro-session.mcap");
+/// A recorder whose file embeds the profile at `profile` as the recorder does.
+fn recorder_with_profile(path: &std::path::Path, profile: &std::path::Path) -> Recorder {
     let metadata = vec![(
         "hand_profile".to_string(),
         BTreeMap::from([
             ("file".to_string(), profile.display().to_string()),
             (
                 "text".to_string(),
-                std::fs::read_to_string(&profile).unwrap(),
+                std::fs::read_to_string(profile).unwrap(),
             ),
         ]),
     )];
-    let mut rec = Recorder::create(&input, WriterOptions::default(), &metadata).unwrap();
+    Recorder::create(path, WriterOptions::default(), &metadata).unwrap()
+}
+
+#[test]
+fn the_profile_embedded_in_a_recording_drives_reprocessing() {
+    let sandbox = Sandbox::new();
+    // An operator recording (the sample's glove samples) made with the Allegro profile.
+    let profile = Sandbox::repo().join("config/hands/allegro.toml");
+    let input = sandbox.dir.path().join("allegro-session.mcap");
+    let mut rec = recorder_with_profile(&input, &profile);
     let glove = rec.add_message_type::<GloveState>().unwrap();
     let mut n = 0;
     for m in read_messages(&sample(), &Filter::topics([GloveState::TOPIC])).unwrap() {
@@ -143,17 +148,7 @@ fn one_side_of_a_two_sided_recording_is_reprocessed_with_namespace() {
     let sandbox = Sandbox::new();
     let profile = Sandbox::repo().join("config/hands/revo2.toml");
     let input = sandbox.dir.path().join("bimanual.mcap");
-    let metadata = vec![(
-        "hand_profile".to_string(),
-        BTreeMap::from([
-            ("file".to_string(), profile.display().to_string()),
-            (
-                "text".to_string(),
-                std::fs::read_to_string(&profile).unwrap(),
-            ),
-        ]),
-    )];
-    let mut rec = Recorder::create(&input, WriterOptions::default(), &metadata).unwrap();
+    let mut rec = recorder_with_profile(&input, &profile);
     let left = rec
         .add_topic(
             "left/glove/state",

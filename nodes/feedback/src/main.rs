@@ -14,7 +14,8 @@ use node_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
 use teleop_runtime::{
-    init_logging, now_ns, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
+    init_logging, now_ns, EStopInput, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime,
+    Publisher, Wake,
 };
 
 #[derive(Parser)]
@@ -34,21 +35,7 @@ struct Args {
 fn main() -> ExitCode {
     init_logging();
     let args = Args::parse();
-    let profile = args
-        .profile
-        .as_deref()
-        .map(HandProfile::load)
-        .transpose()
-        .map_err(anyhow::Error::from);
-    let result = profile
-        .and_then(|p| load(args.config.as_deref(), p))
-        .and_then(|(config, profile)| {
-            tracing::info!(hand = %profile.name, "hand profile loaded");
-            let engine = FeedbackEngine::new(&config, &profile)?;
-            let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-            run(&runtime, &config, engine)
-        });
-    match result {
+    match start(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("stopping: {e:#}");
@@ -86,6 +73,24 @@ fn emit(
     Ok(())
 }
 
+/// The engine's e-stop event for the latched state.
+fn estop_sample(engaged: bool) -> EStop {
+    EStop {
+        engaged: u8::from(engaged),
+        ..Default::default()
+    }
+}
+
+/// Loads everything the arguments name, then runs.
+fn start(args: &Args) -> anyhow::Result<()> {
+    let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
+    let (config, profile) = load(args.config.as_deref(), profile)?;
+    tracing::info!(hand = %profile.name, "hand profile loaded");
+    let engine = FeedbackEngine::new(&config, &profile)?;
+    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+    run(&runtime, &config, engine)
+}
+
 fn run(
     runtime: &NodeRuntime,
     config: &NodeConfig,
@@ -94,15 +99,16 @@ fn run(
     let tactile = runtime.subscriber::<Tactile>()?;
     let state = runtime.subscriber::<HandState>()?;
     let command = runtime.subscriber::<HandCommand>()?;
-    let estop = runtime.subscriber::<EStop>()?;
     let mut forces = runtime.publisher::<GloveForceCommand>()?;
+    // The latched e-stop: engaged before this node started (or while it restarted) is in the
+    // latch file.
+    let estop = EStopInput::new(runtime)?;
     let mut health = Health::new(runtime)?;
     let health_period = Duration::from_millis(config.health_period_ms.max(10));
     let mut last_health = Instant::now();
-    // An e-stop engaged before this node started is in the topic's history.
-    if let Some(e) = estop.poll_latest() {
+    if estop.engaged() {
         emit(
-            engine.handle(&Event::EStop(e), now_ns()),
+            engine.handle(&Event::EStop(estop_sample(true)), now_ns()),
             &mut forces,
             &mut health,
         )?;
@@ -115,7 +121,12 @@ fn run(
             Wake::Input(0) => tactile.drain(|t| events.push(Event::Tactile(*t))),
             Wake::Input(1) => state.drain(|s| events.push(Event::State(*s))),
             Wake::Input(2) => command.drain(|c| events.push(Event::Command(*c))),
-            Wake::Input(_) => estop.drain(|e| events.push(Event::EStop(*e))),
+            Wake::Input(_) => {
+                if let Some(engaged) = estop.update()? {
+                    events.push(Event::EStop(estop_sample(engaged)));
+                }
+                1
+            }
             Wake::Timeout(_) | Wake::Tick => {
                 events.push(Event::Tick);
                 1

@@ -42,41 +42,32 @@ struct Args {
 fn main() -> ExitCode {
     init_logging();
     let args = Args::parse();
-    let profile = args
-        .profile
-        .as_deref()
-        .map(HandProfile::load)
-        .transpose()
-        .map_err(anyhow::Error::from);
-    let result = profile
-        .and_then(|p| load(args.config.as_deref(), args.calibration.as_deref(), p))
-        .and_then(|loaded| {
-            let Loaded {
-                config,
-                calibration,
-                calibration_path,
-                profile,
-            } = loaded;
-            match &calibration_path {
-                Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
-                None => tracing::info!("no calibration profile: using the full 0..1000 range"),
-            }
-            tracing::info!(
-                hand = %profile.name,
-                joints = profile.joints.len(),
-                "hand profile loaded"
-            );
-            let engine = RetargetEngine::new(&config, calibration, &profile)?;
-            let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-            run(&runtime, &config, engine)
-        });
-    match result {
+    match start(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("stopping: {e:#}");
             ExitCode::FAILURE
         }
     }
+}
+
+/// Loads everything the arguments name, then runs.
+fn start(args: &Args) -> anyhow::Result<()> {
+    let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
+    let Loaded {
+        config,
+        calibration,
+        calibration_path,
+        profile,
+    } = load(args.config.as_deref(), args.calibration.as_deref(), profile)?;
+    match &calibration_path {
+        Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
+        None => tracing::info!("no calibration profile: using the full 0..1000 range"),
+    }
+    tracing::info!(hand = %profile.name, joints = profile.joints.len(), "hand profile loaded");
+    let engine = RetargetEngine::new(&config, calibration, &profile)?;
+    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+    run(&runtime, &config, engine)
 }
 
 fn run(
