@@ -15,22 +15,41 @@ pub fn now_ns() -> u64 {
         .saturating_add(ts.tv_nsec as u64)
 }
 
-/// Sleeps until `t` with sub-100 us accuracy: sleeps, then spins the last 200 us. For control
-/// loops with absolute deadlines and for device simulators' line timing.
-pub fn sleep_until(t: std::time::Instant) {
-    use std::time::{Duration, Instant};
+/// Sleeps until the CLOCK_MONOTONIC time `deadline_ns` (as [`now_ns`]): one absolute-deadline
+/// `clock_nanosleep(TIMER_ABSTIME)`, so a late wake-up does not shift the next deadline and
+/// nothing spins. Returns at once if the deadline has passed.
+pub fn sleep_until_ns(deadline_ns: u64) {
+    let ts = libc::timespec {
+        tv_sec: (deadline_ns / 1_000_000_000).min(libc::time_t::MAX as u64) as libc::time_t,
+        tv_nsec: (deadline_ns % 1_000_000_000) as libc::c_long,
+    };
     loop {
-        let now = Instant::now();
-        if now >= t {
+        // SAFETY: `ts` is a valid timespec; the remaining-time pointer may be null with
+        // TIMER_ABSTIME.
+        let rc = unsafe {
+            libc::clock_nanosleep(
+                libc::CLOCK_MONOTONIC,
+                libc::TIMER_ABSTIME,
+                &ts,
+                std::ptr::null_mut(),
+            )
+        };
+        // EINTR (a signal): sleep on to the same deadline.
+        if rc != libc::EINTR {
             return;
         }
-        let left = t - now;
-        if left > Duration::from_micros(300) {
-            std::thread::sleep(left - Duration::from_micros(200));
-        } else {
-            std::hint::spin_loop();
-        }
     }
+}
+
+/// Sleeps until `t` (an `Instant`, which is CLOCK_MONOTONIC on Linux) with an absolute
+/// deadline: see [`sleep_until_ns`]. For control loops and for device simulators' line timing.
+pub fn sleep_until(t: std::time::Instant) {
+    let left = t.saturating_duration_since(std::time::Instant::now());
+    if left.is_zero() {
+        return;
+    }
+    let left_ns = u64::try_from(left.as_nanos()).unwrap_or(u64::MAX);
+    sleep_until_ns(now_ns().saturating_add(left_ns));
 }
 
 #[cfg(test)]
@@ -43,5 +62,15 @@ mod tests {
         let b = now_ns();
         assert!(b >= a);
         assert!(a > 0);
+    }
+
+    #[test]
+    fn sleeps_to_the_absolute_deadline() {
+        let deadline = now_ns() + 3_000_000;
+        sleep_until_ns(deadline);
+        assert!(now_ns() >= deadline);
+        let t = std::time::Instant::now() + std::time::Duration::from_millis(2);
+        sleep_until(t);
+        assert!(std::time::Instant::now() >= t);
     }
 }

@@ -210,6 +210,7 @@ impl NodeRuntime {
     /// called `<namespace>/<name>` and its ports use the namespace's topics.
     pub fn new(name: &str, settings: &IpcSettings) -> Result<Self, RuntimeError> {
         crate::signals::follow_supervisor();
+        crate::realtime::setup_process();
         let namespace = settings.namespace()?;
         let config = settings.config()?;
         let name = qualified(namespace.as_ref(), name);

@@ -12,7 +12,11 @@
 //!   does the same for loops that block on something else, such as a serial port);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
-//! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`init_logging`]: `tracing`.
+//! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
+//!   deadlines (`clock_nanosleep`, `TIMER_ABSTIME`); [`init_logging`]: `tracing` through a
+//!   bounded queue that drops (and counts) instead of blocking a loop;
+//! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
+//!   `launch.toml` gives a process, for its time-critical threads.
 //!
 //! Must not depend on: any device protocol, the retargeting or force-feedback logic, or the CLI.
 //!
@@ -25,9 +29,10 @@ mod health;
 mod ipc;
 mod logging;
 mod ports;
+pub mod realtime;
 mod signals;
 
-pub use clock::{now_ns, sleep_until};
+pub use clock::{now_ns, sleep_until, sleep_until_ns};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use health::Health;
@@ -35,7 +40,7 @@ pub use ipc::{
     discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT,
     ENV_NAMESPACE,
 };
-pub use logging::init_logging;
+pub use logging::{dropped_log_lines, init_logging};
 pub use ports::{Publisher, Subscriber};
 pub use signals::{follow_supervisor, install_stop_handlers, stop_signal, ENV_SUPERVISOR_PID};
 pub use teleop_namespace::{qualified, split, Namespace, NamespaceError};
