@@ -29,11 +29,22 @@ use teleop_runtime::{
     Subscriber, Wake,
 };
 
+/// Where a recording goes (rotated parts get `_1`, `_2`, ... before `.mcap`).
+#[derive(Debug, Clone)]
+pub enum Output {
+    /// This file; an existing file is not overwritten (refused).
+    File(PathBuf),
+    /// A new file in this folder named after the UTC start time to the millisecond
+    /// (`2026-11-23_20-37-35.123.mcap`); when another recorder took that name (started in the
+    /// same millisecond) `-2`, `-3`, ... goes before `.mcap`. Never overwrites a file.
+    Timestamped(PathBuf),
+}
+
 /// What to record and where.
 #[derive(Debug, Clone)]
 pub struct RecordOptions {
-    /// The file (rotated parts get `_1`, `_2`, ... before `.mcap`).
-    pub out: PathBuf,
+    /// Where to write.
+    pub out: Output,
     /// Topics to record (all when `None`), by their plain names (`hand/command`).
     pub topics: Option<Vec<String>>,
     /// Namespaces whose topics are recorded; empty: the topics without a namespace.
@@ -46,19 +57,48 @@ pub struct RecordOptions {
     pub duration: Option<Duration>,
 }
 
-/// `recordings/<UTC date>_<time>.mcap` under `dir`.
-pub fn default_path(dir: &Path) -> PathBuf {
-    let secs = SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
+/// The name a recording started at `at` gets: `<UTC date>_<time>.<milliseconds>`, without
+/// `.mcap`.
+fn timestamped_stem(at: SystemTime) -> String {
+    let since = at.duration_since(UNIX_EPOCH).unwrap_or_default();
+    let secs = since.as_secs();
     let (y, m, d) = civil_from_days((secs / 86_400) as i64);
     let t = secs % 86_400;
-    dir.join(format!(
-        "{y:04}-{m:02}-{d:02}_{:02}-{:02}-{:02}.mcap",
+    format!(
+        "{y:04}-{m:02}-{d:02}_{:02}-{:02}-{:02}.{:03}",
         t / 3600,
         t / 60 % 60,
-        t % 60
-    ))
+        t % 60,
+        since.subsec_millis()
+    )
+}
+
+/// Creates a new recording in `dir` named after `at` ([`Output::Timestamped`]): the first free
+/// name of `<stem>.mcap`, `<stem>-2.mcap`, `<stem>-3.mcap`, ... Each try creates the file only
+/// if it does not exist, so recorders started at the same moment never share a file.
+fn create_timestamped(
+    dir: &Path,
+    at: SystemTime,
+    writer: &WriterOptions,
+    metadata: &[(String, BTreeMap<String, String>)],
+) -> anyhow::Result<Recorder> {
+    let stem = timestamped_stem(at);
+    let mut n = 1u32;
+    loop {
+        let path = if n == 1 {
+            dir.join(format!("{stem}.mcap"))
+        } else {
+            dir.join(format!("{stem}-{n}.mcap"))
+        };
+        match Recorder::create(&path, writer.clone(), metadata) {
+            Err(RecordingError::Io { source, .. })
+                if source.kind() == std::io::ErrorKind::AlreadyExists && n < 1000 =>
+            {
+                n += 1;
+            }
+            created => return Ok(created?),
+        }
+    }
 }
 
 /// Days since 1970-01-01 to (year, month, day) (Howard Hinnant's algorithm).
@@ -164,7 +204,12 @@ impl TopicVisitor for MakeTap<'_> {
 /// Records until SIGINT/SIGTERM or the end of `options.duration`, then finishes the file
 /// properly and returns what was written (drops included).
 pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<RecordingSummary> {
-    let mut rec = Recorder::create(&options.out, options.writer.clone(), &options.metadata)?;
+    let mut rec = match &options.out {
+        Output::File(path) => Recorder::create(path, options.writer.clone(), &options.metadata)?,
+        Output::Timestamped(dir) => {
+            create_timestamped(dir, SystemTime::now(), &options.writer, &options.metadata)?
+        }
+    };
     let names: Vec<&str> = match &options.topics {
         Some(list) => list.iter().map(String::as_str).collect(),
         None => topics().iter().map(|t| t.name).collect(),
@@ -202,7 +247,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
             known: RefCell::default(),
         });
     }
-    tracing::info!(file = %options.out.display(), topics = taps.len(), "recording");
+    tracing::info!(file = %rec.path().display(), topics = taps.len(), "recording");
     let start = std::time::Instant::now();
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
@@ -356,11 +401,30 @@ mod tests {
         assert_eq!(civil_from_days(0), (1970, 1, 1));
         assert_eq!(civil_from_days(20_778), (2026, 11, 21));
         assert_eq!(civil_from_days(11_016), (2000, 2, 29));
-        let p = default_path(Path::new("recordings"));
-        let name = p.file_name().unwrap().to_string_lossy().into_owned();
-        assert!(
-            name.len() == "2026-11-21_08-00-00.mcap".len() && name.ends_with(".mcap"),
-            "{name}"
-        );
+        let at = UNIX_EPOCH + Duration::from_millis(20_778 * 86_400_000 + 8 * 3_600_000 + 7);
+        assert_eq!(timestamped_stem(at), "2026-11-21_08-00-00.007");
+    }
+
+    #[test]
+    fn recorders_started_at_the_same_moment_get_their_own_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = SystemTime::now();
+        let metadata = [];
+        let a = create_timestamped(dir.path(), at, &WriterOptions::default(), &metadata).unwrap();
+        let b = create_timestamped(dir.path(), at, &WriterOptions::default(), &metadata).unwrap();
+        let c = create_timestamped(dir.path(), at, &WriterOptions::default(), &metadata).unwrap();
+        let stem = timestamped_stem(at);
+        assert_eq!(a.path(), dir.path().join(format!("{stem}.mcap")));
+        assert_eq!(b.path(), dir.path().join(format!("{stem}-2.mcap")));
+        assert_eq!(c.path(), dir.path().join(format!("{stem}-3.mcap")));
+        for rec in [a, b, c] {
+            let path = rec.path().to_path_buf();
+            rec.finish().unwrap();
+            assert!(
+                teleop_recording::info(&path).unwrap().complete,
+                "{}",
+                path.display()
+            );
+        }
     }
 }

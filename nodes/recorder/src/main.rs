@@ -5,16 +5,15 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use teleop_recorder::{
-    default_path, file_metadata, record, report, standard_metadata, RecordOptions,
-};
+use teleop_recorder::{file_metadata, record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::WriterOptions;
 use teleop_runtime::{init_logging, IpcSettings, Namespace, NodeRuntime};
 
 #[derive(Parser)]
 #[command(version, about = "Record the pipeline's topics into MCAP")]
 struct Args {
-    /// Output file (default: recordings/<date>_<time>.mcap).
+    /// Output file (default: `<dir>/<UTC date>_<time>.<ms>.mcap`, `-2`, `-3`, ... added when
+    /// another recorder took the name).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Folder for the default output name.
@@ -67,11 +66,14 @@ fn run(args: &Args) -> anyhow::Result<()> {
         metadata.push((name.clone(), m));
     }
     let options = RecordOptions {
-        out: args.out.clone().unwrap_or_else(|| default_path(&args.dir)),
+        out: args
+            .out
+            .clone()
+            .map_or_else(|| Output::Timestamped(args.dir.clone()), Output::File),
         topics: args.topics.clone(),
         namespaces: args.namespaces.clone(),
         writer: WriterOptions {
-            rotate_bytes: args.rotate_mb.map(|mb| mb * 1_000_000),
+            rotate_bytes: args.rotate_mb.map(|mb| mb.saturating_mul(1_000_000)),
             rotate_after: args.rotate_s.map(std::time::Duration::from_secs),
             ..WriterOptions::default()
         },

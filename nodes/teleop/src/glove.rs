@@ -21,8 +21,8 @@ pub struct Target {
     /// The glove's device id.
     #[arg(long, default_value_t = 1)]
     id: u8,
-    /// Answer timeout in milliseconds.
-    #[arg(long, default_value_t = 200)]
+    /// Answer timeout in milliseconds (1 to 60000).
+    #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     timeout_ms: u64,
 }
 

@@ -69,12 +69,12 @@ pub fn nodes(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<Exit
         });
     }
     rows.sort();
-    println!("{:<20} {:<8} {:>8}  EXECUTABLE", "NODE", "STATE", "PID");
+    out!("{:<20} {:<8} {:>8}  EXECUTABLE", "NODE", "STATE", "PID")?;
     for (name, status, pid, exe) in &rows {
-        println!("{name:<20} {status:<8} {pid:>8}  {exe}");
+        out!("{name:<20} {status:<8} {pid:>8}  {exe}")?;
     }
     if rows.is_empty() {
-        println!("(no nodes: is a pipeline running with these IPC settings?)");
+        out!("(no nodes: is a pipeline running with these IPC settings?)")?;
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -88,30 +88,35 @@ pub fn topics(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<Exi
             self.0.topic_ports_in::<M>(self.1)
         }
     }
-    println!(
+    out!(
         "{:<28} {:<36} {:>6} {:>5} {:>5}",
-        "TOPIC", "PAYLOAD", "BYTES", "PUBS", "SUBS"
-    );
+        "TOPIC",
+        "PAYLOAD",
+        "BYTES",
+        "PUBS",
+        "SUBS"
+    )?;
     for ns in covered(ipc, namespaces)? {
         for topic in teleop_msgs::topics() {
             let ports = visit_topic(topic.name, Ports(&runtime, ns.as_ref())).flatten();
             let (pubs, subs) = ports.map_or(("-".into(), "-".into()), |(p, s)| {
                 (p.to_string(), s.to_string())
             });
-            println!(
+            out!(
                 "{:<28} {:<36} {:>6} {:>5} {:>5}",
                 qualified(ns.as_ref(), topic.name),
                 topic.schema_name,
                 topic.size,
                 pubs,
                 subs
-            );
+            )?;
         }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn unknown_topic(topic: &str) -> anyhow::Error {
+/// A name that is no topic of the contract, refused with the list of those that are.
+pub(crate) fn unknown_topic(topic: &str) -> anyhow::Error {
     let names: Vec<_> = teleop_msgs::topics().iter().map(|t| t.name).collect();
     anyhow::anyhow!("unknown topic {topic:?}; topics are: {}", names.join(", "))
 }
@@ -142,26 +147,36 @@ pub fn echo(
             let sub = self.runtime.subscriber_in::<M>(self.namespace)?;
             let printed = core::cell::Cell::new(0u64);
             let limit = self.count.unwrap_or(u64::MAX);
+            // A failed write (the reader closed the pipe: `teleop echo ... | head`) ends the echo.
+            let failed: RefCell<Option<std::io::Error>> = RefCell::new(None);
+            let done = || printed.get() >= limit || failed.borrow().is_some();
             let print = |m: &M| {
-                if printed.get() < limit {
-                    println!("{m:?}");
-                    printed.set(printed.get() + 1);
+                if !done() {
+                    match out!("{m:?}") {
+                        Ok(()) => printed.set(printed.get() + 1),
+                        Err(e) => *failed.borrow_mut() = Some(e),
+                    }
                 }
             };
             // The newest sample published before we subscribed, if any.
             sub.drain(print);
-            if printed.get() >= limit {
-                return Ok(());
+            if !done() {
+                EventLoop::new(Duration::from_secs(1)).run(
+                    &[Input::new(sub.listener())],
+                    |_| {
+                        sub.drain(print);
+                        if done() {
+                            Flow::Break(())
+                        } else {
+                            Flow::Continue(())
+                        }
+                    },
+                )?;
             }
-            EventLoop::new(Duration::from_secs(1)).run(&[Input::new(sub.listener())], |_| {
-                sub.drain(print);
-                if printed.get() >= limit {
-                    Flow::Break(())
-                } else {
-                    Flow::Continue(())
-                }
-            })?;
-            Ok(())
+            match failed.into_inner() {
+                Some(e) => Err(e.into()),
+                None => Ok(()),
+            }
         }
     }
     visit_topic(
@@ -281,11 +296,11 @@ pub fn stats(
         }
     })?;
     let measured = start.elapsed();
-    println!(
+    out!(
         "over {:.1} s; latency = stamp - origin (time since the device sample), transport = receive - stamp; ms p50/p99/max",
         measured.as_secs_f64()
-    );
-    println!(
+    )?;
+    out!(
         "{:<28} {:>8} {:>7} {:>6}  {:>8} {:>8} {:>8}  {:>8} {:>8} {:>8}",
         "TOPIC",
         "RATE_HZ",
@@ -297,12 +312,12 @@ pub fn stats(
         "TR_P50",
         "TR_P99",
         "TR_MAX"
-    );
+    )?;
     for p in &probes {
-        println!("{}", p.report(measured));
+        out!("{}", p.report(measured))?;
     }
     if stop != StopReason::Requested {
-        println!("(interrupted)");
+        out!("(interrupted)")?;
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -5,6 +5,19 @@
 //!
 //! Owns the command line and the supervisor; it runs no control loop itself. Must not contain
 //! device protocols or control logic (those live in `shared/`).
+//!
+//! No argument makes it panic: times and speeds are checked when parsed ([`parse_seconds`],
+//! [`parse_speed`]) and refused naming the argument, and a closed standard output (`teleop echo
+//! glove/state | head`) ends the command quietly with success ([`out!`]).
+
+/// `println!` that returns the write's error instead of panicking on it: a reader that closed
+/// the pipe (`teleop echo ... | head`) ends the command, quietly and with success (see
+/// [`is_broken_pipe`]).
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::print_line(format_args!($($arg)*))
+    };
+}
 
 mod calibrate;
 mod glove;
@@ -44,8 +57,8 @@ enum Command {
         #[arg(default_value = "launch.toml")]
         file: PathBuf,
         /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
+        #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
+        duration: Option<Duration>,
         /// Check the launch file and exit.
         #[arg(long)]
         check: bool,
@@ -76,8 +89,8 @@ enum Command {
     /// Per-topic rate, drops and latency (from the sample headers) over a window.
     Stats {
         /// Measurement window in seconds.
-        #[arg(long, default_value_t = 2.0)]
-        seconds: f64,
+        #[arg(long, default_value = "2", value_parser = parse_seconds, allow_hyphen_values = true)]
+        seconds: Duration,
         /// Only this namespace (repeatable); without it, every namespace found.
         #[arg(long = "namespace", value_name = "NS")]
         namespaces: Vec<Namespace>,
@@ -108,15 +121,16 @@ enum Command {
     },
     /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
     Record {
-        /// Output file (default: recordings/<date>_<time>.mcap).
+        /// Output file (default: `recordings/<UTC date>_<time>.<ms>.mcap`, `-2`, `-3`, ... added
+        /// when another recorder took the name).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Record only these topics.
         #[arg(long, num_args = 1..)]
         topics: Option<Vec<String>>,
         /// Stop after this many seconds.
-        #[arg(long)]
-        duration: Option<f64>,
+        #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
+        duration: Option<Duration>,
         /// Record this namespace's topics into channels `NS/<topic>` (repeatable); without it,
         /// the topics without a namespace.
         #[arg(long = "namespace", value_name = "NS")]
@@ -126,8 +140,9 @@ enum Command {
     Replay {
         /// The recording.
         file: PathBuf,
-        /// Playback speed (1 = real time).
-        #[arg(long, default_value_t = 1.0, conflicts_with = "max_speed")]
+        /// Playback speed (1 = real time; 0.001 to 1000).
+        #[arg(long, default_value = "1", conflicts_with = "max_speed", value_parser = parse_speed,
+               allow_hyphen_values = true)]
         speed: f64,
         /// As fast as possible.
         #[arg(long)]
@@ -135,15 +150,18 @@ enum Command {
         /// Start again at the end, until Ctrl-C.
         #[arg(long = "loop")]
         looped: bool,
-        /// Replay only these topics (e.g. `glove/state` to drive the hand from a recorded operator).
+        /// Replay only these channels (e.g. `glove/state` to drive the hand from a recorded
+        /// operator; `left/glove/state` in a recording of several sides). Without it, the
+        /// sensor topics (glove/state, glove/diagnostics, hand/state, hand/tactile, device/info),
+        /// never the commands, `estop` or node health.
         #[arg(long, num_args = 1..)]
         topics: Option<Vec<String>>,
         /// Seconds from the start of the recording to begin at.
-        #[arg(long)]
-        start: Option<f64>,
+        #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
+        start: Option<Duration>,
         /// Seconds from the start of the recording to end at.
-        #[arg(long)]
-        end: Option<f64>,
+        #[arg(long, value_parser = parse_seconds, allow_hyphen_values = true)]
+        end: Option<Duration>,
         /// Replay only this namespace's channels (repeatable); without it, every channel.
         #[arg(long = "namespace", value_name = "NS")]
         namespaces: Vec<Namespace>,
@@ -151,6 +169,9 @@ enum Command {
         /// without a namespace into `left`), `left=` (into the topics without a namespace).
         #[arg(long, value_name = "FROM=TO", value_parser = recordings::parse_remap)]
         remap: Vec<recordings::Remap>,
+        /// Publish into topics that a running process publishes too (refused without it).
+        #[arg(long)]
+        allow_live: bool,
     },
     /// Inspect or repair recordings.
     Recordings {
@@ -202,11 +223,11 @@ enum Command {
         #[arg(long)]
         yes: bool,
         /// Seconds to get into each pose when `--yes` is given.
-        #[arg(long, default_value_t = 3.0)]
-        settle: f64,
+        #[arg(long, default_value = "3", value_parser = parse_seconds, allow_hyphen_values = true)]
+        settle: Duration,
         /// Seconds of glove samples averaged per pose.
-        #[arg(long, default_value_t = 1.0)]
-        capture: f64,
+        #[arg(long, default_value = "1", value_parser = parse_seconds, allow_hyphen_values = true)]
+        capture: Duration,
     },
 }
 
@@ -251,7 +272,7 @@ fn main() -> ExitCode {
         Command::Stats {
             seconds,
             namespaces,
-        } => inspect::stats(&ipc, secs(seconds), &namespaces),
+        } => inspect::stats(&ipc, seconds, &namespaces),
         Command::Estop {
             release,
             namespaces,
@@ -262,7 +283,7 @@ fn main() -> ExitCode {
             topics,
             duration,
             namespaces,
-        } => recordings::record_cmd(&ipc, out, topics, namespaces, duration.map(secs)),
+        } => recordings::record_cmd(&ipc, out, topics, namespaces, duration),
         Command::Replay {
             file,
             speed,
@@ -273,17 +294,19 @@ fn main() -> ExitCode {
             end,
             namespaces,
             remap,
+            allow_live,
         } => recordings::replay_cmd(
             &ipc,
             &file,
             &recordings::ReplayOptions {
-                speed: (!max_speed).then_some(speed.max(1e-3)),
+                speed: (!max_speed).then_some(speed),
                 looped,
                 topics,
                 start,
                 end,
                 namespaces,
                 remap,
+                allow_live,
             },
         ),
         Command::Recordings { command } => match command {
@@ -315,11 +338,12 @@ fn main() -> ExitCode {
             yes,
             settle,
             capture,
-        } => calibrate::run(&ipc, &out, yes, secs(settle), secs(capture)),
+        } => calibrate::run(&ipc, &out, yes, settle, capture),
         Command::View { args } => run_viewer(&ipc, &args),
     };
     match result {
         Ok(code) => code,
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -327,14 +351,60 @@ fn main() -> ExitCode {
     }
 }
 
-fn secs(s: f64) -> Duration {
-    Duration::from_secs_f64(s.clamp(0.0, 1e6))
+/// The longest time an argument may name: ten years (so that adding it to a clock reading can
+/// never overflow).
+const MAX_SECONDS: f64 = 10.0 * 365.25 * 86_400.0;
+
+/// A time argument in seconds: a finite number from 0 to [`MAX_SECONDS`] (clap names the
+/// argument in the error).
+fn parse_seconds(s: &str) -> Result<Duration, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| "not a number of seconds".to_string())?;
+    if !(0.0..=MAX_SECONDS).contains(&v) {
+        return Err(format!(
+            "expected seconds from 0 to {MAX_SECONDS:.0} (ten years)"
+        ));
+    }
+    Duration::try_from_secs_f64(v).map_err(|e| e.to_string())
+}
+
+/// The replay speed: a finite factor from 0.001 to 1000 (`--max-speed` for as fast as
+/// possible).
+fn parse_speed(s: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| "not a number".to_string())?;
+    if !(0.001..=1000.0).contains(&v) {
+        return Err(
+            "expected a factor from 0.001 to 1000 (--max-speed for as fast as possible)".into(),
+        );
+    }
+    Ok(v)
+}
+
+/// Writes one line to standard output, returning the error instead of panicking like
+/// `println!` (used through [`out!`]).
+fn print_line(args: std::fmt::Arguments) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    stdout.write_fmt(args)?;
+    stdout.write_all(b"\n")
+}
+
+/// Whether `e` is standard output's reader having gone away (`teleop echo ... | head`): the
+/// command has nothing left to do, which is success.
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+    })
 }
 
 fn run_launch(
     file: &std::path::Path,
     ipc: &IpcSettings,
-    duration: Option<f64>,
+    duration: Option<Duration>,
     check: bool,
 ) -> anyhow::Result<ExitCode> {
     let launch = launch::config::load(file)?;
@@ -352,7 +422,7 @@ fn run_launch(
         );
         return Ok(ExitCode::SUCCESS);
     }
-    match launch::supervisor::run(&launch, ipc, duration.map(secs))? {
+    match launch::supervisor::run(&launch, ipc, duration)? {
         launch::supervisor::Outcome::Stopped(_) => Ok(ExitCode::SUCCESS),
         launch::supervisor::Outcome::Failed(why) => {
             eprintln!("error: {why}");

@@ -10,15 +10,15 @@ use node_feedback::{Event, FeedbackEngine};
 use node_retarget::RetargetEngine;
 use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_msgs::{
-    source_id, visit_topic, EStop, GloveForceCommand, GloveState, HandCommand, HandState, Message,
-    Tactile, TopicVisitor,
+    source_id, visit_topic, DeviceInfo, EStop, GloveDiagnostics, GloveForceCommand, GloveState,
+    HandCommand, HandState, Message, Tactile, TopicVisitor,
 };
-use teleop_recorder::{default_path, record, report, standard_metadata, RecordOptions};
+use teleop_recorder::{record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::{
     info as recording_info, read_messages, repair as repair_file, Filter, OwnedMessage,
     RecordedMessage, Recorder, WriterOptions,
 };
-use teleop_runtime::{split, IpcSettings, Namespace, NodeRuntime, Publisher};
+use teleop_runtime::{qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
 
 pub fn record_cmd(
     ipc: &IpcSettings,
@@ -29,7 +29,10 @@ pub fn record_cmd(
 ) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new("teleop-record", ipc)?;
     let options = RecordOptions {
-        out: out.unwrap_or_else(|| default_path(Path::new("recordings"))),
+        out: out.map_or_else(
+            || Output::Timestamped(PathBuf::from("recordings")),
+            Output::File,
+        ),
         topics,
         namespaces,
         writer: WriterOptions::default(),
@@ -43,38 +46,42 @@ pub fn record_cmd(
 
 pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
     let info = recording_info(path)?;
-    println!("file       {}", info.path.display());
-    println!(
+    out!("file       {}", info.path.display())?;
+    out!(
         "state      {}",
         if info.complete {
             "complete"
         } else {
             "not finished (killed recorder?): `teleop recordings repair` makes it indexable"
         }
-    );
-    println!("duration   {:.3} s", info.duration.as_secs_f64());
-    println!("messages   {}", info.messages);
-    println!(
+    )?;
+    out!("duration   {:.3} s", info.duration.as_secs_f64())?;
+    out!("messages   {}", info.messages)?;
+    out!(
         "{:<28} {:<36} {:>9} {:>9} {:>7}",
-        "TOPIC", "SCHEMA", "MESSAGES", "RATE_HZ", "DROPS"
-    );
+        "TOPIC",
+        "SCHEMA",
+        "MESSAGES",
+        "RATE_HZ",
+        "DROPS"
+    )?;
     for t in &info.topics {
-        println!(
+        out!(
             "{:<28} {:<36} {:>9} {:>9.1} {:>7}",
             t.topic,
             t.schema_name,
             t.messages,
             t.rate_hz,
             t.drops.map_or("?".to_string(), |d| d.to_string())
-        );
+        )?;
     }
     for t in info.topics.iter().filter(|t| t.converted_from.is_some()) {
-        println!(
+        out!(
             "converted  {}: recorded with contract version {}, read as version {}",
             t.topic,
             t.converted_from.unwrap_or_default(),
             teleop_msgs::CONTRACT_VERSION
-        );
+        )?;
     }
     for (name, fields) in &info.metadata {
         let shown: Vec<String> = fields
@@ -87,7 +94,7 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
                 }
             })
             .collect();
-        println!("metadata   {name}: {}", shown.join(", "));
+        out!("metadata   {name}: {}", shown.join(", "))?;
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -157,16 +164,31 @@ pub fn parse_remap(s: &str) -> Result<Remap, String> {
     })
 }
 
+/// The topics `teleop replay` publishes when `--topics` is not given: what the devices measure.
+/// Commands (`hand/command`, `glove/force_command`), `estop` and node health are left out:
+/// replayed into a live pipeline they would move the hand, set the glove's forces, engage or
+/// release the e-stop, or make a hung node look alive to the supervisor.
+pub const SENSOR_TOPICS: [&str; 5] = [
+    GloveState::TOPIC,
+    GloveDiagnostics::TOPIC,
+    HandState::TOPIC,
+    Tactile::TOPIC,
+    DeviceInfo::TOPIC,
+];
+
 /// Replay settings.
 pub struct ReplayOptions {
     pub speed: Option<f64>,
     pub looped: bool,
+    /// The channels to replay (`None`: those of the [`SENSOR_TOPICS`]).
     pub topics: Option<Vec<String>>,
-    pub start: Option<f64>,
-    pub end: Option<f64>,
+    pub start: Option<Duration>,
+    pub end: Option<Duration>,
     /// Only channels of these namespaces (all when empty).
     pub namespaces: Vec<Namespace>,
     pub remap: Vec<Remap>,
+    /// Publish into topics that a running process publishes too.
+    pub allow_live: bool,
 }
 
 impl ReplayOptions {
@@ -186,20 +208,103 @@ impl ReplayOptions {
     }
 }
 
+/// The channels to replay out of those `recorded`: the ones `--topics` names (each must be a
+/// topic of the contract, optionally in a namespace, that the recording has), else the
+/// recording's channels of the [`SENSOR_TOPICS`].
+fn replayed_channels(
+    recorded: &[String],
+    topics: Option<&[String]>,
+) -> anyhow::Result<Vec<String>> {
+    let Some(given) = topics else {
+        return Ok(recorded
+            .iter()
+            .filter(|c| split(c).is_some_and(|(_, t)| SENSOR_TOPICS.contains(&t.name)))
+            .cloned()
+            .collect());
+    };
+    for name in given {
+        if split(name).is_none() {
+            return Err(crate::inspect::unknown_topic(name));
+        }
+        anyhow::ensure!(
+            recorded.contains(name),
+            "--topics {name}: not in the recording; its channels are: {}",
+            recorded.join(", ")
+        );
+    }
+    Ok(given.to_vec())
+}
+
+/// Publishers on `M`'s topic in a namespace, other than our own (none yet when asked).
+struct LivePublishers<'a>(&'a NodeRuntime, Option<&'a Namespace>);
+
+impl TopicVisitor for LivePublishers<'_> {
+    type Output = usize;
+    fn visit<M: Message>(self) -> usize {
+        self.0
+            .topic_ports_in::<M>(self.1)
+            .map_or(0, |(publishers, _)| publishers)
+    }
+}
+
 pub fn replay_cmd(
     ipc: &IpcSettings,
     path: &Path,
     opts: &ReplayOptions,
 ) -> anyhow::Result<ExitCode> {
     let info = recording_info(path)?;
+    let recorded: Vec<String> = info.topics.iter().map(|t| t.topic.clone()).collect();
+    let channels = replayed_channels(&recorded, opts.topics.as_deref())?;
+    let targets: Vec<(String, Option<Namespace>, &'static str)> = channels
+        .into_iter()
+        .filter_map(|c| {
+            let (ns, topic) = opts.target(&c)?;
+            Some((c, ns, topic))
+        })
+        .collect();
+    anyhow::ensure!(
+        !targets.is_empty(),
+        "{}: nothing to replay{}; its channels are: {} (name the ones to replay with --topics)",
+        path.display(),
+        if opts.topics.is_none() {
+            format!(
+                " (by default only the sensor topics: {})",
+                SENSOR_TOPICS.join(", ")
+            )
+        } else {
+            " in the chosen namespaces".to_string()
+        },
+        recorded.join(", ")
+    );
     let runtime = NodeRuntime::new("teleop-replay", ipc)?;
+    if !opts.allow_live {
+        let live: Vec<String> = targets
+            .iter()
+            .filter(|(_, ns, topic)| {
+                visit_topic(topic, LivePublishers(&runtime, ns.as_ref())).unwrap_or(0) > 0
+            })
+            .map(|(_, ns, topic)| qualified(ns.as_ref(), topic))
+            .collect();
+        anyhow::ensure!(
+            live.is_empty(),
+            "refusing to publish into {}: a running process publishes there (replayed samples \
+             would mix with live ones); stop it, choose other topics with --topics, or pass \
+             --allow-live",
+            live.join(", ")
+        );
+    }
+    let mut publishers: HashMap<String, Box<dyn Replay>> = HashMap::new();
+    for (channel, ns, topic) in &targets {
+        let replay = visit_topic(topic, MakeReplay(&runtime, ns.as_ref()))
+            .ok_or_else(|| crate::inspect::unknown_topic(topic))??;
+        publishers.insert(channel.clone(), replay);
+    }
     teleop_runtime::install_stop_handlers();
     let filter = Filter {
-        topics: opts.topics.clone(),
-        start: opts.start.map(Duration::from_secs_f64),
-        end: opts.end.map(Duration::from_secs_f64),
+        topics: Some(publishers.keys().cloned().collect()),
+        start: opts.start,
+        end: opts.end,
     };
-    let mut publishers: HashMap<String, Option<Box<dyn Replay>>> = HashMap::new();
     let total = info.duration.as_secs_f64();
     loop {
         let mut first_log: Option<u64> = None;
@@ -217,25 +322,8 @@ pub fn replay_cmd(
             if let Some(speed) = opts.speed {
                 teleop_runtime::sleep_until(start + at.div_f64(speed));
             }
-            let replay = publishers.entry(msg.topic.clone()).or_insert_with(|| {
-                let Some((ns, topic)) = opts.target(&msg.topic) else {
-                    tracing::warn!(
-                        topic = %msg.topic,
-                        "not a topic of the contract or not in the chosen namespaces: skipped"
-                    );
-                    return None;
-                };
-                match visit_topic(topic, MakeReplay(&runtime, ns.as_ref())) {
-                    Some(Ok(p)) => Some(p),
-                    Some(Err(e)) => {
-                        tracing::warn!("cannot publish {}: {e:#}", msg.topic);
-                        None
-                    }
-                    None => None,
-                }
-            });
-            if let Some(r) = replay {
-                r.send(&msg.payload)?;
+            if let Some(replay) = publishers.get_mut(&msg.topic) {
+                replay.send(&msg.payload)?;
                 sent += 1;
             }
             if last_progress.elapsed() >= Duration::from_millis(100) {
@@ -482,7 +570,7 @@ pub fn reprocess_cmd(
                     }
                 }
                 last_glove = Some(t);
-                if let Some(mut c) = retarget.on_glove(&s).command {
+                if let Some(mut c) = retarget.on_glove(&s, t).command {
                     c.header = finalize(c.header, t, c.header.origin_ns);
                     let _ = feedback.handle(&Event::Command(c), t);
                     out_cmds.push((t, c));
@@ -603,7 +691,35 @@ mod namespace_tests {
             end: None,
             namespaces: namespaces.iter().map(|n| ns(n).unwrap()).collect(),
             remap: remap.iter().map(|r| parse_remap(r).unwrap()).collect(),
+            allow_live: false,
         }
+    }
+
+    #[test]
+    fn by_default_only_sensor_channels_of_every_namespace_are_replayed() {
+        let recorded: Vec<String> = [
+            "left/glove/state",
+            "left/hand/command",
+            "left/glove/force_command",
+            "estop",
+            "hand/tactile",
+            "health",
+            "right/device/info",
+            "not/a/topic",
+        ]
+        .map(String::from)
+        .to_vec();
+        assert_eq!(
+            replayed_channels(&recorded, None).unwrap(),
+            ["left/glove/state", "hand/tactile", "right/device/info"]
+        );
+        let named = ["left/hand/command".to_string()];
+        assert_eq!(
+            replayed_channels(&recorded, Some(&named)).unwrap(),
+            ["left/hand/command"]
+        );
+        let err = replayed_channels(&recorded, Some(&["hand/comand".to_string()])).unwrap_err();
+        assert!(err.to_string().contains("\"hand/comand\""), "{err}");
     }
 
     #[test]
