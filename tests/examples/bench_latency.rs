@@ -7,7 +7,9 @@
 //!   glove records when it sampled each answer; `glove/state` (origin = the node's receive time)
 //!   is matched to the last answer sent before it; `hand/command` to the glove state by
 //!   `origin_ns`; the cycle by the first frame at the emulated Revo2, after the command's stamp,
-//!   whose position targets equal the command's. Stages: device sample -> `glove/state`
+//!   whose position targets equal the command's. Only commands whose targets (per mille) no
+//!   other command of the run has are measured, so that a frame carrying an earlier, identical
+//!   command is never taken for a later one's. Stages: device sample -> `glove/state`
 //!   published -> `hand/command` published -> frame at the device. Floor: one EtherCAT cycle.
 //! - Path B, Revo2 tactile sample -> the glove force frame's last byte on the serial line: the
 //!   emulated Revo2 records when it answered each frame (its inputs are sampled then);
@@ -156,12 +158,26 @@ fn run(label: &str) {
     let requests = glove.take_force_timings();
     let frames = std::mem::take(&mut frames.lock().unwrap().at);
 
-    // Path A.
+    // Path A. A frame is attributed to a command by its position targets, so only commands whose
+    // targets (per mille, as the device has them) no other command of the run has are measured:
+    // a frame carrying an earlier, identical command would otherwise be taken for this one's
+    // (the retargeted grasp repeats its targets, and a held hand keeps them).
+    let per_mille = |c: &HandCommand| -> Vec<i32> {
+        c.active_joints()
+            .iter()
+            .map(|j| (j.target * 1000.0).round() as i32)
+            .collect()
+    };
+    let mut uses: HashMap<Vec<i32>, u32> = HashMap::new();
+    for c in &c_v {
+        *uses.entry(per_mille(c)).or_default() += 1;
+    }
     let cmd_by_origin: HashMap<u64, &HandCommand> = c_v
         .iter()
-        .filter(|c| c.flags & teleop_msgs::command_flags::HELD == 0)
+        .filter(|c| c.flags & teleop_msgs::command_flags::HELD == 0 && uses[&per_mille(c)] == 1)
         .map(|c| (c.header.origin_ns, c))
         .collect();
+    let distinct = cmd_by_origin.len();
     let (mut a1, mut a2, mut a3, mut a_total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for s in &s_v {
         let i = answers.partition_point(|a| a.sent_ns <= s.header.origin_ns);
@@ -171,15 +187,13 @@ fn run(label: &str) {
         let Some(cmd) = cmd_by_origin.get(&s.header.origin_ns) else {
             continue;
         };
-        let want: Vec<f32> = cmd
-            .active_joints()
-            .iter()
-            .map(|j| (j.target * 1000.0).round())
-            .collect();
+        let want = per_mille(cmd);
         let from = frames.partition_point(|f| f.0 < cmd.header.stamp_ns);
-        let carried = frames[from..]
-            .iter()
-            .find(|f| f.1.iter().zip(&want).all(|(a, b)| (a - b).abs() < 0.6));
+        let carried = frames[from..].iter().find(|f| {
+            f.1.iter()
+                .zip(&want)
+                .all(|(a, &b)| (a - b as f32).abs() < 0.6)
+        });
         let Some(frame) = carried else { continue };
         a1.push(s.header.stamp_ns.saturating_sub(answer.sampled_ns));
         a2.push(cmd.header.stamp_ns.saturating_sub(s.header.stamp_ns));
@@ -220,6 +234,10 @@ fn run(label: &str) {
     );
     println!(
         "A  glove sample -> EtherCAT cycle carrying its hand command (floor: one cycle, 1.000 ms)"
+    );
+    println!(
+        "   measured over the {distinct} of {} hand commands whose targets no other command had",
+        c_v.len()
     );
     println!(
         "   glove sample -> glove/state published       {}",

@@ -4,9 +4,11 @@
 //! Method: (1) `teleop launch` runs the default simulated session (release build) with the
 //! recorder writing into a temporary folder, for 10 s; the recorder's CPU time is read from
 //! /proc/<pid>/stat (utime + stime) between 2 s and 10 s. (2) That recording is replayed at
-//! maximum speed while a fresh `teleop-recorder` records the replayed topics; reported: replay
-//! messages/s, recorder CPU, messages recorded and drops (a recorder that cannot keep up loses
-//! samples, which its drop count shows).
+//! maximum speed (every channel, `--topics`) while a fresh `teleop-recorder` records the
+//! replayed topics; reported: the messages the replay says it sent, over its wall time from
+//! process start to exit (start-up included); the replay's CPU time (user + system, from
+//! getrusage(RUSAGE_CHILDREN) across its wait); the recorder's CPU over the same wall time; messages recorded and drops (a recorder
+//! that cannot keep up loses samples, which its drop count shows).
 //!
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_recording`
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
@@ -105,7 +107,8 @@ fn main() {
         drops
     );
 
-    // Replay at maximum speed into a second recorder.
+    // Replay at maximum speed into a second recorder: every channel (`--topics`), not only the
+    // sensor topics `teleop replay` publishes by default.
     let out = sandbox.dir.path().join("replayed.mcap");
     let mut recorder = Command::new(bin("teleop-recorder"))
         .args(["--out", out.to_str().unwrap()])
@@ -114,13 +117,57 @@ fn main() {
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(500));
+    let channels: Vec<String> = info.topics.iter().map(|t| t.topic.clone()).collect();
+    let mut args = vec!["replay", rec.to_str().unwrap(), "--max-speed", "--topics"];
+    args.extend(channels.iter().map(String::as_str));
+    let children_cpu = || {
+        // SAFETY: rusage is plain data that getrusage(2) fills.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        // SAFETY: RUSAGE_CHILDREN of this process, into a valid rusage.
+        assert_eq!(
+            unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) },
+            0
+        );
+        let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 / 1e6;
+        s(usage.ru_utime) + s(usage.ru_stime)
+    };
+    // The replay's CPU time (user + system): what the children waited for use, across its wait
+    // (the recorder is waited for later).
+    let before = children_cpu();
     let c0 = cpu_ticks(recorder.id()).unwrap();
     let t = Instant::now();
-    let replay = sandbox.run_teleop(&["replay", rec.to_str().unwrap(), "--max-speed"]);
+    let mut replay = sandbox
+        .teleop()
+        .args(&args)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut replay_err = replay.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        std::io::Read::read_to_string(&mut replay_err, &mut text).unwrap();
+        text
+    });
+    let status = replay.wait().unwrap();
     let replay_time = t.elapsed();
-    assert!(replay.status.success());
-    std::thread::sleep(Duration::from_millis(300));
+    // The recorder's CPU over exactly the replay's wall time.
     let c1 = cpu_ticks(recorder.id()).unwrap();
+    let replay_cpu = children_cpu() - before;
+    assert!(status.success());
+    let progress = reader.join().unwrap();
+    // The replay's last progress line ends with "<sent> messages".
+    let sent: u64 = progress
+        .rsplit('\r')
+        .find_map(|line| {
+            line.trim()
+                .strip_suffix(" messages")?
+                .rsplit(' ')
+                .next()?
+                .parse()
+                .ok()
+        })
+        .expect("the replay reports the messages it sent");
+    std::thread::sleep(Duration::from_millis(300));
     // SAFETY: kill(2) of our own child.
     unsafe {
         libc::kill(recorder.id() as libc::pid_t, libc::SIGINT);
@@ -128,15 +175,19 @@ fn main() {
     recorder.wait().unwrap();
     let replayed = teleop_recording::info(&out).unwrap();
     let drops: u64 = replayed.topics.iter().filter_map(|t| t.drops).sum();
+    let wall = replay_time.as_secs_f64();
     println!(
-        "replay --max-speed: {} messages in {:.2} s = {:.0} msg/s ({:.0}x real time); recorder CPU {:.1} % of the replay time, recorded {} ({:.1} %), sequence-gap drops {}",
-        info.messages,
-        replay_time.as_secs_f64(),
-        info.messages as f64 / replay_time.as_secs_f64(),
-        secs / replay_time.as_secs_f64(),
-        (c1 - c0) as f64 / ticks_per_second() / replay_time.as_secs_f64() * 100.0,
+        "replay --max-speed: {sent} messages sent in {wall:.2} s wall (process start to exit, \
+         start-up and reading the file's index included) = {:.0} msg/s ({:.0}x the recording's \
+         {secs:.1} s); replay CPU {:.2} s = {:.0} % of its wall time; recorder CPU over the same \
+         wall time {:.1} %; recorded {} ({:.1} % of sent), sequence-gap drops {}",
+        sent as f64 / wall,
+        secs / wall,
+        replay_cpu,
+        replay_cpu / wall * 100.0,
+        (c1 - c0) as f64 / ticks_per_second() / wall * 100.0,
         replayed.messages,
-        100.0 * replayed.messages as f64 / info.messages as f64,
+        100.0 * replayed.messages as f64 / sent as f64,
         drops
     );
 }

@@ -297,7 +297,7 @@ pub fn stats(
     })?;
     let measured = start.elapsed();
     out!(
-        "over {:.1} s; latency = stamp - origin (time since the device sample), transport = receive - stamp; ms p50/p99/max",
+        "over {:.1} s; latency = stamp - origin (origin: when the host received the device sample, not when the device took it), transport = receive - stamp; ms p50/p99/max",
         measured.as_secs_f64()
     )?;
     out!(

@@ -1,8 +1,9 @@
-//! What `teleop launch` prints when a session ends: per-topic rates, latency since the device
-//! sample (p50/p99/max, from the headers), drops, the faults the nodes handled, restarts, and
-//! where the recording is. Collected during the session by subscribing to every topic of every
-//! namespace the launch file uses, with fixed-size histograms so that a long session does not
-//! grow memory. A namespace none of whose topics carried a sample is left out when the session
+//! What `teleop launch` prints when a session ends: per-topic rates, latency since the host
+//! received the device sample (`stamp - origin` from the headers, p50/p99/max; the time the
+//! device took the sample is earlier and not known here), drops, the faults the nodes handled,
+//! restarts, and where the recording is. Collected during the session by subscribing to every
+//! topic of every namespace the launch file uses, with fixed-size histograms so that a long
+//! session does not grow memory. A namespace none of whose topics carried a sample is left out when the session
 //! has others (the recorder of a two-sided session runs without a namespace, for instance).
 
 use std::collections::BTreeMap;
@@ -200,7 +201,7 @@ impl SessionWatch {
     ) -> String {
         let s = elapsed.as_secs_f64();
         let mut out = format!(
-            "\nsession summary ({s:.1} s); latency = stamp - device sample (origin), ms\n{:<28} {:>9} {:>9} {:>9} {:>9} {:>7}\n",
+            "\nsession summary ({s:.1} s); latency = stamp - origin (when the host received the device sample, not when the device took it), ms\n{:<28} {:>9} {:>9} {:>9} {:>9} {:>7}\n",
             "TOPIC", "RATE_HZ", "LAT_P50", "LAT_P99", "LAT_MAX", "DROPS"
         );
         let several = self.probes.len() > 1;
