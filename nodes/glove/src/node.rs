@@ -165,6 +165,8 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
     let mut backoff = Duration::from_millis(config.reopen_backoff_ms[0]);
     let mut last_health = Instant::now();
     tracing::info!(%port, baud = config.baud, id = config.id, "glove node starting");
+    // This thread is the exchange loop: it runs at the real-time priority launch.toml names.
+    teleop_runtime::realtime::enter_realtime();
     while teleop_runtime::stop_signal().is_none() {
         match GloveLink::open(&port, config.baud, config.id, timeout) {
             Ok(mut link) => {

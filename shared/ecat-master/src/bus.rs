@@ -252,6 +252,8 @@ impl EthercrabTask {
             std::thread::Builder::new()
                 .name("ethercrab-txrx".into())
                 .spawn(move || {
+                    // Frames wait for this thread: it runs at the cycle's priority.
+                    teleop_runtime::realtime::enter_realtime();
                     let outcome = futures_lite::future::block_on(futures_lite::future::or(
                         async { Some(task.await) },
                         async {

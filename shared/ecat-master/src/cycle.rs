@@ -228,6 +228,9 @@ fn cycle<D: Driver, H: Host<D>>(
                     side_channel::<D>(md, group, poll_period, polled, stop_poll)
                 })?;
         }
+        // This thread cycles at the real-time priority launch.toml names (its side thread,
+        // started above, stays normal).
+        teleop_runtime::realtime::enter_realtime();
         let result = (|| -> anyhow::Result<()> {
             let mut deadline = Instant::now();
             let mut last_inputs: Option<D::Inputs> = None;
@@ -383,6 +386,7 @@ fn cycle<D: Driver, H: Host<D>>(
             Ok(())
         })();
         stop_poll.store(true, Ordering::SeqCst);
+        teleop_runtime::realtime::leave_realtime();
         result
     })
 }

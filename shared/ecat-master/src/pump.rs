@@ -87,7 +87,11 @@ impl Pump {
             let (stop, status) = (stop.clone(), status.clone());
             std::thread::Builder::new()
                 .name("ecat-pump".into())
-                .spawn(move || run(tx, rx, connect, &stop, &status))?
+                .spawn(move || {
+                    // Frames wait for this thread: it runs at the cycle's priority.
+                    teleop_runtime::realtime::enter_realtime();
+                    run(tx, rx, connect, &stop, &status)
+                })?
         };
         Ok(Self {
             thread: Some(thread),

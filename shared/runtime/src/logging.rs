@@ -114,6 +114,9 @@ impl Write for QueueWriter {
 /// (default `info`), e.g. `TELEOP_LOG=debug` or `TELEOP_LOG=teleop_runtime=trace`. Also quiets
 /// iceoryx2's own logger to warnings. Safe to call more than once.
 pub fn init_logging() {
+    // The writer thread starts here, from the thread that sets up (not from a real-time
+    // thread that logs first, whose policy it would inherit).
+    queue();
     let filter = EnvFilter::try_from_env("TELEOP_LOG").unwrap_or_else(|_| EnvFilter::new("info"));
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)

@@ -278,6 +278,17 @@ pub fn enter_realtime_with(rt: &Realtime) -> Outcome {
     Outcome::Refused
 }
 
+/// Returns the calling thread to the normal policy (`SCHED_OTHER`), so that the threads it
+/// starts afterwards (which inherit its policy) do not compete with the time-critical ones.
+pub fn leave_realtime() {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: `param` is a valid sched_param; pthread_self() is the calling thread. Lowering
+    // the policy is always permitted.
+    unsafe {
+        libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param);
+    }
+}
+
 /// Pins the calling thread to `cpus` (nothing if empty); a failure is reported once.
 fn set_affinity(cpus: &[usize]) {
     if cpus.is_empty() {
@@ -389,6 +400,7 @@ mod tests {
             priority: 42,
             ..Default::default()
         };
+        let rt2 = rt.clone();
         let (outcome, sched) = std::thread::spawn(move || {
             let outcome = enter_realtime_with(&rt);
             // SAFETY: gettid has no preconditions.
@@ -404,6 +416,16 @@ mod tests {
             assert_eq!(outcome, Outcome::Refused);
             assert_eq!(sched, (libc::SCHED_OTHER, 0));
         }
+        // Leaving returns to the normal policy.
+        let left = std::thread::spawn(move || {
+            enter_realtime_with(&rt2);
+            leave_realtime();
+            // SAFETY: gettid has no preconditions.
+            thread_sched(unsafe { libc::gettid() })
+        })
+        .join()
+        .unwrap();
+        assert_eq!(left, (libc::SCHED_OTHER, 0));
         // The caller's own thread is untouched.
         // SAFETY: gettid has no preconditions.
         let me = thread_sched(unsafe { libc::gettid() });

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
+use teleop_runtime::realtime::{Realtime, SchedPolicy, MAX_CPU};
 use teleop_runtime::{qualified, Namespace};
 use toml::Spanned;
 
@@ -66,6 +67,12 @@ struct RawProcess {
     namespace: Option<Spanned<String>>,
     #[serde(default)]
     env: BTreeMap<String, String>,
+    sched_policy: Option<Spanned<String>>,
+    sched_priority: Option<Spanned<i64>>,
+    cpu_affinity: Option<Spanned<Vec<i64>>>,
+    #[serde(default)]
+    lock_memory: bool,
+    nice: Option<Spanned<i64>>,
 }
 
 fn default_restart() -> Restart {
@@ -136,6 +143,10 @@ pub struct Process {
     pub namespace: Option<Namespace>,
     /// Extra environment.
     pub env: BTreeMap<String, String>,
+    /// Scheduling of its time-critical threads, memory locking, CPU affinity, nice value
+    /// (`sched_policy`, `sched_priority`, `cpu_affinity`, `lock_memory`, `nice`), passed to it
+    /// in the environment (see `teleop_runtime::realtime`).
+    pub realtime: Realtime,
 }
 
 /// A checked launch file.
@@ -223,6 +234,9 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
         let restart_backoff_max_ms = time(&p.restart_backoff_max_ms, "restart_backoff_max_ms", 1)?;
         let restart_window_s = time(&p.restart_window_s, "restart_window_s", 1000)?;
         let health_timeout_ms = time(&p.health_timeout_ms, "health_timeout_ms", 1)?;
+        let realtime = realtime(&p, &|span, field, why| {
+            anyhow::anyhow!("{origin}:{}: process.{field} of {name:?}: {why}", at(span))
+        })?;
         processes.push(Process {
             node: match p.node {
                 Some(n) if n.is_empty() => None,
@@ -241,6 +255,7 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
             health_timeout_ms,
             required: p.required,
             env: p.env,
+            realtime,
         });
     }
     Ok(Launch {
@@ -248,6 +263,99 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
         session: raw.session,
         processes,
     })
+}
+
+/// The scheduling settings of a process entry, checked; `error(span, field, why)` makes the
+/// error that names the line and the field.
+fn realtime(
+    p: &RawProcess,
+    error: &dyn Fn(core::ops::Range<usize>, &str, String) -> anyhow::Error,
+) -> anyhow::Result<Realtime> {
+    let policy = match &p.sched_policy {
+        None => SchedPolicy::Other,
+        Some(s) => SchedPolicy::parse(s.get_ref()).ok_or_else(|| {
+            error(
+                s.span(),
+                "sched_policy",
+                format!("{:?}: use \"fifo\", \"rr\" or \"other\"", s.get_ref()),
+            )
+        })?,
+    };
+    let priority = match &p.sched_priority {
+        None if policy == SchedPolicy::Other => 0,
+        None => {
+            let span = p.sched_policy.as_ref().map(|s| s.span()).unwrap_or(0..0);
+            return Err(error(
+                span,
+                "sched_priority",
+                format!(
+                    "missing: policy {:?} needs a priority 1..=99",
+                    policy.name()
+                ),
+            ));
+        }
+        Some(v) => {
+            let value = *v.get_ref();
+            let range = if policy == SchedPolicy::Other {
+                0..=0
+            } else {
+                1..=99
+            };
+            if !range.contains(&value) {
+                return Err(error(
+                    v.span(),
+                    "sched_priority",
+                    match policy {
+                        SchedPolicy::Other => format!(
+                            "{value}: needs sched_policy \"fifo\" or \"rr\" (\"other\" has no priority)"
+                        ),
+                        _ => format!("{value}: use 1..=99"),
+                    },
+                ));
+            }
+            value as u8
+        }
+    };
+    let mut cpus = Vec::new();
+    if let Some(list) = &p.cpu_affinity {
+        if list.get_ref().is_empty() {
+            return Err(error(
+                list.span(),
+                "cpu_affinity",
+                "empty: name at least one CPU, or leave it out".into(),
+            ));
+        }
+        for &cpu in list.get_ref() {
+            match usize::try_from(cpu) {
+                Ok(c) if c <= MAX_CPU => cpus.push(c),
+                _ => {
+                    return Err(error(
+                        list.span(),
+                        "cpu_affinity",
+                        format!("CPU {cpu}: use 0..={MAX_CPU}"),
+                    ))
+                }
+            }
+        }
+    }
+    let nice = match &p.nice {
+        None => None,
+        Some(v) => Some(
+            i8::try_from(*v.get_ref())
+                .ok()
+                .filter(|n| (-20..=19).contains(n))
+                .ok_or_else(|| error(v.span(), "nice", format!("{}: use -20..=19", v.get_ref())))?,
+        ),
+    };
+    let rt = Realtime {
+        policy,
+        priority,
+        cpus,
+        lock_memory: p.lock_memory,
+        nice,
+    };
+    debug_assert_eq!(rt.check(), Ok(()));
+    Ok(rt)
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
@@ -425,6 +533,78 @@ mod tests {
         assert!(e.contains("session.stop_timeout_ms"), "{e}");
         // Negative numbers are type errors, with their line.
         let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nrestart_delay_ms = -1\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4"), "{e}");
+    }
+
+    #[test]
+    fn scheduling_settings() {
+        let l = parse_str(
+            "[[process]]\nname = \"hand\"\nprogram = \"x\"\nsched_policy = \"fifo\"\nsched_priority = 80\ncpu_affinity = [1]\nlock_memory = true\nnice = -5\n\n[[process]]\nname = \"b\"\nprogram = \"y\"\n",
+        )
+        .unwrap();
+        assert_eq!(
+            l.processes[0].realtime,
+            Realtime {
+                policy: SchedPolicy::Fifo,
+                priority: 80,
+                cpus: vec![1],
+                lock_memory: true,
+                nice: Some(-5),
+            }
+        );
+        assert!(l.processes[1].realtime.is_default());
+        let rr = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nsched_policy = \"rr\"\nsched_priority = 1\n")
+            .unwrap();
+        assert_eq!(rr.processes[0].realtime.policy, SchedPolicy::Rr);
+
+        for (lines, expect) in [
+            (
+                "sched_policy = \"deadline\"\nsched_priority = 10\n",
+                "dir/launch.toml:4: process.sched_policy of \"a\": \"deadline\": use",
+            ),
+            (
+                "sched_policy = \"fifo\"\n",
+                "dir/launch.toml:4: process.sched_priority of \"a\": missing",
+            ),
+            (
+                "sched_policy = \"fifo\"\nsched_priority = 100\n",
+                "dir/launch.toml:5: process.sched_priority of \"a\": 100: use 1..=99",
+            ),
+            (
+                "sched_policy = \"fifo\"\nsched_priority = 0\n",
+                "dir/launch.toml:5: process.sched_priority of \"a\": 0: use 1..=99",
+            ),
+            (
+                "sched_priority = 10\n",
+                "dir/launch.toml:4: process.sched_priority of \"a\": 10: needs sched_policy",
+            ),
+            (
+                "cpu_affinity = [0, -1]\n",
+                "dir/launch.toml:4: process.cpu_affinity of \"a\": CPU -1: use 0..=1023",
+            ),
+            (
+                "cpu_affinity = []\n",
+                "dir/launch.toml:4: process.cpu_affinity of \"a\": empty",
+            ),
+            (
+                "nice = 20\n",
+                "dir/launch.toml:4: process.nice of \"a\": 20: use -20..=19",
+            ),
+            (
+                "nice = -99999999999\n",
+                "dir/launch.toml:4: process.nice of \"a\": -99999999999: use -20..=19",
+            ),
+        ] {
+            let e = parse_str(&format!(
+                "[[process]]\nname = \"a\"\nprogram = \"x\"\n{lines}"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(e.starts_with(expect), "{lines}: {e}");
+        }
+        let e = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nlock_memory = 1\n")
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 4"), "{e}");

@@ -285,6 +285,9 @@ fn spawn(
             std::fs::canonicalize(&launch.path).unwrap_or_else(|_| launch.path.clone()),
         )
         .envs(&process.env)
+        // Its scheduling settings, applied by the process itself (so that only its
+        // time-critical threads get the real-time priority, and a refusal is its own warning).
+        .envs(process.realtime.to_env())
         // The child arms its parent-death signal again after exec (see
         // `teleop_runtime::follow_supervisor`): the kernel drops ours for binaries with file
         // capabilities.

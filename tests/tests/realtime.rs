@@ -1,0 +1,177 @@
+//! Real-time scheduling from `launch.toml`: a launched node's time-critical threads (the glove
+//! exchange loop, the EtherCAT cycle and frame pump) really run with the policy and priority
+//! the file names, its other threads do not; a process without the right says so once, names
+//! the fix, and runs on at normal priority.
+#![allow(clippy::unwrap_used)]
+
+use std::time::Duration;
+
+use teleop_e2e::{bin, wait_for, Sandbox};
+
+/// (thread name, policy, real-time priority) of every thread of `pid`, from
+/// /proc/<pid>/task/<tid>/stat (fields 2, 41 and 40).
+fn threads(pid: u32) -> Vec<(String, i32, i32)> {
+    let Ok(tasks) = std::fs::read_dir(format!("/proc/{pid}/task")) else {
+        return Vec::new();
+    };
+    tasks
+        .flatten()
+        .filter_map(|task| {
+            let stat = std::fs::read_to_string(task.path().join("stat")).ok()?;
+            let name = stat[stat.find('(')? + 1..stat.rfind(')')?].to_string();
+            let fields: Vec<&str> = stat[stat.rfind(')')? + 2..].split(' ').collect();
+            // `fields[0]` is field 3 (state).
+            Some((
+                name,
+                fields[41 - 3].parse().ok()?,
+                fields[40 - 3].parse().ok()?,
+            ))
+        })
+        .collect()
+}
+
+fn is_root() -> bool {
+    // SAFETY: geteuid has no preconditions.
+    unsafe { libc::geteuid() == 0 }
+}
+
+#[test]
+fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
+    let sandbox = Sandbox::new();
+    let launch = sandbox.default_session(|text| {
+        text.replace(
+            "args = [\"--config\", \"config/glove.toml\"]\n",
+            "args = [\"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\n",
+        )
+        .replace(
+            "args = [\"--config\", \"config/revo2.toml\"]\n",
+            "args = [\"--config\", \"config/revo2.toml\"]\nsched_policy = \"rr\"\nsched_priority = 42\nlock_memory = true\n",
+        )
+    });
+    let mut session = sandbox.launch(&launch);
+    let glove = wait_for(Duration::from_secs(30), "glove node", || {
+        sandbox.pid_of("glove")
+    });
+    let revo2 = wait_for(Duration::from_secs(30), "revo2 node", || {
+        sandbox.pid_of("revo2")
+    });
+    if !is_root() {
+        // Without the right: one warning each, with the fix, and the nodes run on.
+        wait_for(Duration::from_secs(30), "the warning", || {
+            (session
+                .log()
+                .matches("cannot use real-time scheduling")
+                .count()
+                >= 2)
+                .then_some(())
+        });
+        let log = session.log();
+        assert!(log.contains("setcap cap_sys_nice+ep"), "{log}");
+        session.stop();
+        return;
+    }
+    // The glove exchange loop runs on the node's main thread.
+    let main_glove = wait_for(
+        Duration::from_secs(30),
+        "glove loop at SCHED_FIFO 31",
+        || {
+            threads(glove).into_iter().find(|(name, policy, prio)| {
+                name.starts_with("teleop-glove") && *policy == libc::SCHED_FIFO && *prio == 31
+            })
+        },
+    );
+    assert_eq!(main_glove.1, libc::SCHED_FIFO);
+    // The EtherCAT cycle (main thread) and frame pump at SCHED_RR 42, once in OP.
+    wait_for(
+        Duration::from_secs(30),
+        "revo2 cycle and pump at SCHED_RR 42",
+        || {
+            let t = threads(revo2);
+            let rt = |n: &str| {
+                t.iter().any(|(name, policy, prio)| {
+                    name.starts_with(n) && *policy == libc::SCHED_RR && *prio == 42
+                })
+            };
+            (rt("teleop-revo2") && rt("ecat-pump")).then_some(())
+        },
+    );
+    // Its other threads stay normal.
+    let others: Vec<_> = threads(revo2)
+        .into_iter()
+        .filter(|(name, ..)| name == "log-writer")
+        .collect();
+    assert!(!others.is_empty(), "{:?}", threads(revo2));
+    assert!(
+        others
+            .iter()
+            .all(|(_, policy, _)| *policy == libc::SCHED_OTHER),
+        "{others:?}"
+    );
+    // Memory locked: VmLck in /proc/<pid>/status.
+    let status = std::fs::read_to_string(format!("/proc/{revo2}/status")).unwrap();
+    let locked_kb: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmLck:"))
+        .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        .unwrap();
+    assert!(locked_kb > 0, "{status}");
+    // A node without settings stays normal.
+    let retarget = wait_for(Duration::from_secs(30), "retarget node", || {
+        sandbox.pid_of("retarget")
+    });
+    assert!(threads(retarget)
+        .iter()
+        .all(|(_, policy, _)| *policy == libc::SCHED_OTHER));
+    assert!(!session.log().contains("cannot use real-time scheduling"));
+    session.stop();
+}
+
+#[test]
+fn without_the_right_a_node_warns_once_and_runs_on_at_normal_priority() {
+    if !is_root() {
+        // Not root: the test above already runs the refusal path.
+        return;
+    }
+    let sandbox = Sandbox::new();
+    // The glove node runs as root but without CAP_SYS_NICE and with RLIMIT_RTPRIO 0: it may
+    // not use a real-time policy.
+    let glove = bin("teleop-glove").display().to_string();
+    let launch = sandbox.default_session(|text| {
+        text.replace(
+            "program = \"teleop-glove\"\nargs = [\"--config\", \"config/glove.toml\"]\n",
+            &format!(
+                "program = \"prlimit\"\nargs = [\"--rtprio=0\", \"setpriv\", \"--inh-caps=-sys_nice\", \"--bounding-set=-sys_nice\", {glove:?}, \"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\n"
+            ),
+        )
+    });
+    assert!(std::fs::read_to_string(&launch)
+        .unwrap()
+        .contains("prlimit"));
+    let mut session = sandbox.launch(&launch);
+    let pid = wait_for(Duration::from_secs(30), "glove node", || {
+        sandbox.pid_of("glove")
+    });
+    // It runs on: glove states keep coming (its health report names exchanges).
+    wait_for(Duration::from_secs(30), "the warning", || {
+        session
+            .log()
+            .contains("cannot use real-time scheduling")
+            .then_some(())
+    });
+    std::thread::sleep(Duration::from_secs(1));
+    let log = session.log();
+    assert_eq!(
+        log.matches("cannot use real-time scheduling").count(),
+        1,
+        "{log}"
+    );
+    assert!(
+        log.contains("setcap cap_sys_nice+ep") && log.contains("rtprio"),
+        "{log}"
+    );
+    assert_eq!(sandbox.pid_of("glove"), Some(pid), "the node ran on");
+    assert!(threads(pid)
+        .iter()
+        .all(|(_, policy, _)| *policy == libc::SCHED_OTHER));
+    session.stop();
+}
