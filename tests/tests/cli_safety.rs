@@ -166,6 +166,26 @@ fn replay_refuses_unknown_topics_naming_the_known_ones() {
 }
 
 #[test]
+fn replay_of_an_empty_window_fails_instead_of_looping_for_ever() {
+    let sandbox = Sandbox::new();
+    let rec = sandbox.dir.path().join("r.mcap");
+    write_mixed_recording(&rec, 3);
+    let mut replay = sandbox
+        .teleop()
+        .args(["replay", rec.to_str().unwrap(), "--loop", "--start", "100"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = wait_for(Duration::from_secs(20), "replay to give up", || {
+        replay.try_wait().unwrap()
+    });
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut replay.stderr.take().unwrap(), &mut err).unwrap();
+    assert!(!status.success(), "{err}");
+    assert!(err.contains("between --start and --end"), "{err}");
+}
+
+#[test]
 fn replay_publishes_only_sensor_topics_unless_named() {
     let sandbox = Sandbox::new();
     let rec = sandbox.dir.path().join("r.mcap");

@@ -333,6 +333,12 @@ pub fn replay_cmd(
         }
         progress(total, total, sent);
         eprintln!();
+        // An empty window would make `--loop` spin through nothing for ever.
+        anyhow::ensure!(
+            sent > 0,
+            "{}: no message of the chosen channels between --start and --end",
+            path.display()
+        );
         if !opts.looped {
             break;
         }
