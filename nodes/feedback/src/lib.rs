@@ -10,6 +10,7 @@ use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     force_flags, units, EStop, GloveForceCommand, HandCommand, HandState, Tactile as TactileMsg,
 };
+use teleop_runtime::sample_time;
 
 /// The node's configuration file.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -112,7 +113,9 @@ pub struct FeedbackEngine {
     config: NodeConfig,
     profile: HandProfile,
     law: ForceFeedback,
+    /// The newest tactile sample and when it was made.
     tactile: Option<(TactileMsg, u64)>,
+    /// The newest hand state and when it was made.
     state: Option<(HandState, u64)>,
     command: Option<HandCommand>,
     estop: bool,
@@ -140,17 +143,20 @@ impl FeedbackEngine {
     }
 
     /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
+    /// Tactile and hand-state samples are as old as their stamps say (never newer than their
+    /// receipt, see [`sample_time`]): a sample from a topic's history, made before a restart, is
+    /// stale when it arrives.
     /// Steps the law on tactile samples, on hand state when the hand has no tactile data, on
     /// e-stop changes and on ticks.
     pub fn handle(&mut self, event: &Event, now_ns: u64) -> Output {
         let mut out = Output::default();
         let step = match *event {
             Event::Tactile(t) => {
-                self.tactile = Some((t, now_ns));
+                self.tactile = Some((t, sample_time(t.header.stamp_ns, now_ns)));
                 true
             }
             Event::State(s) => {
-                self.state = Some((s, now_ns));
+                self.state = Some((s, sample_time(s.header.stamp_ns, now_ns)));
                 self.tactile.is_none()
             }
             Event::Command(c) => {
@@ -334,7 +340,7 @@ mod tests {
     }
 
     #[test]
-    fn engine_steps_on_tactile_and_ticks_and_goes_stale_by_receive_time() {
+    fn engine_steps_on_tactile_and_ticks_and_goes_stale_by_sample_time() {
         let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
         let mut t = TactileMsg {
             fingertip_count: 5,
@@ -347,6 +353,7 @@ mod tests {
             .command
             .is_none());
         for i in 0..200 {
+            t.header.stamp_ns = i * ms;
             let out = e.handle(&Event::Tactile(t), i * ms);
             assert!(out.command.is_some());
         }
@@ -367,5 +374,35 @@ mod tests {
         );
         assert_eq!(engaged.estop_changed, Some(true));
         assert_eq!(engaged.command.unwrap().force, [0; 5]);
+    }
+
+    #[test]
+    fn samples_made_before_the_timeout_are_stale_when_they_arrive() {
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        let ms = 1_000_000;
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 2.3;
+        let mut s = HandState {
+            joint_count: 6,
+            link_up: 1,
+            ..Default::default()
+        };
+        s.joints[2].current_ma = 900.0;
+        // Made 1 s ago (a topic's history after a restart), received now: no force.
+        t.header.stamp_ns = 1000 * ms;
+        s.header.stamp_ns = 1000 * ms;
+        e.handle(&Event::State(s), 2000 * ms);
+        let out = e.handle(&Event::Tactile(t), 2000 * ms);
+        let cmd = out.command.unwrap();
+        assert_eq!(cmd.force, [0; 5]);
+        assert_ne!(cmd.flags & force_flags::STALE, 0, "{cmd:?}");
+        // The same sample made just now drives the glove.
+        t.header.stamp_ns = 2001 * ms;
+        let out = e.handle(&Event::Tactile(t), 2001 * ms);
+        assert_eq!(out.command.unwrap().flags & force_flags::STALE, 0);
+        assert!(out.became_fresh);
     }
 }

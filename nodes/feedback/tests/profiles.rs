@@ -72,10 +72,12 @@ fn session(profile: &HandProfile, touch: Touch) -> Vec<GloveForceCommand> {
     let mut out = Vec::new();
     for (k, glove) in recorded_glove().iter().enumerate() {
         let now = 1_000_000_000 + k as u64 * 3_000_000;
-        let Some(cmd) = retarget.on_glove(glove).command else {
+        let Some(cmd) = retarget.on_glove(glove, glove.header.stamp_ns).command else {
             continue;
         };
-        let state = hand_state(profile, &cmd, &blocked);
+        // Samples made now, as the hand node would.
+        let mut state = hand_state(profile, &cmd, &blocked);
+        state.header.stamp_ns = now;
         feedback.handle(&Event::Command(cmd), now);
         let pressing =
             (0..profile.joints.len()).any(|j| blocked[j] && state.joints[j].effort.abs() > 0.3);
@@ -86,6 +88,7 @@ fn session(profile: &HandProfile, touch: Touch) -> Vec<GloveForceCommand> {
                 fingertip_count: tips.len() as u8,
                 ..Default::default()
             };
+            t.header.stamp_ns = now;
             for (slot, &finger) in tips.iter().enumerate() {
                 let tip = &mut t.fingertips[slot];
                 tip.normal_n = if finger == index_finger && pressing {

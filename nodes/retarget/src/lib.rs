@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use teleop_hand_profile::{CommandUnits, HandProfile};
 use teleop_msgs::{command_flags, control_mode, units, GloveState, HandCommand, MAX_JOINTS};
 use teleop_retarget::{Calibration, GloveInput, JointTargets, RetargetConfig, Retargeter};
+use teleop_runtime::sample_time;
 
 // The retargeter sizes its joint arrays with the profile crate's bound; the contract must carry
 // as many.
@@ -130,6 +131,8 @@ pub struct RetargetEngine {
     command: CommandShape,
     stale: bool,
     last_origin: u64,
+    /// A glove sample made longer ago than this is stale when it arrives.
+    timeout_ns: u64,
 }
 
 impl RetargetEngine {
@@ -144,12 +147,17 @@ impl RetargetEngine {
             command: CommandShape::of(profile),
             stale: true,
             last_origin: 0,
+            timeout_ns: config.glove_timeout_ms.max(1).saturating_mul(1_000_000),
         })
     }
 
-    /// A glove sample arrived. A glove that reports its link down counts as stale input.
-    pub fn on_glove(&mut self, sample: &GloveState) -> Output {
-        if sample.link_up == 0 {
+    /// A glove sample arrived at `received_ns` (CLOCK_MONOTONIC, or the log time when
+    /// reprocessing). A glove that reports its link down counts as stale input, and so does a
+    /// sample made longer than the glove timeout ago by its stamp (never newer than its receipt,
+    /// see [`sample_time`]): one from the topic's history, made before a restart, moves nothing.
+    pub fn on_glove(&mut self, sample: &GloveState, received_ns: u64) -> Output {
+        let made = sample_time(sample.header.stamp_ns, received_ns);
+        if sample.link_up == 0 || received_ns - made > self.timeout_ns {
             return self.on_timeout();
         }
         let targets = self.retargeter.step(&GloveInput {
@@ -331,7 +339,8 @@ mod tests {
             ..Default::default()
         };
         s.header.origin_ns = 1_000_000;
-        let out = e.on_glove(&s);
+        s.header.stamp_ns = 1_000_000;
+        let out = e.on_glove(&s, 1_000_000);
         assert!(out.became_fresh && out.command.is_some());
         let live = out.command.unwrap();
         let held = e.on_timeout();
@@ -342,9 +351,35 @@ mod tests {
         assert!(!e.on_timeout().became_stale, "reported once");
         s.link_up = 0;
         assert_ne!(
-            e.on_glove(&s).command.unwrap().flags & command_flags::HELD,
+            e.on_glove(&s, 1_000_000).command.unwrap().flags & command_flags::HELD,
             0
         );
+    }
+
+    #[test]
+    fn a_glove_sample_made_before_the_timeout_moves_nothing() {
+        let mut e =
+            RetargetEngine::new(&NodeConfig::default(), Calibration::default(), &revo2()).unwrap();
+        let ms = 1_000_000;
+        let mut s = GloveState {
+            link_up: 1,
+            raw_position: [500; 6],
+            ..Default::default()
+        };
+        // Made 1 s before it arrives (a topic's history after a restart): no command.
+        s.header.stamp_ns = 1000 * ms;
+        let out = e.on_glove(&s, 2000 * ms);
+        assert_eq!(out.command, None);
+        // Made within the timeout (100 ms): followed.
+        s.header.stamp_ns = 1950 * ms;
+        let out = e.on_glove(&s, 2000 * ms);
+        assert!(out.became_fresh && out.command.is_some());
+        // Followed, then an old one: held, not followed.
+        s.header.stamp_ns = 1500 * ms;
+        s.raw_position = [0; 6];
+        let out = e.on_glove(&s, 2001 * ms);
+        assert!(out.became_stale);
+        assert_ne!(out.command.unwrap().flags & command_flags::HELD, 0);
     }
 
     #[test]

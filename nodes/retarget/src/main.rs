@@ -16,7 +16,7 @@ use node_retarget::{load, Loaded, NodeConfig, Output, RetargetEngine};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{GloveState, HandCommand};
 use teleop_runtime::{
-    init_logging, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
+    init_logging, now_ns, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
 };
 
 #[derive(Parser)]
@@ -110,7 +110,7 @@ fn run(
         match wake {
             Wake::Input(_) => {
                 let mut outs = Vec::new();
-                glove.drain(|s| outs.push(engine.on_glove(s)));
+                glove.drain(|s| outs.push(engine.on_glove(s, now_ns())));
                 for out in outs {
                     health.count_loop();
                     emit(out, &mut commands, &mut health)?;

@@ -28,7 +28,7 @@ fn run(profile: &HandProfile, glove: &[GloveState]) -> Vec<HandCommand> {
         RetargetEngine::new(&NodeConfig::default(), Calibration::default(), profile).unwrap();
     glove
         .iter()
-        .filter_map(|s| engine.on_glove(s).command)
+        .filter_map(|s| engine.on_glove(s, s.header.stamp_ns).command)
         .collect()
 }
 

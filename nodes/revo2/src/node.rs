@@ -1,7 +1,8 @@
 //! The Revo2 node: the master's cycle (`teleop-ecat-master`) with the [`Revo2`] driver, and the
-//! node's ports as its host: hand commands in (stale after `stale_command_ms`), hand state and
-//! tactile data out for every valid exchange, the link state while the hand is away, health and
-//! device info periodically.
+//! node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp; none
+//! followed while the latched e-stop is engaged, so the hand holds), hand state and tactile data
+//! out for every valid exchange, the link state while the hand is away, health and device info
+//! periodically.
 
 use std::time::{Duration, Instant};
 
@@ -10,7 +11,7 @@ use teleop_msgs::{
     bus_state, device_kind, fixed_text, link_kind, DeviceInfo, HandCommand, HandState, Tactile,
 };
 use teleop_revo2_protocol::Inputs;
-use teleop_runtime::{Health, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
 
 use crate::bus::DeviceInfo as FoundDevice;
 use crate::config::Revo2Config;
@@ -23,6 +24,8 @@ struct Ports {
     /// The connected device, published with every health report.
     connected: Option<DeviceInfo>,
     commands: Subscriber<HandCommand>,
+    /// The latched e-stop: while engaged, no command is followed (the master holds).
+    estop: EStopInput,
     state: Publisher<HandState>,
     tactile: Publisher<Tactile>,
     health: Health,
@@ -38,6 +41,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
         device: runtime.publisher()?,
         connected: None,
         commands: runtime.subscriber()?,
+        estop: EStopInput::new(runtime)?,
         state: runtime.publisher()?,
         tactile: runtime.publisher()?,
         health: Health::new(runtime)?,
@@ -74,9 +78,20 @@ impl Host<Revo2> for Ports {
     }
 
     fn command(&mut self) -> Option<HandCommand> {
+        match self.estop.update() {
+            Ok(Some(true)) => tracing::warn!("e-stop engaged: the hand holds its last target"),
+            Ok(Some(false)) => tracing::info!("e-stop released: following hand commands"),
+            Ok(None) => {}
+            Err(e) => {
+                self.health.count_error();
+                tracing::warn!("e-stop acknowledgement: {e}");
+            }
+        }
+        // Freshness counts from the command's stamp: one from the topic's history, sent
+        // before this node (re)started, is stale.
         let cmd = self.commands.poll_latest();
         let fresh = self.commands.is_fresh(Instant::now(), self.stale_after);
-        cmd.filter(|_| fresh)
+        cmd.filter(|_| fresh && !self.estop.engaged())
     }
 
     fn connected(&mut self, driver: &Revo2) {

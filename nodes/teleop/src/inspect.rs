@@ -12,10 +12,10 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
-use teleop_msgs::{visit_topic, EStop, Message, TopicVisitor};
+use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, TopicVisitor};
 use teleop_runtime::{
-    discover_namespaces, now_ns, qualified, split, EventLoop, Flow, Input, IpcSettings, Namespace,
-    NodeRuntime, Service, StopReason, Subscriber, Wake,
+    discover_namespaces, latch_path, now_ns, qualified, set_latch, split, EventLoop, Flow, Input,
+    IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber, Wake,
 };
 
 /// Name of the short-lived iceoryx2 node the inspection commands create.
@@ -322,8 +322,16 @@ pub fn stats(
     Ok(ExitCode::SUCCESS)
 }
 
+/// How long `teleop estop` waits for the nodes that obey the e-stop to acknowledge it.
+const ESTOP_ACK_WAIT: Duration = Duration::from_secs(1);
+
 /// Engages or releases the e-stop of the namespaces given, or else of the topics without a
 /// namespace and of every namespace in use: one operator's e-stop stops every side.
+///
+/// The state is the latch file of each namespace (see `teleop_runtime::EStopInput`), written
+/// and synced before the `estop` topic wakes the running nodes, so it outlives this command
+/// and any node's restart. Then it waits for the nodes' acknowledgements (`estop/ack`) and lists
+/// them; none at all is a failure (exit code 1), although the latch stays as set.
 pub fn estop(
     ipc: &IpcSettings,
     engage: bool,
@@ -331,32 +339,84 @@ pub fn estop(
 ) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     let covered = covered(ipc, namespaces)?;
-    let mut publishers = Vec::with_capacity(covered.len());
-    for ns in &covered {
-        publishers.push(runtime.publisher_in::<EStop>(ns.as_ref())?);
+    let mut sides = Vec::with_capacity(covered.len());
+    for ns in covered {
+        // Subscribe to the answers before asking.
+        let acks = runtime.subscriber_in::<EStopAck>(ns.as_ref())?;
+        let publisher = runtime.publisher_in::<EStop>(ns.as_ref())?;
+        sides.push((ns, acks, publisher, Vec::<String>::new()));
     }
-    let msg = EStop {
-        engaged: u8::from(engage),
-        ..Default::default()
-    };
-    // Repeat for a moment so that every subscriber, including one that is just starting, has it
-    // before this process (and with it the publisher's history) goes away. The force-feedback
-    // node latches the state until the opposite command.
-    for _ in 0..10 {
-        for publisher in &mut publishers {
-            publisher.publish(&msg)?;
+    let asked_at = now_ns();
+    for (ns, _, publisher, _) in &mut sides {
+        let path = latch_path(ipc, ns.as_ref());
+        set_latch(&path, engage).map_err(|e| {
+            anyhow::anyhow!(
+                "cannot {} the e-stop latch {}: {e}",
+                if engage { "engage" } else { "release" },
+                path.display()
+            )
+        })?;
+        publisher.publish(&EStop {
+            engaged: u8::from(engage),
+            ..Default::default()
+        })?;
+    }
+    // Every node that obeys the e-stop has one `estop/ack` publisher: wait until each has
+    // answered, or for at most ESTOP_ACK_WAIT.
+    let deadline = Instant::now() + ESTOP_ACK_WAIT;
+    loop {
+        let mut all = true;
+        for (ns, acks, _, answered) in &mut sides {
+            acks.drain(|a| {
+                let name = text_of(&a.node_name);
+                if a.header.stamp_ns >= asked_at
+                    && (a.engaged != 0) == engage
+                    && !answered.contains(&name)
+                {
+                    answered.push(name);
+                }
+            });
+            let expected = runtime
+                .topic_ports_in::<EStopAck>(ns.as_ref())
+                .map_or(0, |(publishers, _)| publishers);
+            all &= answered.len() >= expected;
         }
-        std::thread::sleep(Duration::from_millis(30));
+        if all || Instant::now() >= deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
     }
-    let sides: Vec<&str> = covered.iter().map(|ns| shown(ns.as_ref())).collect();
     println!(
-        "e-stop {} (namespaces: {})",
+        "e-stop {}",
         if engage {
-            "ENGAGED: glove forces held at zero until `teleop estop --release`"
+            "ENGAGED (latched): glove forces at zero, hands holding, until `teleop estop --release`"
         } else {
             "released"
-        },
-        sides.join(", ")
+        }
     );
+    let mut acknowledged = 0;
+    for (ns, _, _, answered) in &mut sides {
+        answered.sort();
+        acknowledged += answered.len();
+        println!(
+            "  namespace {}: latch {}; acknowledged by {}",
+            shown(ns.as_ref()),
+            latch_path(ipc, ns.as_ref()).display(),
+            if answered.is_empty() {
+                "no node".to_string()
+            } else {
+                answered.join(", ")
+            }
+        );
+    }
+    if acknowledged == 0 {
+        eprintln!(
+            "no node acknowledged the e-stop within {} ms: none that obeys it is running; the latch \
+             is {} and every node that starts will obey it",
+            ESTOP_ACK_WAIT.as_millis(),
+            if engage { "set" } else { "cleared" }
+        );
+        return Ok(ExitCode::FAILURE);
+    }
     Ok(ExitCode::SUCCESS)
 }

@@ -95,7 +95,9 @@ enum Command {
         #[arg(long = "namespace", value_name = "NS")]
         namespaces: Vec<Namespace>,
     },
-    /// Engage (or release) the emergency stop: all glove forces go to zero, on every side.
+    /// Engage (or release) the emergency stop, latched until `--release`: all glove forces go
+    /// to zero and the hands hold their last target, on every side. Lists the nodes that
+    /// acknowledged it; exits 1 when none did.
     Estop {
         /// Release instead of engage.
         #[arg(long)]

@@ -406,6 +406,22 @@ message! {
     }
 }
 
+message! {
+    /// A node's answer to the e-stop: published by every node that obeys it (the force feedback
+    /// and the hand nodes) when it starts and after every [`EStop`] sample, with the state it
+    /// now obeys (`teleop estop` lists the nodes that answered).
+    EStopAck("teleop_msgs/msg/EStopAck", topic "estop/ack", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// 1 = the node holds the e-stop (glove forces zero, hand holding), 0 = released.
+        engaged: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 7] => "uint8[7]",
+        /// The node's name (with its namespace), UTF-8, zero padded.
+        node_name: [u8; 32] => "uint8[32]",
+    }
+}
+
 /// Device kinds of [`DeviceInfo`].
 pub mod device_kind {
     /// The EH55BF1 exoskeleton glove.
@@ -466,6 +482,7 @@ topics!(
     NodeHealth,
     EStop,
     DeviceInfo,
+    EStopAck,
 );
 
 impl NodeHealth {

@@ -203,6 +203,7 @@ pub struct NodeRuntime {
     name: String,
     namespace: Option<Namespace>,
     source_id: u32,
+    estop_latch: std::path::PathBuf,
 }
 
 impl NodeRuntime {
@@ -227,6 +228,7 @@ impl NodeRuntime {
         Ok(Self {
             node,
             source_id: teleop_msgs::source_id(&name),
+            estop_latch: crate::estop::latch_path(settings, namespace.as_ref()),
             name,
             namespace,
         })
@@ -240,6 +242,11 @@ impl NodeRuntime {
     /// The namespace of the node's topics.
     pub fn namespace(&self) -> Option<&Namespace> {
         self.namespace.as_ref()
+    }
+
+    /// The e-stop latch file of the node's namespace (see [`EStopInput`](crate::EStopInput)).
+    pub fn estop_latch(&self) -> &std::path::Path {
+        &self.estop_latch
     }
 
     /// The id this node writes into the headers it stamps.

@@ -10,6 +10,8 @@
 //! - [`EventLoop`]: a WaitSet over the inputs with per-input deadlines (input watchdogs) and a
 //!   periodic tick; returns on SIGINT/SIGTERM so the node can stop cleanly ([`stop_signal`]
 //!   does the same for loops that block on something else, such as a serial port);
+//! - [`EStopInput`]: the latched e-stop (a latch file per namespace that outlives every process,
+//!   the `estop` topic as its doorbell, `estop/ack` as the nodes' answer);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
@@ -24,6 +26,7 @@
 
 mod clock;
 mod config_file;
+mod estop;
 mod event_loop;
 mod health;
 mod ipc;
@@ -34,6 +37,7 @@ mod signals;
 
 pub use clock::{now_ns, sleep_until, sleep_until_ns};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
+pub use estop::{latch_engaged, latch_path, set_latch, EStopInput};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use health::Health;
 pub use ipc::{
@@ -41,7 +45,7 @@ pub use ipc::{
     ENV_NAMESPACE,
 };
 pub use logging::{dropped_log_lines, init_logging};
-pub use ports::{Publisher, Subscriber};
+pub use ports::{sample_time, Publisher, Subscriber};
 pub use signals::{follow_supervisor, install_stop_handlers, stop_signal, ENV_SUPERVISOR_PID};
 pub use teleop_namespace::{qualified, split, Namespace, NamespaceError};
 

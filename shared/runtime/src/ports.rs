@@ -70,6 +70,14 @@ impl<M: Message> Publisher<M> {
     }
 }
 
+/// When a sample stamped `stamp_ns` and received at `received_ns` (both CLOCK_MONOTONIC) was
+/// made, for judging its freshness: its stamp, but never later than its receipt (a stamp from
+/// the future, or from another clock, counts from the receipt). Unstamped (0) is as old as can
+/// be.
+pub fn sample_time(stamp_ns: u64, received_ns: u64) -> u64 {
+    stamp_ns.min(received_ns)
+}
+
 /// Most distinct publishers per topic whose sequence numbers are tracked for drop counting.
 const TRACKED_SOURCES: usize = 16;
 
@@ -80,6 +88,8 @@ pub struct Subscriber<M: Message> {
     listener: Listener<Service>,
     latest: Cell<Option<M>>,
     received_at: Cell<Option<Instant>>,
+    /// When the newest sample was received, CLOCK_MONOTONIC ns.
+    received_ns: Cell<u64>,
     received: Cell<u64>,
     dropped: Cell<u64>,
     errors: Cell<u64>,
@@ -96,6 +106,7 @@ impl<M: Message> Subscriber<M> {
             listener,
             latest: Cell::new(None),
             received_at: Cell::new(None),
+            received_ns: Cell::new(0),
             received: Cell::new(0),
             dropped: Cell::new(0),
             errors: Cell::new(0),
@@ -154,9 +165,19 @@ impl<M: Message> Subscriber<M> {
             .map(|t| now.saturating_duration_since(t))
     }
 
-    /// True when a sample was received within `timeout` of `now`.
+    /// True when the newest sample was made within `timeout` of `now`: its age counts from its
+    /// stamp ([`sample_time`]), so a sample from the topic's history, made long before this
+    /// subscriber received it, is not fresh.
     pub fn is_fresh(&self, now: Instant, timeout: Duration) -> bool {
-        self.age(now).is_some_and(|age| age <= timeout)
+        let Some(age) = self.age(now) else {
+            return false;
+        };
+        let received_ns = self.received_ns.get();
+        let made = sample_time(
+            self.latest.get().map_or(0, |m| m.header().stamp_ns),
+            received_ns,
+        );
+        age + Duration::from_nanos(received_ns - made) <= timeout
     }
 
     /// Samples received since creation.
@@ -178,6 +199,7 @@ impl<M: Message> Subscriber<M> {
         let header = msg.header();
         self.latest.set(Some(*msg));
         self.received_at.set(Some(Instant::now()));
+        self.received_ns.set(now_ns());
         self.received.set(self.received.get() + 1);
         let mut table = self.last_seq.borrow_mut();
         let slot = table

@@ -71,6 +71,32 @@ fn publish_stamps_and_subscriber_receives_in_order() {
 }
 
 #[test]
+fn freshness_counts_from_the_stamp_not_the_receipt() {
+    let ipc = settings();
+    let a = NodeRuntime::new("pub-node", &ipc).unwrap();
+    let b = NodeRuntime::new("sub-node", &ipc).unwrap();
+    let mut p = a.publisher::<HandCommand>().unwrap();
+    let s = b.subscriber::<HandCommand>().unwrap();
+    // Made 300 ms before it is received (as a sample from a topic's history after a restart).
+    let mut old = HandCommand::default();
+    old.header.stamp_ns = now_ns() - 300_000_000;
+    p.send_as_is(&old).unwrap();
+    assert!(s.poll_latest().is_some());
+    assert!(!s.is_fresh(Instant::now(), Duration::from_millis(100)));
+    assert!(s.is_fresh(Instant::now(), Duration::from_secs(10)));
+    // Stamped now: fresh. A stamp from the future counts from the receipt.
+    p.publish(&HandCommand::default()).unwrap();
+    assert!(s.poll_latest().is_some());
+    assert!(s.is_fresh(Instant::now(), Duration::from_millis(100)));
+    let mut future = HandCommand::default();
+    future.header.stamp_ns = now_ns() + 3_600_000_000_000;
+    p.send_as_is(&future).unwrap();
+    assert!(s.poll_latest().is_some());
+    std::thread::sleep(Duration::from_millis(150));
+    assert!(!s.is_fresh(Instant::now(), Duration::from_millis(100)));
+}
+
+#[test]
 fn origin_is_kept_when_set() {
     let ipc = settings();
     let n = NodeRuntime::new("origin", &ipc).unwrap();

@@ -1,0 +1,336 @@
+//! The latched e-stop and freshness from the sample's stamp, through the real processes: an
+//! e-stop survives a `kill -9` of the force-feedback node and reaches a node that was down when
+//! it was sent; `teleop estop` lists the nodes that acknowledged it (and fails when none did);
+//! only `--release` releases. A glove sample older than the timeout, kept in the topic's history,
+//! does not drive the hand after the retargeting node restarts.
+#![allow(clippy::unwrap_used)]
+
+use std::process::Output;
+use std::time::{Duration, Instant};
+
+use teleop_e2e::{wait_for, Sandbox};
+use teleop_msgs::{force_flags, hand_model, units, GloveForceCommand, GloveState, HandCommand};
+use teleop_msgs::{HandState, NodeHealth, Tactile};
+use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+
+/// A node configuration for this test's sandbox: `text` naming the repository's Revo2 profile.
+fn with_profile(text: &str) -> String {
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
+}
+
+const FEEDBACK_TOML: &str = r#"
+tactile_timeout_ms = 100
+hand_timeout_ms = 100
+tick_ms = 10
+[feedback]
+contact_threshold_n = 0.3
+gain_per_n = 250.0
+max_force = 800
+stale_ramp_s = 0.2
+"#;
+
+/// One process `name` running `program`, restarted 1.5 s after it dies (long enough to send an
+/// e-stop while it is down).
+fn launch_one(name: &str, program: &str, config: &str) -> String {
+    format!(
+        r#"
+[session]
+stop_timeout_ms = 2000
+
+[[process]]
+name = "{name}"
+program = "{program}"
+args = ["--config", "{config}"]
+restart = "always"
+restart_delay_ms = 1500
+restart_backoff_max_ms = 1500
+"#
+    )
+}
+
+/// The test plays the hand: state and tactile with the thumb pressing (10 N: the glove's thumb
+/// saturates at 800).
+struct Hand {
+    state: Publisher<HandState>,
+    tactile: Publisher<Tactile>,
+    forces: Subscriber<GloveForceCommand>,
+}
+
+impl Hand {
+    /// For `duration`, every 2 ms: publish the hand; returns the force commands that came back.
+    fn pump(&mut self, duration: Duration) -> Vec<GloveForceCommand> {
+        let mut forces = Vec::new();
+        let start = Instant::now();
+        while start.elapsed() < duration {
+            self.state
+                .publish(&HandState {
+                    hand_model: hand_model::REVO2,
+                    joint_count: 6,
+                    link_up: 1,
+                    units: units::NORMALISED,
+                    ..Default::default()
+                })
+                .unwrap();
+            let mut t = Tactile {
+                hand_model: hand_model::REVO2,
+                fingertip_count: 5,
+                ..Default::default()
+            };
+            t.fingertips[0].normal_n = 10.0;
+            self.tactile.publish(&t).unwrap();
+            self.forces.drain(|f| forces.push(*f));
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        forces
+    }
+
+    /// Pumps until the newest force command satisfies `ok` (panics after `timeout`).
+    fn until(&mut self, timeout: Duration, what: &str, ok: impl Fn(&GloveForceCommand) -> bool) {
+        wait_for(timeout, what, || {
+            self.pump(Duration::from_millis(20))
+                .last()
+                .is_some_and(&ok)
+                .then_some(())
+        });
+    }
+}
+
+fn stopped(f: &GloveForceCommand) -> bool {
+    f.force == [0; 5] && f.flags & force_flags::ESTOP != 0
+}
+
+fn pushing(f: &GloveForceCommand) -> bool {
+    f.force[4] == 800 && f.flags & force_flags::ESTOP == 0
+}
+
+fn text(out: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// Kills `pid` with SIGKILL (no chance to clean up).
+fn kill_9(pid: u32) {
+    // SAFETY: kill(2) on a pid the test read from the pipeline's node list.
+    unsafe {
+        libc::kill(pid as libc::pid_t, libc::SIGKILL);
+    }
+}
+
+/// Waits for the supervisor to have restarted `name`: alive with a pid other than `old`.
+fn restarted(sandbox: &Sandbox, name: &str, old: u32) -> u32 {
+    wait_for(Duration::from_secs(20), "the restarted node", || {
+        sandbox.pid_of(name).filter(|&p| p != old)
+    })
+}
+
+#[test]
+fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release() {
+    let sandbox = Sandbox::new();
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
+    );
+    let _session = sandbox.launch(&launch);
+    let node = NodeRuntime::new("e2e-hand", &sandbox.ipc).unwrap();
+    let mut hand = Hand {
+        state: node.publisher().unwrap(),
+        tactile: node.publisher().unwrap(),
+        forces: node.subscriber().unwrap(),
+    };
+    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+
+    // Engaged: the CLI names the node that acknowledged; forces zero.
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("ENGAGED") && text(&out).contains("acknowledged by feedback"),
+        "{}",
+        text(&out)
+    );
+    hand.until(Duration::from_secs(2), "e-stop", stopped);
+
+    // kill -9 the feedback node: the restarted one is still engaged.
+    let first = sandbox.pid_of("feedback").unwrap();
+    kill_9(first);
+    let second = restarted(&sandbox, "feedback", first);
+    hand.forces.drain(|_| {}); // the killed node's last ones
+    let forces = hand.pump(Duration::from_millis(700));
+    assert!(!forces.is_empty(), "force commands from the restarted node");
+    assert!(
+        forces.iter().all(stopped),
+        "restarted node released the e-stop: {:?}",
+        forces.iter().find(|f| !stopped(f))
+    );
+
+    // Released: forces return.
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("acknowledged by feedback"),
+        "{}",
+        text(&out)
+    );
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+
+    // Engaged while the node is down: nobody acknowledges (exit 1, said so), and the node comes
+    // back engaged.
+    kill_9(second);
+    wait_for(Duration::from_secs(5), "the node to be gone", || {
+        (sandbox.pid_of("feedback") != Some(second)).then_some(())
+    });
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("no node acknowledged"),
+        "{}",
+        text(&out)
+    );
+    let third = restarted(&sandbox, "feedback", second);
+    assert_ne!(third, first);
+    hand.forces.drain(|_| {}); // the killed node's last ones
+    let forces = hand.pump(Duration::from_millis(700));
+    assert!(!forces.is_empty(), "force commands from the restarted node");
+    assert!(
+        forces.iter().all(stopped),
+        "the e-stop sent while the node was down was lost: {:?}",
+        forces.iter().find(|f| !stopped(f))
+    );
+
+    // Only --release releases.
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+}
+
+const RETARGET_TOML: &str = r#"
+glove_timeout_ms = 100
+"#;
+
+#[test]
+fn a_glove_sample_older_than_the_timeout_does_not_drive_the_hand_after_a_restart() {
+    let sandbox = Sandbox::new();
+    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("retarget", "teleop-retarget", "retarget.toml"),
+    );
+    let _session = sandbox.launch(&launch);
+    let node = NodeRuntime::new("e2e-glove", &sandbox.ipc).unwrap();
+    let mut glove: Publisher<GloveState> = node.publisher().unwrap();
+    let commands: Subscriber<HandCommand> = node.subscriber().unwrap();
+    let health: Subscriber<NodeHealth> = node.subscriber().unwrap();
+    let sample = |raw: [u16; 6], link_up: u8| GloveState {
+        raw_position: raw,
+        position: raw.map(|r| f32::from(r) / 1000.0),
+        link_up,
+        glove_id: 1,
+        ..Default::default()
+    };
+    // The operator's hand, open: the retargeting node follows it.
+    wait_for(Duration::from_secs(20), "a hand command", || {
+        glove.publish(&sample([1000; 6], 1)).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+        commands.poll_latest()
+    });
+    // The last glove sample (kept in the topic's history) grows old; the node restarts.
+    std::thread::sleep(Duration::from_millis(300));
+    let old = sandbox.pid_of("retarget").unwrap();
+    kill_9(old);
+    let killed_at = now_ns();
+    restarted(&sandbox, "retarget", old);
+    // Its first health report: its glove subscriber exists (made before its health port), so
+    // the next glove sample brings it the historical one first.
+    wait_for(
+        Duration::from_secs(10),
+        "the restarted node's health",
+        || {
+            let mut seen = None;
+            health.drain(|h| {
+                if h.name() == "retarget" && h.header.stamp_ns > killed_at {
+                    seen = Some(());
+                }
+            });
+            seen
+        },
+    );
+    commands.drain(|_| {});
+    // Wake the restarted node with a glove whose link is down (no pose of its own): the only
+    // pose it could follow is the historical one.
+    let start = Instant::now();
+    let mut followed = Vec::new();
+    while start.elapsed() < Duration::from_millis(600) {
+        glove.publish(&sample([0; 6], 0)).unwrap();
+        commands.drain(|c| followed.push(*c));
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(
+        followed.is_empty(),
+        "the restarted node followed a glove sample made before its timeout: {:?}",
+        followed.first()
+    );
+}
+
+#[test]
+fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release() {
+    let sandbox = Sandbox::new();
+    let launch = sandbox.default_session(|t| t);
+    let session = sandbox.launch(&launch);
+    let node = NodeRuntime::new("e2e-watch", &sandbox.ipc).unwrap();
+    let state: Subscriber<HandState> = node.subscriber().unwrap();
+    let commands: Subscriber<HandCommand> = node.subscriber().unwrap();
+    let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
+    let fresh = Duration::from_millis(150);
+    let until = |what: &str, ok: &dyn Fn() -> bool| {
+        let start = Instant::now();
+        while !ok() {
+            assert!(
+                start.elapsed() < Duration::from_secs(30),
+                "timed out waiting for {what}\n{}",
+                session.log()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    };
+    let following = || {
+        commands.drain(|_| {});
+        state.drain(|_| {});
+        commands.is_fresh(Instant::now(), fresh)
+            && state
+                .latest()
+                .is_some_and(|s| s.link_up == 1 && s.holding == 0)
+    };
+    until("the hand following the glove", &following);
+
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("acknowledged by feedback, revo2"),
+        "{}",
+        text(&out)
+    );
+    // The glove still drives fresh commands, but the hand holds and the glove force is zero.
+    until("the hand holding under the e-stop", &|| {
+        commands.drain(|_| {});
+        state.drain(|_| {});
+        forces.drain(|_| {});
+        commands.is_fresh(Instant::now(), fresh)
+            && state
+                .latest()
+                .is_some_and(|s| s.link_up == 1 && s.holding == 1)
+            && forces.latest().is_some_and(|f| stopped(&f))
+    });
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    until("the hand following again", &following);
+    forces.drain(|_| {});
+    assert_eq!(
+        forces.latest().unwrap().flags & force_flags::ESTOP,
+        0,
+        "glove force released"
+    );
+}
