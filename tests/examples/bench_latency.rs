@@ -19,7 +19,15 @@
 //!   sample -> `hand/tactile` published -> `glove/force_command` published -> last byte at the
 //!   glove. Floor: one serial exchange (34 bytes at 115200 baud = 2.95 ms).
 //!
-//! Then the same under CPU stress (two `yes > /dev/null` processes, one per core).
+//! - EtherCAT period deviation: |interval - 1 ms| between consecutive process-data frames at
+//!   the emulated Revo2 (stamped when it answered each one; mailbox frames left out).
+//!
+//! Four cases side by side in one run: the nodes at the normal policy and at a real-time policy
+//! (`launch.toml`: `sched_policy = "fifo"`, the Revo2 node at priority 70, the glove 60,
+//! retargeting and force feedback 50), each idle and under CPU stress (two `yes > /dev/null`
+//! processes, one per core). The simulators stand in for devices, which do not share the
+//! host's CPU: in every case their threads run at SCHED_FIFO 80 (when the program may; it says
+//! when not), so the cases differ only in the nodes' policy.
 //!
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_latency`
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
@@ -39,6 +47,9 @@ use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::SubDevice;
 use teleop_glove_protocol::BaudRate;
 use teleop_msgs::{GloveForceCommand, GloveState, HandCommand, Tactile};
+use teleop_runtime::realtime::{
+    enter_realtime_with, leave_realtime, Outcome, Realtime, SchedPolicy,
+};
 use teleop_runtime::{now_ns, NodeRuntime, Subscriber};
 
 const SECONDS: u64 = 20;
@@ -47,6 +58,10 @@ const SECONDS: u64 = 20;
 #[derive(Default)]
 struct Frames {
     at: Vec<(u64, [f32; 6])>,
+    /// When each process-data frame (one per cycle) was answered; the others are mailbox and
+    /// state frames.
+    cycles: Vec<u64>,
+    output_cycles: u64,
 }
 
 fn serve_revo2(
@@ -62,29 +77,72 @@ fn serve_revo2(
             _ => f32::NAN,
         });
         // The frame has been answered: its inputs were sampled now.
-        frames.lock().unwrap().at.push((now_ns(), targets));
+        let now = now_ns();
+        let mut frames = frames.lock().unwrap();
+        frames.at.push((now, targets));
+        let cycles = dev.app().output_cycles;
+        if cycles != frames.output_cycles {
+            frames.output_cycles = cycles;
+            frames.cycles.push(now);
+        }
     };
     serve_socket(&server, &sim, Instant::now(), &stopping, &mut record).unwrap();
 }
 
-fn percentiles(mut v: Vec<u64>) -> String {
+/// p50, p99 and max in ms (None: no samples).
+fn quantiles(v: &[u64]) -> Option<[f64; 3]> {
+    let mut v = v.to_vec();
     if v.is_empty() {
-        return "-".into();
+        return None;
     }
     v.sort_unstable();
     let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1e6;
-    format!(
-        "p50 {:>7.3}  p99 {:>7.3}  max {:>7.3}  (n={})",
-        at(0.5),
-        at(0.99),
-        at(1.0),
-        v.len()
-    )
+    Some([at(0.5), at(0.99), at(1.0)])
 }
 
-fn run(label: &str) {
+fn percentiles(v: Vec<u64>) -> String {
+    match quantiles(&v) {
+        None => "-".into(),
+        Some([p50, p99, max]) => format!(
+            "p50 {p50:>7.3}  p99 {p99:>7.3}  max {max:>7.3}  (n={})",
+            v.len()
+        ),
+    }
+}
+
+/// One case's headline figures.
+struct Summary {
+    label: String,
+    exchanges: f64,
+    period: Option<[f64; 3]>,
+    a: Option<[f64; 3]>,
+    b: Option<[f64; 3]>,
+}
+
+/// The launch file's real-time settings for a node process (by its config file).
+const NODE_PRIORITIES: [(&str, u8); 4] = [
+    ("config/revo2.toml", 70),
+    ("config/glove.toml", 60),
+    ("config/retarget.toml", 50),
+    ("config/feedback.toml", 50),
+];
+/// The simulators' priority (they stand in for devices).
+const SIM_PRIORITY: u8 = 80;
+
+fn run(label: &str, realtime: bool) -> Summary {
     let sandbox = Sandbox::new();
     let launch = sandbox.default_session(|t| {
+        let t = if realtime {
+            NODE_PRIORITIES.iter().fold(t, |t, (config, priority)| {
+                let args = format!("args = [\"--config\", \"{config}\"]\n");
+                t.replace(
+                    &args,
+                    &format!("{args}sched_policy = \"fifo\"\nsched_priority = {priority}\n"),
+                )
+            })
+        } else {
+            t
+        };
         // The simulators run in this program; the recorder is not part of the budget.
         let mut out = String::new();
         for block in t.split("[[process]]") {
@@ -98,6 +156,15 @@ fn run(label: &str) {
         }
         out
     });
+    // The simulators' threads inherit this thread's policy while it starts them.
+    let sims = enter_realtime_with(&Realtime {
+        policy: SchedPolicy::Fifo,
+        priority: SIM_PRIORITY,
+        ..Default::default()
+    });
+    if sims != Outcome::Realtime {
+        println!("note: the simulators run at the normal policy (no right to SCHED_FIFO)");
+    }
     let link = sandbox.dir.path().join("glove");
     let glove = SimGlove::start(
         SimOptions {
@@ -119,6 +186,7 @@ fn run(label: &str) {
         let (revo2, frames, stop) = (revo2.clone(), frames.clone(), stop.clone());
         std::thread::spawn(move || serve_revo2(server, revo2, frames, stop))
     };
+    leave_realtime();
     let mut session = sandbox.launch(&launch);
     let node = NodeRuntime::new("bench-latency", &sandbox.ipc).unwrap();
     let states: Subscriber<GloveState> = node.subscriber().unwrap();
@@ -140,7 +208,11 @@ fn run(label: &str) {
     forces.drain(|_| {});
     glove.record_answers(true);
     let _ = glove.take_answer_timings();
-    frames.lock().unwrap().at.clear();
+    {
+        let mut frames = frames.lock().unwrap();
+        frames.at.clear();
+        frames.cycles.clear();
+    }
     let (mut s_v, mut c_v, mut t_v, mut f_v) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(SECONDS) {
@@ -156,7 +228,13 @@ fn run(label: &str) {
     let _ = serve.join();
     let answers = glove.take_answer_timings();
     let requests = glove.take_force_timings();
-    let frames = std::mem::take(&mut frames.lock().unwrap().at);
+    let (frames, cycles) = {
+        let mut frames = frames.lock().unwrap();
+        (
+            std::mem::take(&mut frames.at),
+            std::mem::take(&mut frames.cycles),
+        )
+    };
 
     // Path A. A frame is attributed to a command by its position targets, so only commands whose
     // targets (per mille, as the device has them) no other command of the run has are measured:
@@ -227,10 +305,25 @@ fn run(label: &str) {
         b3.push(r.received_ns.saturating_sub(f.header.stamp_ns));
         b_total.push(r.received_ns.saturating_sub(sample));
     }
-    let exchanges = answers.len() as f64 / SECONDS as f64;
+    let period: Vec<u64> = cycles
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]).abs_diff(1_000_000))
+        .collect();
+    let summary = Summary {
+        label: label.to_string(),
+        exchanges: answers.len() as f64 / SECONDS as f64,
+        period: quantiles(&period),
+        a: quantiles(&a_total),
+        b: quantiles(&b_total),
+    };
+    let exchanges = summary.exchanges;
     println!(
         "\n{label}: ms ({exchanges:.0} glove exchanges/s, {:.0} EtherCAT frames/s)",
         frames.len() as f64 / SECONDS as f64
+    );
+    println!(
+        "E  EtherCAT period deviation |interval - 1 ms|     {}",
+        percentiles(period)
     );
     println!(
         "A  glove sample -> EtherCAT cycle carrying its hand command (floor: one cycle, 1.000 ms)"
@@ -274,17 +367,41 @@ fn run(label: &str) {
         "   total                                        {}",
         percentiles(b_total)
     );
+    summary
 }
 
 fn main() {
     println!("method: see the program's doc comment (20 s per case, release build, 2-core VM)");
-    run("idle");
+    let mut summaries = vec![
+        run("normal policy, idle", false),
+        run("real-time policy, idle", true),
+    ];
     let hogs: Vec<Child> = (0..2)
         .map(|_| Command::new("yes").stdout(Stdio::null()).spawn().unwrap())
         .collect();
-    run("under CPU stress (two `yes` processes)");
+    summaries.push(run("normal policy, two CPU hogs", false));
+    summaries.push(run("real-time policy, two CPU hogs", true));
     for mut h in hogs {
         let _ = h.kill();
         let _ = h.wait();
+    }
+    let ms = |q: Option<[f64; 3]>| match q {
+        Some([p50, p99, max]) => format!("{p50:>6.3} {p99:>7.3} {max:>7.3}"),
+        None => format!("{:>22}", "-"),
+    };
+    println!("\nside by side (ms: p50 p99 max)");
+    println!(
+        "{:<32} {:>10}  {:<22}  {:<22}  {:<22}",
+        "case", "glove ex/s", "EtherCAT period dev", "path A total", "path B total"
+    );
+    for s in &summaries {
+        println!(
+            "{:<32} {:>10.0}  {}  {}  {}",
+            s.label,
+            s.exchanges,
+            ms(s.period),
+            ms(s.a),
+            ms(s.b)
+        );
     }
 }

@@ -47,6 +47,10 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
             "args = [\"--config\", \"config/revo2.toml\"]\n",
             "args = [\"--config\", \"config/revo2.toml\"]\nsched_policy = \"rr\"\nsched_priority = 42\nlock_memory = true\n",
         )
+        .replace(
+            "args = [\"--config\", \"config/feedback.toml\"]\n",
+            "args = [\"--config\", \"config/feedback.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 20\n",
+        )
     });
     let mut session = sandbox.launch(&launch);
     let glove = wait_for(Duration::from_secs(30), "glove node", || {
@@ -115,6 +119,24 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
         .and_then(|v| v.split_whitespace().next()?.parse().ok())
         .unwrap();
     assert!(locked_kb > 0, "{status}");
+    // A node built on the event loop: the loop's thread (its main thread).
+    let feedback = wait_for(Duration::from_secs(30), "feedback node", || {
+        sandbox.pid_of("feedback")
+    });
+    wait_for(
+        Duration::from_secs(30),
+        "feedback loop at SCHED_FIFO 20",
+        || {
+            threads(feedback)
+                .iter()
+                .any(|(name, policy, prio)| {
+                    name.starts_with("teleop-feedback")
+                        && *policy == libc::SCHED_FIFO
+                        && *prio == 20
+                })
+                .then_some(())
+        },
+    );
     // A node without settings stays normal.
     let retarget = wait_for(Duration::from_secs(30), "retarget node", || {
         sandbox.pid_of("retarget")

@@ -73,8 +73,21 @@ impl EventLoop {
     }
 
     /// Sleeps until something happens and calls `on_wake` for it, until SIGINT/SIGTERM or until
-    /// `on_wake` returns `Break`.
+    /// `on_wake` returns `Break`. The loop is the node's time-critical thread: while it runs, the
+    /// calling thread has the scheduling policy and priority `launch.toml` names for the process
+    /// (see [`crate::realtime`]; none: unchanged).
     pub fn run(
+        &self,
+        inputs: &[Input<'_>],
+        on_wake: impl FnMut(Wake) -> Flow,
+    ) -> Result<StopReason, RuntimeError> {
+        crate::realtime::enter_realtime();
+        let result = self.wait(inputs, on_wake);
+        crate::realtime::leave_realtime();
+        result
+    }
+
+    fn wait(
         &self,
         inputs: &[Input<'_>],
         mut on_wake: impl FnMut(Wake) -> Flow,
