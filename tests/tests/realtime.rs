@@ -41,7 +41,11 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
     let launch = sandbox.default_session(|text| {
         text.replace(
             "args = [\"--config\", \"config/glove.toml\"]\n",
-            "args = [\"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\n",
+            "args = [\"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\ncpu_affinity = [0]\n",
+        )
+        .replace(
+            "args = [\"--config\", \"config/retarget.toml\"]\n",
+            "args = [\"--config\", \"config/retarget.toml\"]\nnice = 5\n",
         )
         .replace(
             "args = [\"--config\", \"config/revo2.toml\"]\n",
@@ -85,6 +89,14 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
         },
     );
     assert_eq!(main_glove.1, libc::SCHED_FIFO);
+    // Pinned to CPU 0.
+    let status = std::fs::read_to_string(format!("/proc/{glove}/status")).unwrap();
+    assert!(
+        status
+            .lines()
+            .any(|l| l.starts_with("Cpus_allowed_list:") && l.ends_with("\t0")),
+        "{status}"
+    );
     // The EtherCAT cycle (main thread) and frame pump at SCHED_RR 42, once in OP.
     wait_for(
         Duration::from_secs(30),
@@ -144,6 +156,15 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
     assert!(threads(retarget)
         .iter()
         .all(|(_, policy, _)| *policy == libc::SCHED_OTHER));
+    // Its nice value (field 19 of the main thread's stat).
+    let stat = std::fs::read_to_string(format!("/proc/{retarget}/stat")).unwrap();
+    let nice: i32 = stat[stat.rfind(')').unwrap() + 2..]
+        .split(' ')
+        .nth(19 - 3)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(nice, 5, "{stat}");
     assert!(!session.log().contains("cannot use real-time scheduling"));
     session.stop();
 }
