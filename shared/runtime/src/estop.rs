@@ -15,7 +15,9 @@
 //! gone.
 
 use std::cell::{Cell, RefCell};
+use std::ffi::{CStr, CString};
 use std::io;
+use std::os::unix::ffi::OsStrExt;
 use std::path::{Path, PathBuf};
 
 use teleop_msgs::{fixed_text, EStop, EStopAck};
@@ -65,23 +67,27 @@ pub fn set_latch(path: &Path, engaged: bool) -> io::Result<()> {
 }
 
 /// True when the latch at `path` is engaged: the file exists, or whether it does cannot be told
-/// (an error other than "not found": fail safe).
-pub fn latch_engaged(path: &Path) -> bool {
-    match std::fs::symlink_metadata(path) {
-        Ok(_) => true,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => false,
-        Err(e) => {
-            tracing::warn!(path = %path.display(), error = %e, "cannot read the e-stop latch: engaged");
-            true
-        }
+/// (an error other than "not found": fail safe). Allocates nothing (called from control loops).
+fn latch_engaged(path: &CStr) -> bool {
+    // SAFETY: `path` is NUL-terminated; `stat` is a plain struct that lstat(2) fills.
+    let mut stat: libc::stat = unsafe { core::mem::zeroed() };
+    // SAFETY: both pointers are valid for the call.
+    if unsafe { libc::lstat(path.as_ptr(), &mut stat) } == 0 {
+        return true;
     }
+    let error = io::Error::last_os_error();
+    if error.kind() == io::ErrorKind::NotFound {
+        return false;
+    }
+    tracing::warn!(path = ?path, %error, "cannot read the e-stop latch: engaged");
+    true
 }
 
 /// A node's e-stop input: the doorbell, the latch file and the acknowledgement it publishes.
 pub struct EStopInput {
     doorbell: Subscriber<EStop>,
     ack: RefCell<Publisher<EStopAck>>,
-    path: PathBuf,
+    path: CString,
     engaged: Cell<bool>,
     name: [u8; 32],
 }
@@ -94,7 +100,13 @@ impl EStopInput {
         let input = Self {
             doorbell,
             ack: RefCell::new(runtime.publisher()?),
-            path: runtime.estop_latch().to_path_buf(),
+            path: CString::new(runtime.estop_latch().as_os_str().as_bytes()).map_err(|_| {
+                RuntimeError::Settings {
+                    what: "e-stop latch path",
+                    value: runtime.estop_latch().display().to_string(),
+                    reason: "contains a NUL byte".into(),
+                }
+            })?,
             engaged: Cell::new(false),
             name: fixed_text(runtime.name()),
         };
@@ -129,11 +141,6 @@ impl EStopInput {
         self.engaged.set(engaged);
         self.acknowledge()?;
         Ok(changed)
-    }
-
-    /// The latch file this input reads.
-    pub fn path(&self) -> &Path {
-        &self.path
     }
 
     fn acknowledge(&self) -> Result<(), RuntimeError> {
@@ -174,12 +181,13 @@ mod tests {
     fn set_and_read_the_latch() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sub").join("p_estop");
-        assert!(!latch_engaged(&path));
+        let c = CString::new(path.as_os_str().as_bytes()).unwrap();
+        assert!(!latch_engaged(&c));
         set_latch(&path, true).unwrap();
-        assert!(latch_engaged(&path));
+        assert!(latch_engaged(&c));
         set_latch(&path, true).unwrap();
         set_latch(&path, false).unwrap();
-        assert!(!latch_engaged(&path));
+        assert!(!latch_engaged(&c));
         set_latch(&path, false).unwrap();
     }
 
@@ -189,7 +197,8 @@ mod tests {
         // A path through a regular file: ENOTDIR, neither present nor absent.
         let file = dir.path().join("f");
         std::fs::write(&file, b"").unwrap();
-        assert!(latch_engaged(&file.join("estop")));
+        let c = CString::new(file.join("estop").as_os_str().as_bytes()).unwrap();
+        assert!(latch_engaged(&c));
     }
 
     #[test]
