@@ -176,45 +176,79 @@ fn without_the_right_a_node_warns_once_and_runs_on_at_normal_priority() {
         return;
     }
     let sandbox = Sandbox::new();
-    // The glove node runs as root but without CAP_SYS_NICE and with RLIMIT_RTPRIO 0: it may
-    // not use a real-time policy.
-    let glove = bin("teleop-glove").display().to_string();
-    let launch = sandbox.default_session(|text| {
+    // The glove and Revo2 nodes run as root but without CAP_SYS_NICE and with RLIMIT_RTPRIO 0:
+    // they may not use a real-time policy. The Revo2 node's cycle and frame pump threads both
+    // ask: still one warning per process.
+    let unprivileged = |text: String, node: &str| {
+        let exe = bin(&format!("teleop-{node}")).display().to_string();
         text.replace(
-            "program = \"teleop-glove\"\nargs = [\"--config\", \"config/glove.toml\"]\n",
+            &format!("program = \"teleop-{node}\"\nargs = [\"--config\", \"config/{node}.toml\"]\n"),
             &format!(
-                "program = \"prlimit\"\nargs = [\"--rtprio=0\", \"setpriv\", \"--inh-caps=-sys_nice\", \"--bounding-set=-sys_nice\", {glove:?}, \"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\n"
+                "program = \"prlimit\"\nargs = [\"--rtprio=0\", \"setpriv\", \"--inh-caps=-sys_nice\", \"--bounding-set=-sys_nice\", {exe:?}, \"--config\", \"config/{node}.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\n"
             ),
         )
-    });
-    assert!(std::fs::read_to_string(&launch)
-        .unwrap()
-        .contains("prlimit"));
+    };
+    let launch = sandbox.default_session(|text| unprivileged(unprivileged(text, "glove"), "revo2"));
+    assert_eq!(
+        std::fs::read_to_string(&launch)
+            .unwrap()
+            .matches("prlimit")
+            .count(),
+        2
+    );
     let mut session = sandbox.launch(&launch);
-    let pid = wait_for(Duration::from_secs(30), "glove node", || {
+    let glove = wait_for(Duration::from_secs(30), "glove node", || {
         sandbox.pid_of("glove")
     });
-    // It runs on: glove states keep coming (its health report names exchanges).
-    wait_for(Duration::from_secs(30), "the warning", || {
-        session
-            .log()
-            .contains("cannot use real-time scheduling")
-            .then_some(())
+    let revo2 = wait_for(Duration::from_secs(30), "revo2 node", || {
+        sandbox.pid_of("revo2")
     });
+    let warnings = |log: &str, process: &str| {
+        log.lines()
+            .filter(|l| {
+                l.trim_start().starts_with(&format!("{process} |"))
+                    && l.contains("cannot use real-time scheduling")
+            })
+            .count()
+    };
+    // The Revo2 node's pump asks at start, its cycle once in OP (when commands flow).
+    wait_for(
+        Duration::from_secs(30),
+        "the warnings, and the hand following commands",
+        || {
+            let log = session.log();
+            (warnings(&log, "glove") == 1
+                && warnings(&log, "revo2") == 1
+                && log.contains("hand commands fresh"))
+            .then_some(())
+        },
+    );
     std::thread::sleep(Duration::from_secs(1));
     let log = session.log();
     assert_eq!(
-        log.matches("cannot use real-time scheduling").count(),
-        1,
+        (warnings(&log, "glove"), warnings(&log, "revo2")),
+        (1, 1),
         "{log}"
     );
     assert!(
-        log.contains("setcap cap_sys_nice+ep") && log.contains("rtprio"),
+        log.contains("setcap cap_sys_nice+ep") && log.contains("rtprio 31"),
         "{log}"
     );
-    assert_eq!(sandbox.pid_of("glove"), Some(pid), "the node ran on");
-    assert!(threads(pid)
-        .iter()
-        .all(|(_, policy, _)| *policy == libc::SCHED_OTHER));
+    // They run on, at the normal policy.
+    assert_eq!(
+        sandbox.pid_of("glove"),
+        Some(glove),
+        "the glove node ran on"
+    );
+    assert_eq!(
+        sandbox.pid_of("revo2"),
+        Some(revo2),
+        "the revo2 node ran on"
+    );
+    for pid in [glove, revo2] {
+        assert!(threads(pid)
+            .iter()
+            .all(|(_, policy, _)| *policy == libc::SCHED_OTHER));
+    }
     session.stop();
 }

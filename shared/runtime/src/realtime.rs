@@ -263,11 +263,14 @@ pub fn enter_realtime_with(rt: &Realtime) -> Outcome {
     }
     static WARNED: AtomicBool = AtomicBool::new(false);
     if !WARNED.swap(true, Ordering::SeqCst) {
+        let exe = std::env::current_exe()
+            .map(|e| e.display().to_string())
+            .unwrap_or_else(|_| "<executable>".into());
         tracing::warn!(
             "cannot use real-time scheduling ({} priority {}) for thread {:?}: {}; running on at \
-             normal priority. Fix: `sudo setcap cap_sys_nice+ep <executable>` (together with \
-             any capability it already has, e.g. `cap_net_raw,cap_sys_nice+ep`), or allow the \
-             user real-time priorities in /etc/security/limits.conf (`<user> - rtprio {}`)",
+             normal priority. Fix: `sudo setcap cap_sys_nice+ep {exe}` (together with any \
+             capability it already has, e.g. `cap_net_raw,cap_sys_nice+ep`), or allow the user \
+             real-time priorities in /etc/security/limits.conf (`<user> - rtprio {}`)",
             rt.policy.name(),
             rt.priority,
             std::thread::current().name().unwrap_or("?"),
