@@ -334,3 +334,71 @@ fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release
         "glove force released"
     );
 }
+
+#[test]
+fn a_replayed_glove_drives_the_hand_its_stamps_moved_to_the_replay() {
+    let sandbox = Sandbox::new();
+    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("retarget", "teleop-retarget", "retarget.toml"),
+    );
+    let _session = sandbox.launch(&launch);
+    let node = NodeRuntime::new("e2e-glove", &sandbox.ipc).unwrap();
+    let commands: Subscriber<HandCommand> = node.subscriber().unwrap();
+    let mut glove: Publisher<GloveState> = node.publisher().unwrap();
+    let sample = GloveState {
+        raw_position: [1000; 6],
+        position: [1.0; 6],
+        link_up: 1,
+        glove_id: 1,
+        ..Default::default()
+    };
+    wait_for(Duration::from_secs(20), "a hand command", || {
+        glove.publish(&sample).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+        commands.poll_latest()
+    });
+    // Record the glove for a second, on this machine's clock.
+    let rec = sandbox.dir.path().join("glove.mcap");
+    let mut recorder = sandbox
+        .teleop()
+        .args([
+            "record",
+            "--topics",
+            "glove/state",
+            "--duration",
+            "1",
+            "--out",
+        ])
+        .arg(&rec)
+        .spawn()
+        .unwrap();
+    let status = wait_for(Duration::from_secs(20), "the recording", || {
+        glove.publish(&sample).unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+        recorder.try_wait().unwrap()
+    });
+    assert!(status.success());
+    drop(glove);
+    // The recorded samples are now older than the glove timeout; replayed, they are made again.
+    std::thread::sleep(Duration::from_millis(500));
+    commands.drain(|_| {});
+    let out = sandbox.run_teleop(&["replay", rec.to_str().unwrap(), "--topics", "glove/state"]);
+    assert!(out.status.success(), "{}", text(&out));
+    let mut followed = Vec::new();
+    commands.drain(|c| followed.push(*c));
+    let live: Vec<_> = followed
+        .iter()
+        .filter(|c| c.flags & teleop_msgs::command_flags::HELD == 0)
+        .collect();
+    assert!(
+        live.len() > 50,
+        "{} of {} commands followed the replay",
+        live.len(),
+        followed.len()
+    );
+    // The recorded latency is kept: the glove samples' origin moved with their stamp.
+    assert!(live.iter().all(|c| c.header.stamp_ns >= c.header.origin_ns
+        && c.header.stamp_ns - c.header.origin_ns < 1_000_000_000));
+}

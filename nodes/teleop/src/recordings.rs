@@ -18,7 +18,7 @@ use teleop_recording::{
     info as recording_info, read_messages, repair as repair_file, Filter, OwnedMessage,
     RecordedMessage, Recorder, WriterOptions,
 };
-use teleop_runtime::{qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
+use teleop_runtime::{now_ns, qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
 
 pub fn record_cmd(
     ipc: &IpcSettings,
@@ -117,15 +117,23 @@ pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode>
 
 /// Republishes recorded samples of one topic.
 trait Replay {
-    fn send(&mut self, payload: &[u8]) -> anyhow::Result<()>;
+    /// Sends one recorded payload, its header's times moved by `shift_ns` (modulo 2^64).
+    fn send(&mut self, payload: &[u8], shift_ns: u64) -> anyhow::Result<()>;
 }
 
 struct TopicReplay<M: Message>(Publisher<M>);
 
 impl<M: Message> Replay for TopicReplay<M> {
-    fn send(&mut self, payload: &[u8]) -> anyhow::Result<()> {
-        let msg = M::from_bytes(payload).map_err(|e| anyhow::anyhow!("{}: {e}", M::TOPIC))?;
-        // The recorded header is kept: downstream latency accounting sees the original stamps.
+    fn send(&mut self, payload: &[u8], shift_ns: u64) -> anyhow::Result<()> {
+        let mut msg = M::from_bytes(payload).map_err(|e| anyhow::anyhow!("{}: {e}", M::TOPIC))?;
+        // The recorded header is kept but moved in time: latency accounting downstream sees the
+        // recorded differences (stamp - origin), and freshness, which counts from the stamp,
+        // sees a sample made as long before it is sent as it was before it was recorded.
+        let header = msg.header_mut();
+        header.stamp_ns = header.stamp_ns.wrapping_add(shift_ns);
+        if header.origin_ns != 0 {
+            header.origin_ns = header.origin_ns.wrapping_add(shift_ns);
+        }
         self.0.send_as_is(&msg)?;
         Ok(())
     }
@@ -323,7 +331,8 @@ pub fn replay_cmd(
                 teleop_runtime::sleep_until(start + at.div_f64(speed));
             }
             if let Some(replay) = publishers.get_mut(&msg.topic) {
-                replay.send(&msg.payload)?;
+                // The recorder's log time is its CLOCK_MONOTONIC receive time.
+                replay.send(&msg.payload, now_ns().wrapping_sub(msg.log_time_ns))?;
                 sent += 1;
             }
             if last_progress.elapsed() >= Duration::from_millis(100) {
