@@ -64,6 +64,30 @@ mod tests {
         assert!(a > 0);
     }
 
+    fn thread_cpu_ns() -> u64 {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `ts` is a valid, writable timespec.
+        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+        ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+    }
+
+    #[test]
+    fn sleeping_does_not_spin() {
+        // 100 sleeps of 1 ms: a sleep that spins its last 200 us burns about 20 ms of CPU;
+        // a kernel sleep a few microseconds per wake-up.
+        let before = thread_cpu_ns();
+        let mut deadline = std::time::Instant::now();
+        for _ in 0..100 {
+            deadline += std::time::Duration::from_millis(1);
+            sleep_until(deadline);
+        }
+        let cpu = thread_cpu_ns() - before;
+        assert!(cpu < 10_000_000, "{cpu} ns of CPU in 100 sleeps");
+    }
+
     #[test]
     fn sleeps_to_the_absolute_deadline() {
         let deadline = now_ns() + 3_000_000;
