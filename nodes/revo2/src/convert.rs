@@ -6,65 +6,91 @@ use teleop_msgs::{
     HandState, Tactile,
 };
 use teleop_revo2_protocol::{
-    direction, newtons, ControlMode, Inputs, JointData, MultiFingerCommand, Outputs, TouchStatus,
-    UnitMode, DEFAULT_JOINT_RANGES, JOINTS,
+    direction, multi_command, newtons, ControlMode, Inputs, JointData, MultiFingerCommand, Outputs,
+    TouchStatus, UnitMode, DEFAULT_JOINT_RANGES, JOINTS, MAX_CURRENT_MA, PERCENT_FULL,
 };
 
 use crate::config::Revo2Config;
 
-/// Outputs for `cmd`, and how many targets were clamped to the configured joint limits.
-/// `None` when the command is not for a Revo2 or has a mode the Revo2 lacks.
-pub fn outputs_for(cmd: &HandCommand, config: &Revo2Config) -> Option<(Outputs, u32)> {
+/// Outputs for `cmd` in the device's `units`, and how many targets were clamped to the
+/// configured joint limits. `None` when the command is not for a Revo2 or has a mode the Revo2
+/// lacks.
+///
+/// Normalised values become the unit mode's values (percent: per mille of travel, of full speed
+/// and of the maximum current; physical: degrees over the joint's range, degrees per second, mA)
+/// and go through the protocol crate's unit-aware builder ([`multi_command`]), which checks
+/// them against the ranges of that unit mode.
+pub fn outputs_for(
+    cmd: &HandCommand,
+    config: &Revo2Config,
+    units: UnitMode,
+) -> Option<(Outputs, u32)> {
     if cmd.hand_model != hand_model::REVO2 || usize::from(cmd.joint_count) < JOINTS {
         return None;
     }
     if cmd.units != units::NORMALISED {
         return None;
     }
-    let full = config.full_speed_travel_per_s;
-    let per_mille = |x: f32| (x * 1000.0).round().clamp(-1000.0, 1000.0);
-    let mut clamps = 0;
-    let mut multi = MultiFingerCommand::default();
-    for j in 0..JOINTS {
-        let joint = cmd.joints[j];
-        let (p1, p2) = match cmd.control_mode {
-            control_mode::POSITION | control_mode::POSITION_TIME => {
-                let target = if joint.target.is_finite() {
-                    joint.target
-                } else {
-                    0.0
-                };
-                let limited = target.clamp(config.joint_min[j], config.joint_max[j]);
-                if limited != target {
-                    clamps += 1;
-                }
-                let second = if cmd.control_mode == control_mode::POSITION {
-                    // Speed limit in travel per second -> per mille of full speed (0 = none).
-                    if joint.speed_limit > 0.0 {
-                        per_mille(joint.speed_limit / full).max(1.0)
-                    } else {
-                        1000.0
-                    }
-                } else {
-                    joint.speed_limit.clamp(0.0, 65535.0).round()
-                };
-                (per_mille(limited), second)
-            }
-            control_mode::VELOCITY => (per_mille(joint.target / full), 0.0),
-            control_mode::EFFORT | control_mode::DUTY => (per_mille(joint.target), 0.0),
-            _ => return None,
-        };
-        multi.param1[j] = p1 as i16;
-        multi.param2[j] = p2 as u16;
-    }
     let mode = match cmd.control_mode {
         control_mode::POSITION => ControlMode::PositionSpeed,
         control_mode::POSITION_TIME => ControlMode::PositionTime,
         control_mode::VELOCITY => ControlMode::Speed,
         control_mode::EFFORT => ControlMode::Current,
-        _ => ControlMode::Pwm,
+        control_mode::DUTY => ControlMode::Pwm,
+        _ => return None,
     };
-    multi.mode = mode as u8;
+    let full = config.full_speed_travel_per_s;
+    let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+    let mut clamps = 0;
+    let mut targets = [0.0; JOINTS];
+    let mut seconds = [0.0; JOINTS];
+    for (j, range) in DEFAULT_JOINT_RANGES.iter().enumerate() {
+        let joint = cmd.joints[j];
+        // Travel (0..1) in the unit mode: per mille, or degrees over the joint's range.
+        let (offset, span) = match units {
+            UnitMode::Percent => (0.0, f32::from(PERCENT_FULL)),
+            UnitMode::Physical => (range.min_deg, range.max_deg - range.min_deg),
+        };
+        let share = |x: f32| finite(x).clamp(-1.0, 1.0);
+        match mode {
+            ControlMode::PositionSpeed | ControlMode::PositionTime => {
+                let target = finite(joint.target);
+                let limited = target.clamp(config.joint_min[j], config.joint_max[j]);
+                if limited != target {
+                    clamps += 1;
+                }
+                targets[j] = offset + span * limited;
+                seconds[j] = if mode == ControlMode::PositionSpeed {
+                    // Speed limit in travel per second (0 = none), at least the smallest step.
+                    let of_full = if joint.speed_limit > 0.0 {
+                        (joint.speed_limit / full).min(1.0)
+                    } else {
+                        1.0
+                    };
+                    match units {
+                        UnitMode::Percent => (of_full * span).round().max(1.0),
+                        UnitMode::Physical => (of_full * full * span).round().max(1.0),
+                    }
+                } else {
+                    finite(joint.speed_limit).clamp(0.0, 65535.0)
+                };
+            }
+            ControlMode::Speed => {
+                targets[j] = match units {
+                    UnitMode::Percent => share(finite(joint.target) / full) * span,
+                    UnitMode::Physical => share(finite(joint.target) / full) * full * span,
+                }
+            }
+            ControlMode::Current => {
+                targets[j] = match units {
+                    UnitMode::Percent => share(joint.target) * f32::from(PERCENT_FULL),
+                    UnitMode::Physical => share(joint.target) * MAX_CURRENT_MA,
+                }
+            }
+            ControlMode::Pwm => targets[j] = share(joint.target) * f32::from(PERCENT_FULL),
+        }
+    }
+    let multi = multi_command(mode, targets, seconds, units).ok()?;
     Some((
         Outputs {
             multi,
@@ -74,19 +100,47 @@ pub fn outputs_for(cmd: &HandCommand, config: &Revo2Config) -> Option<(Outputs, 
     ))
 }
 
-/// Position + speed command to where the joints are now: the hand holds.
-pub fn hold_outputs(joints: &JointData, unit_mode: UnitMode, speed_per_mille: u16) -> Outputs {
-    let mut multi = MultiFingerCommand {
-        mode: ControlMode::PositionSpeed as u8,
-        ..Default::default()
-    };
-    for j in 0..JOINTS {
-        multi.param1[j] = joints.position[j].min(i16::MAX as u16) as i16;
-        multi.param2[j] = speed_per_mille;
-    }
-    let _ = unit_mode; // positions are echoed in the units they were read in
+/// The raw position targets of `outputs` when they command positions (position + speed or
+/// position + time), in the device's units: what [`hold_outputs`] holds.
+pub fn position_targets(outputs: &Outputs) -> Option<[i16; JOINTS]> {
+    let mode = ControlMode::from_u8(outputs.multi.mode)?;
+    matches!(mode, ControlMode::PositionSpeed | ControlMode::PositionTime)
+        .then_some(outputs.multi.param1)
+}
+
+/// The hold speed of every joint in the device's `units`: `hold_speed_per_mille` of full speed
+/// (physical: of `full_speed_travel_per_s` over the joint's range, in degrees per second).
+pub fn hold_speeds(config: &Revo2Config, units: UnitMode) -> [u16; JOINTS] {
+    let per_mille = config.hold_speed_per_mille;
+    core::array::from_fn(|j| match units {
+        UnitMode::Percent => per_mille,
+        UnitMode::Physical => {
+            let range = DEFAULT_JOINT_RANGES[j];
+            let deg_s = f32::from(per_mille) / f32::from(PERCENT_FULL)
+                * config.full_speed_travel_per_s
+                * (range.max_deg - range.min_deg);
+            deg_s.round().clamp(1.0, f32::from(u16::MAX)) as u16
+        }
+    })
+}
+
+/// Position + speed command that holds the hand: at `target`, the last commanded position
+/// targets (so a grasped object stays squeezed, with the device's configured protection
+/// currents bounding the squeeze), or where the joints are now when no position was commanded;
+/// at `speeds` (see [`hold_speeds`]). Both are in the device's units.
+pub fn hold_outputs(
+    target: Option<&[i16; JOINTS]>,
+    joints: &JointData,
+    speeds: &[u16; JOINTS],
+) -> Outputs {
+    let measured: [i16; JOINTS] =
+        core::array::from_fn(|j| joints.position[j].min(i16::MAX as u16) as i16);
     Outputs {
-        multi,
+        multi: MultiFingerCommand {
+            mode: ControlMode::PositionSpeed as u8,
+            param1: *target.unwrap_or(&measured),
+            param2: *speeds,
+        },
         ..Default::default()
     }
 }
@@ -181,8 +235,12 @@ mod tests {
             joint_max: [1.0, 1.0, 0.6, 1.0, 1.0, 1.0],
             ..Default::default()
         };
-        let (out, clamps) =
-            outputs_for(&cmd([0.0, 0.5, 0.9, 1.0, 0.25, f32::NAN], 1.0), &config).unwrap();
+        let (out, clamps) = outputs_for(
+            &cmd([0.0, 0.5, 0.9, 1.0, 0.25, f32::NAN], 1.0),
+            &config,
+            UnitMode::Percent,
+        )
+        .unwrap();
         assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
         assert_eq!(out.multi.param1, [0, 500, 600, 1000, 250, 0]);
         assert_eq!(
@@ -190,22 +248,69 @@ mod tests {
             "1 travel/s of 2 travel/s full speed"
         );
         assert_eq!(clamps, 1);
-        let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config).unwrap();
+        let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent).unwrap();
         assert_eq!(out.multi.param2, [1000; 6], "no limit = full speed");
         let mut other = cmd([0.5; 6], 0.0);
         other.hand_model = hand_model::ALLEGRO;
-        assert!(outputs_for(&other, &config).is_none());
+        assert!(outputs_for(&other, &config, UnitMode::Percent).is_none());
     }
 
     #[test]
-    fn hold_echoes_the_measured_positions() {
+    fn physical_units_go_out_in_degrees_and_degrees_per_second() {
+        let config = Revo2Config::default();
+        let (out, clamps) = outputs_for(
+            &cmd([0.0, 0.5, 1.0, 0.25, 0.5, 0.5], 1.0),
+            &config,
+            UnitMode::Physical,
+        )
+        .unwrap();
+        assert_eq!(clamps, 0);
+        // 0..90 degrees per joint: half travel is 45 degrees (not 500 per mille).
+        assert_eq!(out.multi.param1, [0, 45, 90, 23, 45, 45]);
+        // 1 travel/s of 2 travel/s full speed over 90 degrees: 90 degrees per second.
+        assert_eq!(out.multi.param2, [90; 6]);
+        let mut effort = cmd([0.5; 6], 0.0);
+        effort.control_mode = control_mode::EFFORT;
+        let (out, _) = outputs_for(&effort, &config, UnitMode::Physical).unwrap();
+        assert_eq!(
+            out.multi.param1, [500; 6],
+            "half the maximum current, in mA"
+        );
+        let mut velocity = cmd([-1.0; 6], 0.0);
+        velocity.control_mode = control_mode::VELOCITY;
+        let (out, _) = outputs_for(&velocity, &config, UnitMode::Physical).unwrap();
+        assert_eq!(
+            out.multi.param1, [-90; 6],
+            "half of full speed over 90 degrees"
+        );
+        let (out, _) = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
+        assert_eq!(out.multi.param1, [-500; 6]);
+    }
+
+    #[test]
+    fn hold_keeps_the_last_commanded_target_else_the_measured_position() {
         let joints = JointData {
             position: [10, 20, 30, 40, 50, 60],
             ..Default::default()
         };
-        let out = hold_outputs(&joints, UnitMode::Percent, 300);
+        let config = Revo2Config::default();
+        let speeds = hold_speeds(&config, UnitMode::Percent);
+        let out = hold_outputs(None, &joints, &speeds);
         assert_eq!(out.multi.param1, [10, 20, 30, 40, 50, 60]);
         assert_eq!(out.multi.param2, [300; 6]);
+        // A grasp: the target lies past where the object stopped the fingers.
+        let (grasp, _) = outputs_for(&cmd([0.8; 6], 1.0), &config, UnitMode::Percent).unwrap();
+        let target = position_targets(&grasp).unwrap();
+        let out = hold_outputs(Some(&target), &joints, &speeds);
+        assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
+        assert_eq!(out.multi.param1, [800; 6], "the squeeze stays");
+        assert_eq!(out.multi.param2, [300; 6], "at the hold speed");
+        let mut velocity = cmd([0.5; 6], 0.0);
+        velocity.control_mode = control_mode::VELOCITY;
+        let (moving, _) = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
+        assert_eq!(position_targets(&moving), None, "no position to hold");
+        // 300 per mille of 2 travel/s over 90 degrees.
+        assert_eq!(hold_speeds(&config, UnitMode::Physical), [54; 6]);
     }
 
     #[test]

@@ -8,20 +8,24 @@ use ethercrab::MainDevice;
 use futures_lite::future::block_on;
 use teleop_ecat_master::{Driver, Found, Image, OpGroup, PreOpGroup};
 use teleop_msgs::HandCommand;
-use teleop_revo2_protocol::{obj, Inputs, TactileData};
+use teleop_revo2_protocol::{obj, Inputs, TactileData, JOINTS};
 
 use crate::bus::{check_identity, configure, DeviceInfo};
 use crate::config::{Revo2Config, TactileSource};
-use crate::convert::{hold_outputs, outputs_for};
+use crate::convert::{hold_outputs, hold_speeds, outputs_for, position_targets};
 
 /// The Revo2's process data is the first SubDevice's.
 const REVO2: usize = 0;
 
-/// The Revo2 driver: its configuration, and what bring-up learned about the device.
+/// The Revo2 driver: its configuration, what bring-up learned about the device, and the last
+/// commanded position targets (what the hand holds on a stale command).
 #[derive(Debug, Clone)]
 pub struct Revo2 {
     config: Revo2Config,
     info: DeviceInfo,
+    /// Position targets of the latest command packed since bring-up, in the device's units;
+    /// `None` before the first or after a command of another mode.
+    target: Option<[i16; JOINTS]>,
 }
 
 impl Revo2 {
@@ -30,6 +34,7 @@ impl Revo2 {
         Self {
             config,
             info: DeviceInfo::default(),
+            target: None,
         }
     }
 
@@ -68,11 +73,14 @@ impl Driver for Revo2 {
         group: &PreOpGroup,
     ) -> anyhow::Result<()> {
         self.info = configure(md, group, &self.config).await?;
+        // A device brought up (again) holds where it is until it is commanded.
+        self.target = None;
         Ok(())
     }
 
     fn pack(&mut self, command: &HandCommand, outputs: &mut Image) -> Option<u32> {
-        let (out, clamps) = outputs_for(command, &self.config)?;
+        let (out, clamps) = outputs_for(command, &self.config, self.info.units())?;
+        self.target = position_targets(&out);
         let _ = out.pack(outputs.subdevice_mut(REVO2));
         Some(clamps)
     }
@@ -85,12 +93,11 @@ impl Driver for Revo2 {
         Some(decoded)
     }
 
+    /// Holds the last commanded position targets (a grasp keeps its squeeze), or the measured
+    /// position when none was commanded, at the configured hold speed.
     fn hold(&self, last: &Inputs, outputs: &mut Image) {
-        let out = hold_outputs(
-            &last.joints,
-            self.info.units(),
-            self.config.hold_speed_per_mille,
-        );
+        let speeds = hold_speeds(&self.config, self.info.units());
+        let out = hold_outputs(self.target.as_ref(), &last.joints, &speeds);
         let _ = out.pack(outputs.subdevice_mut(REVO2));
     }
 

@@ -175,8 +175,8 @@ fn commanded_targets_move_the_hand_and_closing_on_the_object_gives_tactile_force
     );
     assert!(t.fingertips[1].proximity > 0);
 
-    // The command goes stale: the hand holds where it is, flagged, and does not drift (fingers
-    // in contact settle where the object's push balances the hold, then stay).
+    // The command goes stale: the hand holds the last target, flagged, and does not drift; the
+    // fingers in contact keep squeezing the ball.
     rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
     std::thread::sleep(Duration::from_millis(300));
     let held = rig.states.poll_latest().unwrap();
@@ -191,7 +191,13 @@ fn commanded_targets_move_the_hand_and_closing_on_the_object_gives_tactile_force
             positions(&later)
         );
     }
-    assert!(rig.log().contains("hand command stale: holding position"));
+    let grip = rig.tactile.poll_latest().unwrap().fingertips[1].normal_n;
+    assert!(
+        grip > t.fingertips[1].normal_n / 2.0,
+        "the grip stays: {grip} N (was {} N)",
+        t.fingertips[1].normal_n
+    );
+    assert!(rig.log().contains("hand command stale: the device holds"));
 }
 
 #[test]

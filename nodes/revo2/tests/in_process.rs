@@ -3,6 +3,9 @@
 //! bring-up to OP, then every control mode in both unit modes moves the simulated fingers.
 #![allow(clippy::unwrap_used)]
 
+#[allow(dead_code)] // the IPC helpers are for the process tests; the command builder is used here
+mod common;
+
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -10,6 +13,7 @@ use std::time::Duration;
 use futures_lite::future::block_on;
 use sim_revo2::{revo2_subdevice, Revo2};
 use teleop_ecat_link::{FrameLink, InProcessLink};
+use teleop_ecat_master::{Driver, Image};
 use teleop_ecat_sim::{AlState, SubDevice};
 use teleop_revo2::bus::{bring_up, Bus};
 use teleop_revo2::config::{DeviceSettings, TactileSource};
@@ -203,4 +207,130 @@ fn a_wrong_identity_is_refused_with_a_clear_error() {
         err.contains("not a Revo2") && err.contains("0x00000002"),
         "{err}"
     );
+}
+
+/// A Revo2 driver brought up on `sim` through the master's bring-up, in `unit_mode`.
+fn driver_on(
+    sim: &Sim,
+    clock: &Clock,
+    unit_mode: u8,
+) -> (Bus, teleop_revo2::bus::OpGroup, teleop_revo2::Revo2) {
+    let bus = bus(sim, clock);
+    let mut driver = teleop_revo2::Revo2::new(Revo2Config {
+        device: DeviceSettings {
+            unit_mode: Some(unit_mode),
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    let group = block_on(teleop_ecat_master::bring_up(&bus.md, &mut driver)).unwrap();
+    (bus, group, driver)
+}
+
+/// What the driver wrote into `image`, as the outputs `drive` sends.
+fn written(image: &Image) -> Outputs {
+    Outputs::unpack(image.subdevice(0)).unwrap()
+}
+
+#[test]
+fn physical_units_commands_go_out_through_the_drivers_conversion_in_degrees() {
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(None, 4)));
+    let clock = Clock::default();
+    let (bus, group, mut driver) = driver_on(&sim, &clock, 1);
+    assert_eq!(driver.info().units(), UnitMode::Physical);
+    let mut image = Image::with_lengths([Outputs::LEN]);
+    let clamps = driver
+        .pack(&common::position_command([0.6; 6]), &mut image)
+        .unwrap();
+    assert_eq!(clamps, 0);
+    let a = driver.info().tx_assignment.clone();
+    drive(&clock, &bus, &group, &written(&image), 800, &a);
+    // 0.6 of the travel: 54 of 90 degrees, i.e. 600 per mille on the hand (was sent as 600
+    // "degrees", which closes the hand fully).
+    let p = sim.lock().unwrap().app().hand().positions();
+    assert!(p.iter().all(|&x| (x - 600.0).abs() < 15.0), "{p:?}");
+}
+
+#[test]
+fn the_hold_keeps_squeezing_a_grasped_object() {
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(
+        Some(sim_revo2::hand::VirtualObject::ball()),
+        5,
+    )));
+    let clock = Clock::default();
+    let (bus, group, mut driver) = driver_on(&sim, &clock, 0);
+    let a = driver.info().tx_assignment.clone();
+    let mut image = Image::with_lengths([Outputs::LEN]);
+    // Close the hand around the ball, past where it stops the fingers: a squeeze.
+    driver
+        .pack(&common::position_command([0.6; 6]), &mut image)
+        .unwrap();
+    let last = drive(&clock, &bus, &group, &written(&image), 800, &a);
+    let index =
+        |inputs: &Inputs| teleop_revo2::convert::tactile(inputs).unwrap().fingertips[1].normal_n;
+    let gripped = index(&last);
+    assert!(gripped > 1.0, "index force on the ball: {gripped} N");
+    // The command goes stale: the master sends the driver's hold for 2 s.
+    driver.hold(&last, &mut image);
+    let held = drive(&clock, &bus, &group, &written(&image), 2000, &a);
+    assert!(
+        index(&held) > gripped / 2.0,
+        "the grip stays: {} N after 2 s of hold (was {gripped} N)",
+        index(&held)
+    );
+}
+
+#[test]
+fn unset_serial_numbers_do_not_stop_bring_up() {
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(None, 6)));
+    sim.lock().unwrap().app_mut().erase_serial_numbers();
+    let clock = Clock::default();
+    let (_bus, _group, driver) = driver_on(&sim, &clock, 0);
+    assert_eq!(sim.lock().unwrap().al_state(), (AlState::Op, false, 0));
+    assert_eq!(driver.info().control_sn, "(unset)");
+    assert_eq!(driver.info().wrist_sn, "(unset)");
+    assert_eq!(driver.info().control_fw, "1.4.2");
+}
+
+/// Bring-up's error on `sim`.
+fn bring_up_error(sim: &Sim) -> String {
+    let clock = Clock::default();
+    let bus = bus(sim, &clock);
+    let mut driver = teleop_revo2::Revo2::new(Revo2Config::default());
+    format!(
+        "{:#}",
+        block_on(teleop_ecat_master::bring_up(&bus.md, &mut driver))
+            .err()
+            .unwrap()
+    )
+}
+
+#[test]
+fn a_device_with_another_pdo_mapping_is_refused_naming_the_object() {
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(None, 7)));
+    // Joint data with positions and speeds swapped.
+    let mut swapped: Vec<u32> = teleop_revo2_protocol::JOINT_TX_MAPPING
+        .iter()
+        .map(|m| m.encode())
+        .collect();
+    swapped.swap(0, 1);
+    sim.lock()
+        .unwrap()
+        .app_mut()
+        .present_mapping(0x1A00, swapped);
+    let err = bring_up_error(&sim);
+    assert!(
+        err.contains("0x1a00:01") && err.contains("PDO layout"),
+        "{err}"
+    );
+    assert_ne!(sim.lock().unwrap().al_state().0, AlState::Op);
+}
+
+#[test]
+fn an_unreadable_unit_mode_is_refused_not_taken_as_percent() {
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(None, 8)));
+    sim.lock().unwrap().app_mut().fail_reads(0x8000, 0x05);
+    let err = bring_up_error(&sim);
+    assert!(err.contains("unit_mode (0x8000:05)"), "{err}");
+    assert_ne!(sim.lock().unwrap().al_state().0, AlState::Op);
 }

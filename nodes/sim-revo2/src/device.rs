@@ -61,6 +61,10 @@ pub struct Revo2 {
     upgrade: Upgrade,
     /// Restarts after a firmware upgrade.
     pub restarts: u64,
+    /// PDO mappings presented instead of the documented ones (see [`Revo2::present_mapping`]).
+    mappings: BTreeMap<u16, Vec<u32>>,
+    /// Objects whose reads are aborted (see [`Revo2::fail_reads`]).
+    failing_reads: Vec<(u16, u8)>,
 }
 
 impl Revo2 {
@@ -105,6 +109,8 @@ impl Revo2 {
             holds: 0,
             upgrade: Upgrade::new(FlashTiming::default()),
             restarts: 0,
+            mappings: BTreeMap::new(),
+            failing_reads: Vec::new(),
         }
     }
 
@@ -159,6 +165,26 @@ impl Revo2 {
     /// The current input (TxPDO) assignment.
     pub fn tx_assignment(&self) -> &[u16] {
         &self.tx_assign
+    }
+
+    /// Makes the board serial numbers (0x8000:12, 0x8000:14) read as on a device whose were
+    /// never written: 16 bytes of 0xFF (erased flash), not text.
+    pub fn erase_serial_numbers(&mut self) {
+        for sub in [0x12, 0x14] {
+            self.values.insert((obj::CONFIG, sub), vec![0xFF; 16]);
+        }
+    }
+
+    /// Presents `entries` (encoded mapping entries) as the mapping of PDO `pdo` (0x1600, 0x1A00,
+    /// 0x1A01) when it is read, as a device with other firmware would; the process data stays
+    /// the documented layout.
+    pub fn present_mapping(&mut self, pdo: u16, entries: Vec<u32>) {
+        self.mappings.insert(pdo, entries);
+    }
+
+    /// Aborts every read of `index:sub` (a broken object).
+    pub fn fail_reads(&mut self, index: u16, sub: u8) {
+        self.failing_reads.push((index, sub));
     }
 
     /// A configuration value as stored (raw bytes).
@@ -292,6 +318,12 @@ impl Application for Revo2 {
         if index == obj::SM2_ASSIGN || index == obj::SM3_ASSIGN {
             let values = self.assignment(index).clone();
             return list(&values, sub, |v| v.to_le_bytes().to_vec());
+        }
+        if self.failing_reads.contains(&(index, sub)) {
+            return Err(SdoAbort::GENERAL);
+        }
+        if let Some(presented) = self.mappings.get(&index) {
+            return list(presented, sub, |m| m.to_le_bytes().to_vec());
         }
         if let Some(mapping) = mapping_entries(index) {
             return list(mapping, sub, |m| m.encode().to_le_bytes().to_vec());

@@ -262,7 +262,7 @@ fn cycle<D: Driver, H: Host<D>>(
                     }
                     None => {
                         if !stale {
-                            tracing::warn!("hand command stale: holding position");
+                            tracing::warn!("hand command stale: the device holds");
                             host.event(Event::Stale);
                             stale = true;
                         }
@@ -373,7 +373,7 @@ fn cycle<D: Driver, H: Host<D>>(
                 host.exchanged(driver, &decoded, &exchange)?;
                 last_inputs = Some(decoded);
             }
-            // Stopping: hold where the device is for a few cycles before leaving OP.
+            // Stopping: the driver's hold for a few cycles before leaving OP.
             if let Some(last) = &last_inputs {
                 driver.hold(last, &mut outputs);
                 write_outputs(md, group, &outputs);

@@ -107,8 +107,10 @@ pub trait Driver {
     /// unusable (counted with the wrong working counters).
     fn unpack(&mut self, inputs: &Image, polled: Option<&Self::Polled>) -> Option<Self::Inputs>;
 
-    /// Writes the outputs that hold the device where `last` says it is: sent when the command
-    /// goes stale, and for a few cycles before the master leaves OP.
+    /// Writes the outputs that hold the device: sent when the command goes stale (the operator
+    /// is lost, or the e-stop holds it), and for a few cycles before the master leaves OP. A
+    /// driver holds the last commanded target where it has one, so that a grasp keeps its
+    /// grip; `last` (where the device is) is for when it has none.
     fn hold(&self, last: &Self::Inputs, outputs: &mut Image);
 
     /// How often the side channel runs, or `None` (the default) for none. The side channel is
