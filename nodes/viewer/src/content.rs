@@ -759,6 +759,9 @@ impl Scene {
                 entries.push(Entry::scalar("health/estop", f64::from(m.engaged)));
             }
             Sample::DeviceInfo(m) => device_info(m, &mut entries),
+            Sample::EStopAck(m) => {
+                entries.push(Entry::scalar("health/estop_ack", f64::from(m.engaged)));
+            }
         }
         let picked = !had_robot && self.robot.is_some();
         Some(Frame {

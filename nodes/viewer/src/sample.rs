@@ -2,8 +2,8 @@
 //! sources (live subscribers and recordings) hand the content layer the same thing.
 
 use teleop_msgs::{
-    DeviceInfo, EStop, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand, HandState,
-    Message, NodeHealth, SampleHeader, Tactile,
+    DeviceInfo, EStop, EStopAck, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand,
+    HandState, Message, NodeHealth, SampleHeader, Tactile,
 };
 
 /// One sample of a contract topic. Fixed size and heap free, so that it travels through the
@@ -29,6 +29,8 @@ pub enum Sample {
     EStop(EStop),
     /// `device/info`.
     DeviceInfo(DeviceInfo),
+    /// `estop/ack`.
+    EStopAck(EStopAck),
 }
 
 fn decode_as<M: Message>(payload: &[u8], wrap: fn(M) -> Sample) -> Option<Sample> {
@@ -50,6 +52,7 @@ impl Sample {
             NodeHealth::TOPIC => decode_as(payload, Self::Health),
             EStop::TOPIC => decode_as(payload, Self::EStop),
             DeviceInfo::TOPIC => decode_as(payload, Self::DeviceInfo),
+            EStopAck::TOPIC => decode_as(payload, Self::EStopAck),
             _ => None,
         }
     }
@@ -66,6 +69,7 @@ impl Sample {
             Self::Health(_) => NodeHealth::TOPIC,
             Self::EStop(_) => EStop::TOPIC,
             Self::DeviceInfo(_) => DeviceInfo::TOPIC,
+            Self::EStopAck(_) => EStopAck::TOPIC,
         }
     }
 
@@ -81,6 +85,7 @@ impl Sample {
             Self::Health(m) => m.header(),
             Self::EStop(m) => m.header(),
             Self::DeviceInfo(m) => m.header(),
+            Self::EStopAck(m) => m.header(),
         }
     }
 }
