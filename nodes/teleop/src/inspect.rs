@@ -14,8 +14,9 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
 use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, TopicVisitor};
 use teleop_runtime::{
-    discover_namespaces, latch_path, now_ns, qualified, set_latch, split, EventLoop, Flow, Input,
-    IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber, Wake,
+    discover_namespaces, latch_path, latched_namespaces, now_ns, qualified, set_latch, split,
+    EventLoop, Flow, Input, IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber,
+    Wake,
 };
 
 /// Name of the short-lived iceoryx2 node the inspection commands create.
@@ -326,7 +327,8 @@ pub fn stats(
 const ESTOP_ACK_WAIT: Duration = Duration::from_secs(1);
 
 /// Engages or releases the e-stop of the namespaces given, or else of the topics without a
-/// namespace and of every namespace in use: one operator's e-stop stops every side.
+/// namespace, of every namespace in use and of every namespace latched (whose nodes may all be
+/// down): one operator's e-stop stops every side, and `--release` releases every side.
 ///
 /// The state is the latch file of each namespace (see `teleop_runtime::EStopInput`), written
 /// and synced before the `estop` topic wakes the running nodes, so it outlives this command
@@ -338,7 +340,15 @@ pub fn estop(
     namespaces: &[Namespace],
 ) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
-    let covered = covered(ipc, namespaces)?;
+    let mut covered = covered(ipc, namespaces)?;
+    if namespaces.is_empty() {
+        // Namespaces latched while none of their nodes runs (not found by their services).
+        for ns in latched_namespaces(ipc) {
+            if !covered.contains(&Some(ns.clone())) {
+                covered.push(Some(ns));
+            }
+        }
+    }
     let mut sides = Vec::with_capacity(covered.len());
     for ns in covered {
         // Subscribe to the answers before asking.

@@ -40,6 +40,31 @@ pub fn latch_path(settings: &IpcSettings, namespace: Option<&Namespace>) -> Path
     Path::new(root).join(name)
 }
 
+/// The namespaces whose latch is engaged in the pipeline of `settings` (not the topics without
+/// a namespace), sorted: `teleop estop --release` releases them even when none of their nodes
+/// runs.
+pub fn latched_namespaces(settings: &IpcSettings) -> Vec<Namespace> {
+    let plain = latch_path(settings, None);
+    let (Some(dir), Some(stem)) = (plain.parent(), plain.file_name()) else {
+        return Vec::new();
+    };
+    let mut stem = stem.to_os_string();
+    stem.push(".");
+    let stem = stem.as_bytes();
+    let mut found: Vec<Namespace> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|entry| {
+            let name = entry.file_name();
+            let rest = name.as_bytes().strip_prefix(stem)?;
+            Namespace::new(&std::str::from_utf8(rest).ok()?.replace('.', "/")).ok()
+        })
+        .collect();
+    found.sort();
+    found
+}
+
 /// Engages (creates and syncs the file) or releases (removes it) the latch at `path`.
 pub fn set_latch(path: &Path, engaged: bool) -> io::Result<()> {
     use std::io::Write;
@@ -175,6 +200,22 @@ mod tests {
             latch_path(&settings, Some(&ns)),
             Path::new("/r/p_estop.cell2.left")
         );
+    }
+
+    #[test]
+    fn latched_namespaces_are_found_by_their_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings = IpcSettings::isolated(dir.path());
+        assert!(latched_namespaces(&settings).is_empty());
+        let left = Namespace::new("cell2/left").unwrap();
+        let right = Namespace::new("right").unwrap();
+        for ns in [None, Some(&left), Some(&right)] {
+            set_latch(&latch_path(&settings, ns), true).unwrap();
+        }
+        std::fs::write(dir.path().join("unrelated"), b"").unwrap();
+        assert_eq!(latched_namespaces(&settings), vec![left.clone(), right]);
+        set_latch(&latch_path(&settings, Some(&left)), false).unwrap();
+        assert_eq!(latched_namespaces(&settings).len(), 1);
     }
 
     #[test]
