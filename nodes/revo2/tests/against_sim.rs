@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice, serve_socket, Revo2};
+use sim_revo2::{revo2_subdevice_with_loop, serve_socket, Revo2};
 use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::{AlState, SubDevice};
 mod common;
@@ -51,7 +51,12 @@ impl Rig {
         let dir = tempfile::tempdir().unwrap();
         let ipc = IpcSettings::isolated(&dir.path().join("iox"));
         let socket = dir.path().join("revo2.sock");
-        let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(Some(VirtualObject::ball()), 7)));
+        // A firmware that reads AL control once per 1 ms loop, as the simulator process runs.
+        let sim: Sim = Arc::new(Mutex::new(revo2_subdevice_with_loop(
+            Some(VirtualObject::ball()),
+            7,
+            Duration::from_millis(1),
+        )));
         let stop = Arc::new(AtomicBool::new(false));
         let server = serve(
             StreamServer::bind(&socket).unwrap(),
@@ -210,6 +215,14 @@ fn watchdog_drop_is_acknowledged_and_frame_loss_ridden_out() {
     });
     rig.command([0.5; 6], Duration::from_millis(500));
     assert_eq!(lock(&rig.sim).al_state().0, AlState::Op, "{}", rig.log());
+    // One acknowledge, seen by the firmware before the OP request, recovers it: an OP request
+    // written right after the acknowledge overwrites it unread, and the error stays.
+    assert_eq!(
+        rig.log().matches("dropped to SAFE-OP").count(),
+        1,
+        "{}",
+        rig.log()
+    );
 
     lock(&rig.sim).faults().wrong_wkc_probability = 0.2;
     let s = rig.command([0.45; 6], Duration::from_millis(500));

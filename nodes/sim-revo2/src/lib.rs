@@ -26,8 +26,19 @@ pub use firmware::{FlashTiming, Upgrade};
 /// sync managers before requesting BOOT, as on devices whose boot loader has its own mailbox.
 pub const BOOTSTRAP_MAILBOX: ((u16, u16), (u16, u16)) = ((0x1000, 256), (0x1200, 256));
 
-/// An emulated Revo2 with an optional virtual object in its hand.
+/// An emulated Revo2 with an optional virtual object in its hand, acting on every AL control
+/// write at once (for callers that drive its clock themselves).
 pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubDevice<Revo2> {
+    revo2_subdevice_with_loop(object, serial, std::time::Duration::ZERO)
+}
+
+/// An emulated Revo2 whose firmware reads AL control once per `firmware_loop` (see
+/// [`EscConfig::firmware_loop`]), as the `teleop-sim-revo2` process runs it.
+pub fn revo2_subdevice_with_loop(
+    object: Option<hand::VirtualObject>,
+    serial: u32,
+    firmware_loop: std::time::Duration,
+) -> SubDevice<Revo2> {
     let config = EscConfig {
         identity: Identity {
             vendor_id: teleop_revo2_protocol::VENDOR_ID,
@@ -39,6 +50,7 @@ pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubD
         mailbox_protocols: mailbox_protocols::COE | mailbox_protocols::FOE,
         bootstrap_rx_mailbox: BOOTSTRAP_MAILBOX.0,
         bootstrap_tx_mailbox: BOOTSTRAP_MAILBOX.1,
+        firmware_loop,
         ..EscConfig::default()
     };
     let hand = hand::Hand::new(hand::HandParams::default(), object);

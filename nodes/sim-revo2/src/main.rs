@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice, serve_link, serve_socket, Revo2};
+use sim_revo2::{revo2_subdevice_with_loop, serve_link, serve_socket, Revo2};
 use teleop_ecat_link::{Accept, RawSocketLink, StreamServer};
 use teleop_ecat_sim::SubDevice;
 
@@ -37,6 +37,10 @@ struct Args {
     /// Control socket (default: the socket path with `.ctl`, or /tmp/teleop-revo2-IF.ctl).
     #[arg(long)]
     control: Option<PathBuf>,
+    /// Period of the firmware's main loop in microseconds: AL control is read once per loop,
+    /// as a slave firmware does (0: every write acted on at once).
+    #[arg(long, default_value_t = 1000)]
+    firmware_loop_us: u64,
 }
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
@@ -66,9 +70,10 @@ fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, SubDevice<Revo2>> {
 
 fn run(args: Args) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
-    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice(
+    let sim: Sim = Arc::new(Mutex::new(revo2_subdevice_with_loop(
         object(&args.object)?,
         args.serial,
+        Duration::from_micros(args.firmware_loop_us),
     )));
     let start = Instant::now();
     let control = args

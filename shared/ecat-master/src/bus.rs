@@ -414,8 +414,20 @@ pub async fn scan(md: &MainDevice<'static>) -> anyhow::Result<(PreOpGroup, Vec<F
     Ok((group, found))
 }
 
-/// Acknowledges the AL error of SubDevice `index` and requests OP again (ethercrab does not do
-/// this by itself); returns the AL status code it showed.
+/// How long [`recover_op`] waits for each step to show in the AL status (a firmware reads AL
+/// control once per main loop).
+const RECOVERY_STEP_TIMEOUT: Duration = Duration::from_millis(100);
+/// AL control/status: the error (acknowledge) bit and the SAFE-OP and OP states.
+const ERROR: u16 = 0x10;
+const SAFE_OP: u16 = 0x04;
+const OP: u16 = 0x08;
+
+/// Recovers SubDevice `index` from an AL error (ethercrab does not do this by itself): writes
+/// the acknowledge (SAFE-OP + error acknowledge), waits until the AL status shows the error
+/// flag cleared, then requests OP and waits until it is in OP. A SubDevice firmware reads AL
+/// control once per loop, so an OP request written right after the acknowledge would overwrite
+/// it unread (the error stays, the request is ignored). Returns the AL status code the error
+/// showed. Blocks the caller up to twice [`RECOVERY_STEP_TIMEOUT`].
 pub async fn recover_op(
     md: &MainDevice<'static>,
     group: &OpGroup,
@@ -426,11 +438,44 @@ pub async fn recover_op(
         .register_read::<u16>(RegisterAddress::AlStatusCode)
         .await
         .unwrap_or(0);
-    sd.register_write(RegisterAddress::AlControl, 0x0014u16)
+    sd.register_write(RegisterAddress::AlControl, SAFE_OP | ERROR)
         .await?;
-    sd.register_write(RegisterAddress::AlControl, 0x0008u16)
-        .await?;
+    wait_al_status(md, group, index, "the acknowledged error cleared", |s| {
+        s & ERROR == 0
+    })
+    .await?;
+    sd.register_write(RegisterAddress::AlControl, OP).await?;
+    wait_al_status(md, group, index, "OP after the request", |s| {
+        s & 0x0F == OP || s & ERROR != 0
+    })
+    .await?;
     Ok(code)
+}
+
+/// Polls the AL status of SubDevice `index` until `done` holds, up to
+/// [`RECOVERY_STEP_TIMEOUT`]; the error names `what` was awaited.
+async fn wait_al_status(
+    md: &MainDevice<'static>,
+    group: &OpGroup,
+    index: usize,
+    what: &str,
+    done: fn(u16) -> bool,
+) -> anyhow::Result<()> {
+    let sd = group.subdevice(md, index)?;
+    let start = std::time::Instant::now();
+    loop {
+        let status = sd.register_read::<u16>(RegisterAddress::AlStatus).await?;
+        if done(status) {
+            return Ok(());
+        }
+        if start.elapsed() > RECOVERY_STEP_TIMEOUT {
+            anyhow::bail!(
+                "SubDevice {index}: {what} not shown within {} ms (AL status {status:#06x})",
+                RECOVERY_STEP_TIMEOUT.as_millis()
+            );
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
 }
 
 /// The working counter a healthy cycle returns: the group's LRW counts, per SubDevice, 1 for its

@@ -145,6 +145,9 @@ pub struct SubDevice<A: Application> {
     stats: Stats,
     /// Restarting: no frames are answered until then.
     offline_until: Option<Duration>,
+    /// When AL control was first written since the firmware last read it (with
+    /// [`EscConfig::firmware_loop`]).
+    al_control_written_at: Option<Duration>,
 }
 
 impl<A: Application> core::fmt::Debug for SubDevice<A> {
@@ -214,6 +217,7 @@ impl<A: Application> SubDevice<A> {
             faults: Faults::default(),
             stats: Stats::default(),
             offline_until: None,
+            al_control_written_at: None,
             config,
         };
         sd.init_registers();
@@ -277,6 +281,7 @@ impl<A: Application> SubDevice<A> {
         self.code = al_status::NO_ERROR;
         self.mbx.reset();
         self.sdo.reset();
+        self.al_control_written_at = None;
         self.last_outputs = now;
         self.init_registers();
         self.offline_until = if offline.is_zero() {
@@ -351,9 +356,9 @@ impl<A: Application> SubDevice<A> {
         }
     }
 
-    /// Advances the SubDevice's own clock without a frame (the end of a restart, the
-    /// application's [`poll`](Application::poll) and the SM watchdog are checked on every frame
-    /// and here).
+    /// Advances the SubDevice's own clock without a frame (the end of a restart, the firmware's
+    /// reading of AL control, the application's [`poll`](Application::poll) and the SM watchdog
+    /// are checked on every frame and here).
     pub fn tick(&mut self, now: Duration) {
         if let Some(until) = self.offline_until {
             if now < until {
@@ -362,6 +367,7 @@ impl<A: Application> SubDevice<A> {
             tracing::info!("SubDevice up again after its restart");
             self.offline_until = None;
         }
+        self.firmware_reads_al_control(now);
         if let AppRequest::Restart { offline } = self.app.poll(now, self.state) {
             self.restart(now, offline);
             return;
@@ -789,6 +795,24 @@ impl<A: Application> SubDevice<A> {
             }
         }
         if ev.al_control {
+            if self.config.firmware_loop.is_zero() {
+                self.al_control_written(now);
+            } else if self.al_control_written_at.is_none() {
+                self.al_control_written_at = Some(now);
+            }
+        }
+    }
+
+    /// The firmware's loop: at each multiple of [`EscConfig::firmware_loop`] it reads AL
+    /// control; acts on the value there once a loop has run since the first unread write (the
+    /// frame being processed has not written yet, so the value is the one the loop saw).
+    fn firmware_reads_al_control(&mut self, now: Duration) {
+        let Some(at) = self.al_control_written_at else {
+            return;
+        };
+        let period = self.config.firmware_loop.as_nanos().max(1);
+        if now.as_nanos() / period > at.as_nanos() / period {
+            self.al_control_written_at = None;
             self.al_control_written(now);
         }
     }

@@ -442,6 +442,13 @@ pub struct EscConfig {
     /// communication on port 1, its loop open), as on a bus of several SubDevices whose frames
     /// the caller passes through each in turn. `false`: the last SubDevice (port 1 closed).
     pub port1_linked: bool,
+    /// Period of the application firmware's main loop, which reads AL control once per loop:
+    /// writes between two loops are seen as one, the latest value (ETG.1000.6 leaves the
+    /// sampling to the application; a firmware polling the register does this). A MainDevice
+    /// that writes an acknowledge and a state request back to back has the acknowledge missed.
+    /// `Duration::ZERO`: every write is acted on at once (an ESC whose PDI handles each AL
+    /// event interrupt).
+    pub firmware_loop: Duration,
 }
 
 impl Default for EscConfig {
@@ -465,6 +472,7 @@ impl Default for EscConfig {
             watchdog: Duration::from_millis(100),
             mailbox_protocols: mailbox_protocols::COE,
             port1_linked: false,
+            firmware_loop: Duration::ZERO,
         }
     }
 }
