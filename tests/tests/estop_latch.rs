@@ -402,3 +402,25 @@ fn a_replayed_glove_drives_the_hand_its_stamps_moved_to_the_replay() {
     assert!(live.iter().all(|c| c.header.stamp_ns >= c.header.origin_ns
         && c.header.stamp_ns - c.header.origin_ns < 1_000_000_000));
 }
+
+#[test]
+fn release_without_namespace_releases_a_side_latched_while_its_nodes_are_down() {
+    let sandbox = Sandbox::new();
+    let latch = teleop_runtime::latch_path(
+        &sandbox.ipc,
+        Some(&teleop_runtime::Namespace::new("left").unwrap()),
+    );
+    // Nothing runs: engaged all the same, said so, exit 1.
+    let out = sandbox.run_teleop(&["estop", "--namespace", "left"]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("no node acknowledged"),
+        "{}",
+        text(&out)
+    );
+    assert!(latch.exists(), "{}", latch.display());
+    // No namespace is in use, but the left side is latched: released with the others.
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(text(&out).contains("namespace left"), "{}", text(&out));
+    assert!(!latch.exists(), "{}", text(&out));
+}
