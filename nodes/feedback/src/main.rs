@@ -1,7 +1,8 @@
 //! `teleop-feedback`: the force-feedback process. Subscribes to `hand/tactile`, `hand/state`,
 //! `hand/command` and `estop`, runs the [`FeedbackEngine`] on every sample and on a tick every
 //! `tick_ms` (so stale inputs ramp the force to zero even when nothing arrives), and publishes
-//! `glove/force_command`. An engaged e-stop zeroes every force at once until it is released.
+//! `glove/force_command`. An engaged e-stop zeroes every force at once until it is released; it
+//! is latched outside the process (`teleop_runtime::EStopInput`), so a restart keeps it.
 //!
 //! Owns only the plumbing between the topics and the engine.
 
