@@ -3,8 +3,9 @@
 //! ended; the bus scan; and the AL acknowledge that ethercrab's typestate API does not do.
 
 use std::future::Future;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::ptr::NonNull;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Poll, Waker};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -84,19 +85,49 @@ pub struct Bus {
     pub pump: Option<Pump>,
     /// ethercrab's own task, on the `ethercrab:` transport.
     task: Option<EthercrabTask>,
-    /// The bus opened by [`current`](Self::current) after this one's task ended.
-    successor: OnceLock<Box<Bus>>,
+    /// The latest bus opened by [`current`](Self::current) after a task ended (kept by the
+    /// bus first opened; replacing it frees the one before once nobody uses it).
+    latest: Mutex<Option<Arc<Bus>>>,
+    /// The PDU storage the MainDevice and the frame carriers borrow: the last field, so that
+    /// it is freed after them.
+    _storage: Storage,
 }
 
-/// A fresh PDU storage, split. Each bus has its own (ethercrab splits a storage only once, and
-/// its PDU handles cannot be had back from a task that ended on an error), leaked: a few KiB
-/// per bus opened.
-fn split_storage() -> anyhow::Result<(PduTx<'static>, PduRx<'static>, PduLoop<'static>)> {
-    let storage: &'static PduStorage<MAX_FRAMES, FRAME_SIZE> =
-        Box::leak(Box::new(PduStorage::new()));
-    storage
-        .try_split()
-        .map_err(|()| anyhow::anyhow!("PDU storage already in use"))
+/// The PDU storages alive now (each bus has one; see [`Bus::live_storages`]).
+static LIVE_STORAGES: AtomicUsize = AtomicUsize::new(0);
+
+/// A bus's own PDU storage (ethercrab splits a storage only once, and its PDU handles cannot
+/// be had back from a task that ended on an error), freed with the bus: a link that flaps for
+/// hours does not grow the process.
+struct Storage(NonNull<PduStorage<MAX_FRAMES, FRAME_SIZE>>);
+
+// SAFETY: a PduStorage is made to be shared between threads (ethercrab's own storages are
+// statics); this handle only frees it.
+unsafe impl Send for Storage {}
+// SAFETY: as above; the handle gives no access.
+unsafe impl Sync for Storage {}
+
+impl Storage {
+    /// A fresh storage, split.
+    fn split() -> anyhow::Result<(Self, PduTx<'static>, PduRx<'static>, PduLoop<'static>)> {
+        let storage = Storage(NonNull::from(Box::leak(Box::new(PduStorage::new()))));
+        LIVE_STORAGES.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: the storage lives until `Storage` is dropped, which the bus does after the
+        // MainDevice and the pump or task holding these handles (its last field).
+        let shared: &'static PduStorage<MAX_FRAMES, FRAME_SIZE> = unsafe { storage.0.as_ref() };
+        let (tx, rx, pdu_loop) = shared
+            .try_split()
+            .map_err(|()| anyhow::anyhow!("PDU storage already in use"))?;
+        Ok((storage, tx, rx, pdu_loop))
+    }
+}
+
+impl Drop for Storage {
+    fn drop(&mut self) {
+        // SAFETY: made by `Box::leak` in `split`; everything borrowing it is gone (see there).
+        drop(unsafe { Box::from_raw(self.0.as_ptr()) });
+        LIVE_STORAGES.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 impl Bus {
@@ -121,14 +152,15 @@ impl Bus {
             Some(link) => link,
             None => connect(),
         });
-        let (tx, rx, pdu_loop) = split_storage()?;
+        let (storage, tx, rx, pdu_loop) = Storage::split()?;
         let md = MainDevice::new(pdu_loop, timeouts(), MainDeviceConfig::default());
         let pump = Pump::start(tx, rx, connect)?;
         Ok(Self {
             md,
             pump: Some(pump),
             task: None,
-            successor: OnceLock::new(),
+            latest: Mutex::new(None),
+            _storage: storage,
         })
     }
 
@@ -146,14 +178,15 @@ impl Bus {
     /// it; no such interface). An interface that is down opens, but the task then ends on its
     /// first send: see [`current`](Self::current).
     pub fn open_ethercrab(interface: &str) -> anyhow::Result<Self> {
-        let (tx, rx, pdu_loop) = split_storage()?;
+        let (storage, tx, rx, pdu_loop) = Storage::split()?;
         let task = EthercrabTask::start(interface, tx, rx)?;
         let md = MainDevice::new(pdu_loop, timeouts(), MainDeviceConfig::default());
         Ok(Self {
             md,
             pump: None,
             task: Some(task),
-            successor: OnceLock::new(),
+            latest: Mutex::new(None),
+            _storage: storage,
         })
     }
 
@@ -168,22 +201,25 @@ impl Bus {
         }
     }
 
-    /// The bus to use now. On `ethercrab:`, when the task of the latest bus has ended and the
-    /// interface is up, this opens a fresh bus (its own PDU storage, MainDevice and task), keeps
-    /// it as this bus's successor, and returns it; later calls return it (or its own successor).
-    /// Otherwise (the pump's transports, which reconnect by themselves; a live task; an
-    /// interface still down; a failed reopen, which is logged) it returns the latest bus as it
-    /// is. Groups made with an earlier bus must not be used with a later one: bring the device
-    /// up again.
-    pub fn current(&self) -> CurrentBus<'_> {
-        CurrentBus(self.latest())
+    /// The PDU storages alive in this process: one per bus not yet dropped (a bus replaced
+    /// by [`current`](Self::current) is dropped once nobody uses it).
+    pub fn live_storages() -> usize {
+        LIVE_STORAGES.load(Ordering::SeqCst)
     }
 
-    fn latest(&self) -> &Bus {
-        let mut bus = self;
-        while let Some(next) = bus.successor.get() {
-            bus = next;
-        }
+    /// The bus to use now. On `ethercrab:`, when the task of the latest bus has ended and the
+    /// interface is up, this opens a fresh bus (its own PDU storage, MainDevice and task), keeps
+    /// it as the latest in place of the one before (which is freed once nobody uses it), and
+    /// returns it; later calls return it. Otherwise (the pump's transports, which reconnect by
+    /// themselves; a live task; an interface still down; a failed reopen, which is logged) it
+    /// returns the latest bus as it is. Groups made with an earlier bus must not be used with a
+    /// later one: bring the device up again.
+    pub fn current(&self) -> CurrentBus<'_> {
+        let mut latest = self.latest.lock().unwrap_or_else(|e| e.into_inner());
+        let bus = match latest.as_ref() {
+            Some(bus) => CurrentBus::Reopened(bus.clone()),
+            None => CurrentBus::First(self),
+        };
         let Some(task) = &bus.task else {
             return bus;
         };
@@ -210,8 +246,9 @@ impl Bus {
                     interface = %task.interface,
                     "ethercrab's task had ended: opened a fresh bus"
                 );
-                let _ = bus.successor.set(Box::new(fresh));
-                bus.successor.get().map_or(bus, |b| b)
+                let fresh = Arc::new(fresh);
+                *latest = Some(fresh.clone());
+                CurrentBus::Reopened(fresh)
             }
             Err(e) => {
                 tracing::warn!("reopening the bus failed: {e:#}");
@@ -222,13 +259,21 @@ impl Bus {
 }
 
 /// The bus [`Bus::current`] picked; dereferences to it (`&current` is a `&Bus`).
-pub struct CurrentBus<'a>(&'a Bus);
+pub enum CurrentBus<'a> {
+    /// The bus first opened.
+    First(&'a Bus),
+    /// A bus opened after ethercrab's task ended.
+    Reopened(Arc<Bus>),
+}
 
 impl std::ops::Deref for CurrentBus<'_> {
     type Target = Bus;
 
     fn deref(&self) -> &Bus {
-        self.0
+        match self {
+            CurrentBus::First(bus) => bus,
+            CurrentBus::Reopened(bus) => bus,
+        }
     }
 }
 
