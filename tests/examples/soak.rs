@@ -3,8 +3,8 @@
 //!
 //! Method: `teleop launch` runs the repository's `launch.toml` (release build) inside a sandbox.
 //! Every 10 s the resident set size (VmRSS from /proc/<pid>/status) of every process and the
-//! latency of `hand/command` and `glove/force_command` since their device sample (stamp - origin,
-//! from `teleop stats` over 2 s) are sampled. At the end the session summary gives drops,
+//! latency of `hand/command` and `glove/force_command` since the host received their device
+//! sample (stamp - origin, from `teleop stats` over 2 s) are sampled. At the end the session summary gives drops,
 //! restarts and faults. Memory growth = RSS at the end - RSS after a 60 s warm-up.
 //!
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example soak -- 600`
