@@ -407,3 +407,94 @@ fn short_soak_without_drops_or_restarts() {
         info.topics
     );
 }
+
+/// The latest index fingertip force on the hand, newtons.
+fn index_force(w: &Watch) -> f32 {
+    w.tactile.latest().map_or(0.0, |t| t.fingertips[1].normal_n)
+}
+
+/// Lowest index force over `outage`, sampled while it lasts; `holding` is set when the Revo2
+/// node reported holding meanwhile.
+fn lowest_index_force(session: &Session, w: &Watch, outage: Duration, holding: &mut bool) -> f32 {
+    let start = Instant::now();
+    let mut lowest = f32::MAX;
+    w.until(
+        session,
+        outage + Duration::from_secs(1),
+        "the outage",
+        |w| {
+            lowest = lowest.min(index_force(w));
+            *holding |= w.state.latest().is_some_and(|s| s.holding == 1);
+            start.elapsed() >= outage
+        },
+    );
+    lowest
+}
+
+#[test]
+fn a_grasp_survives_a_lost_glove_and_a_lost_operator() {
+    let sandbox = Sandbox::new();
+    // The operator closes on the ball and keeps squeezing it.
+    let squeeze = sandbox.write(
+        "squeeze.csv",
+        "0,950,950,950,950,900,700\n2,510,510,510,510,533,300\n1000,510,510,510,510,533,300\n",
+    );
+    // The retargeting node, killed below, comes back only after 2 s.
+    let launch = sandbox.default_session(|t| {
+        t.replace(
+            "\"--script\", \"grasp\"",
+            &format!("\"--script\", \"{}\"", squeeze.display()),
+        )
+        .replace(
+            "args = [\"--config\", \"config/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 500",
+            "args = [\"--config\", \"config/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 2000",
+        )
+    });
+    assert!(std::fs::read_to_string(&launch)
+        .unwrap()
+        .contains("restart_delay_ms = 2000"));
+    let session = sandbox.launch(&launch);
+    let watch = Watch::new(&sandbox);
+    watch.until(&session, Duration::from_secs(30), "the ball gripped", |w| {
+        fresh(&w.cmd) && fresh(&w.state) && index_force(w) > 1.0
+    });
+    // A settled grip: the samples of one more second drained, the latest kept.
+    std::thread::sleep(Duration::from_secs(1));
+    watch.until(&session, Duration::from_secs(1), "a settled grip", |_| true);
+    let gripped = index_force(&watch);
+    assert!(gripped > 1.0, "index force on the ball: {gripped} N");
+
+    // The glove is lost for 2 s: the retargeting node re-sends its last command as held, and
+    // the Revo2 node holds its last target whenever that goes stale.
+    assert!(sandbox.control("glove.ctl", "unplug 2.0").starts_with("ok"));
+    let mut holding = false;
+    let lowest = lowest_index_force(&session, &watch, Duration::from_secs(2), &mut holding);
+    assert!(
+        lowest > gripped / 2.0,
+        "glove lost: the index force fell to {lowest} N (gripped at {gripped} N)\n{}",
+        session.log()
+    );
+    watch.until(&session, Duration::from_secs(10), "glove back", |w| {
+        w.glove.latest().is_some_and(|g| g.link_up == 1) && fresh(&w.cmd)
+    });
+
+    // The operator's commands stop for 2 s (the retargeting node dies and is restarted 2 s
+    // later): the Revo2 node's command goes stale and the hand holds the last target, still
+    // squeezing.
+    let retarget = sandbox.pid_of("retarget").expect("pid of retarget");
+    // SAFETY: kill(2) of a process of this test's own session.
+    unsafe {
+        libc::kill(retarget as libc::pid_t, libc::SIGKILL);
+    }
+    let mut holding = false;
+    let lowest = lowest_index_force(&session, &watch, Duration::from_secs(2), &mut holding);
+    assert!(holding, "the Revo2 node held on the stale command");
+    assert!(
+        lowest > gripped / 2.0,
+        "commands lost: the index force fell to {lowest} N (gripped at {gripped} N)\n{}",
+        session.log()
+    );
+    watch.until(&session, Duration::from_secs(10), "commands back", |w| {
+        fresh(&w.cmd) && w.state.latest().is_some_and(|s| s.holding == 0)
+    });
+}
