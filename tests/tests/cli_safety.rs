@@ -139,6 +139,35 @@ fn echo_into_a_closed_pipe_ends_quietly_with_success() {
 }
 
 #[test]
+fn listings_into_a_closed_pipe_end_quietly_with_success() {
+    let sandbox = Sandbox::new();
+    let rec = sandbox.dir.path().join("r.mcap");
+    write_mixed_recording(&rec, 3);
+    let launch = sandbox.default_session(|t| t);
+    let cases: [&[&str]; 4] = [
+        &["recordings", "info", rec.to_str().unwrap()],
+        &["topics"],
+        &["nodes"],
+        &["launch", "--check", launch.to_str().unwrap()],
+    ];
+    for args in cases {
+        // The reader is gone before the command writes anything.
+        let mut child = sandbox
+            .teleop()
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let err = stderr_of(&out);
+        assert!(out.status.success(), "teleop {args:?}: {err}");
+        assert!(!err.contains("panicked"), "teleop {args:?}: {err}");
+    }
+}
+
+#[test]
 fn replay_refuses_unknown_topics_naming_the_known_ones() {
     let sandbox = Sandbox::new();
     let rec = sandbox.dir.path().join("r.mcap");

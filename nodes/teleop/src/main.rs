@@ -411,7 +411,7 @@ fn run_launch(
 ) -> anyhow::Result<ExitCode> {
     let launch = launch::config::load(file)?;
     if check {
-        println!(
+        out!(
             "{}: {} processes: {}",
             file.display(),
             launch.processes.len(),
@@ -421,7 +421,7 @@ fn run_launch(
                 .map(|p| p.name.as_str())
                 .collect::<Vec<_>>()
                 .join(", ")
-        );
+        )?;
         return Ok(ExitCode::SUCCESS);
     }
     match launch::supervisor::run(&launch, ipc, duration)? {

@@ -40,7 +40,7 @@ pub fn record_cmd(
         duration,
     };
     let summary = record(&runtime, &options)?;
-    print!("{}", report(&summary));
+    out!("{}", report(&summary).trim_end())?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -102,7 +102,7 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
 pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
     let out = out.unwrap_or_else(|| path.with_extension("repaired.mcap"));
     let report = repair_file(path, &out)?;
-    println!(
+    out!(
         "recovered {} messages into {}{}",
         report.messages,
         report.output.display(),
@@ -111,7 +111,7 @@ pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode>
         } else {
             ""
         }
-    );
+    )?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -636,21 +636,28 @@ pub fn reprocess_cmd(
         }
     }
     let summary = rec.finish()?;
-    println!(
+    out!(
         "reprocessed {} messages of {} into {}",
         messages.len(),
         input.display(),
         out.display()
-    );
-    println!(
+    )?;
+    out!(
         "{:<22} {:>10} {:>10} {:>8} {:>12}",
-        "OUTPUT", "RECOMPUTED", "MATCHED", "DIFFER", "MAX_DIFF"
-    );
+        "OUTPUT",
+        "RECOMPUTED",
+        "MATCHED",
+        "DIFFER",
+        "MAX_DIFF"
+    )?;
     for (name, c) in [("hand/command", &cmds), ("glove/force_command", &forces)] {
-        println!(
+        out!(
             "{name:<22} {:>10} {:>10} {:>8} {:>12.6}",
-            c.recomputed, c.matched, c.differing, c.max_difference
-        );
+            c.recomputed,
+            c.matched,
+            c.differing,
+            c.max_difference
+        )?;
     }
     let _ = summary;
     Ok(ExitCode::SUCCESS)
