@@ -50,7 +50,7 @@ pub struct Revo2Config {
     pub transport: String,
     /// Cycle rate in Hz.
     pub cycle_hz: f64,
-    /// A hand command older than this is stale: the hand holds its position.
+    /// A hand command older than this is stale: the hand holds its last target.
     pub stale_command_ms: u64,
     /// Without a valid exchange (answer with the right working counter, device in OP) for this
     /// long, the link counts as lost: `hand/state` says so and the bus is brought up again.
@@ -62,7 +62,8 @@ pub struct Revo2Config {
     /// Hand speed at 100 % speed, in joint travel per second (the document does not give it; used
     /// to turn normalised speed limits into the device's per-mille speed).
     pub full_speed_travel_per_s: f32,
-    /// Speed used when holding after a stale command, per mille of full speed.
+    /// Speed used when holding after a stale command, per mille of full speed (converted to
+    /// degrees per second in physical units).
     pub hold_speed_per_mille: u16,
     /// Joint limits, normalised (0 = open, 1 = closed), Revo2 order.
     pub joint_min: [f32; 6],
