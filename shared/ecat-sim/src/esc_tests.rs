@@ -1117,3 +1117,48 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_firmware_loop_reads_al_control_once_per_loop() {
+    let ms = |tenths: u64| Duration::from_micros(tenths * 100);
+    for firmware_loop in [Duration::from_millis(1), Duration::ZERO] {
+        let config = EscConfig {
+            firmware_loop,
+            ..EscConfig::default()
+        };
+        let mut bus = Bus::with_config(config, App::new(4, 6));
+        bus.mailboxes();
+        let looped = !firmware_loop.is_zero();
+        // An invalid request: seen at the next loop.
+        bus.now = ms(1);
+        bus.fpwr(reg::AL_CONTROL, &[0x08, 0]);
+        let status = (bus.reg16(reg::AL_STATUS), bus.reg16(reg::AL_STATUS_CODE));
+        assert_eq!(status, if looped { (0x01, 0) } else { (0x11, 0x0011) });
+        bus.now = ms(11);
+        assert_eq!(bus.reg16(reg::AL_STATUS), 0x11, "{firmware_loop:?}");
+        // Acknowledge and PRE-OP request back to back, within one loop: the firmware sees
+        // only the request, and the error stays.
+        bus.now = ms(12);
+        bus.fpwr(reg::AL_CONTROL, &[0x11, 0]);
+        bus.now = ms(13);
+        bus.fpwr(reg::AL_CONTROL, &[0x02, 0]);
+        bus.now = ms(21);
+        let status = (bus.reg16(reg::AL_STATUS), bus.reg16(reg::AL_STATUS_CODE));
+        assert_eq!(
+            status,
+            if looped { (0x11, 0x0011) } else { (0x02, 0) },
+            "{firmware_loop:?}"
+        );
+        if !looped {
+            continue;
+        }
+        // Acknowledge, wait for the error flag to clear, then request: taken.
+        bus.fpwr(reg::AL_CONTROL, &[0x11, 0]);
+        bus.now = ms(31);
+        assert_eq!(bus.reg16(reg::AL_STATUS), 0x01);
+        bus.fpwr(reg::AL_CONTROL, &[0x02, 0]);
+        bus.now = ms(41);
+        assert_eq!(bus.reg16(reg::AL_STATUS), 0x02);
+        assert_eq!(bus.sd.al_state(), (AlState::PreOp, false, 0));
+    }
+}
