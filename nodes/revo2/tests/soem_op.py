@@ -42,6 +42,11 @@ def main():
               f"product {sd.id:#010x} revision {sd.rev:#x}", flush=True)
         if sd.man != VENDOR_ID or sd.id != PRODUCT_CODE:
             fail(f"not a Revo2: vendor {sd.man:#010x} product {sd.id:#010x}")
+        # config_init requests PRE-OP without waiting; a firmware takes its next loop to enter
+        # it (and to open its mailbox).
+        if master.state_check(pysoem.PREOP_STATE, TIMEOUT_US) != pysoem.PREOP_STATE:
+            master.read_state()
+            fail(f"not in PRE-OP: state {sd.state:#x}, AL status code {sd.al_status:#06x}")
         # The identity object over CoE as well (SDO upload through the mailbox).
         vendor_sdo = int.from_bytes(sd.sdo_read(0x1018, 1), "little")
         if vendor_sdo != VENDOR_ID:
