@@ -205,3 +205,36 @@ node = "orphan-check"
         (!alive(node)).then_some(())
     });
 }
+
+#[test]
+fn a_node_stopped_and_continued_goes_on() {
+    // SIGSTOP then SIGCONT (a debugger, Ctrl-Z and `fg`) interrupts the node's wait; it is not
+    // a request to stop.
+    let sandbox = Sandbox::new();
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    let launch = sandbox.write(
+        "launch.toml",
+        &format!(
+            "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--profile\", {:?}]\n",
+            profile.display().to_string()
+        ),
+    );
+    let mut session = sandbox.launch(&launch);
+    let pid = wait_for(Duration::from_secs(20), "retarget node", || {
+        sandbox.pid_of("retarget")
+    });
+    // Let it settle into its event loop's wait first.
+    std::thread::sleep(Duration::from_millis(1000));
+    for signal in [libc::SIGSTOP, libc::SIGCONT] {
+        // SAFETY: kill(2) on a process of this test's session.
+        unsafe {
+            libc::kill(pid as libc::pid_t, signal);
+        }
+        std::thread::sleep(Duration::from_millis(300));
+    }
+    std::thread::sleep(Duration::from_millis(700));
+    assert!(alive(pid), "{}", session.log());
+    assert_eq!(sandbox.pid_of("retarget"), Some(pid), "{}", session.log());
+    assert!(!session.log().contains("exited"), "{}", session.log());
+    session.stop();
+}

@@ -6,6 +6,7 @@ use std::time::Duration;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::{CallbackProgression, WaitSetBuilder};
 use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2_bb_posix::signal::SignalHandler;
 
 use crate::ipc::RuntimeError;
 use crate::Service;
@@ -108,27 +109,35 @@ impl EventLoop {
             .attach_interval(self.tick)
             .map_err(|e| RuntimeError::ipc("attaching tick", "event loop", e))?;
 
-        let result = waitset
-            .wait_and_process(|id| {
-                let wake = if id.has_event_from(&tick) {
-                    Some(Wake::Tick)
-                } else {
-                    guards.iter().enumerate().find_map(|(i, g)| {
-                        if id.has_missed_deadline(g) {
-                            Some(Wake::Timeout(i))
-                        } else if id.has_event_from(g) {
-                            Some(Wake::Input(i))
-                        } else {
-                            None
-                        }
-                    })
-                };
-                match wake.map(&mut on_wake) {
-                    Some(Flow::Break(())) => CallbackProgression::Stop,
-                    _ => CallbackProgression::Continue,
-                }
-            })
-            .map_err(|e| RuntimeError::ipc("waiting", "event loop", e))?;
+        let result = loop {
+            let result = waitset
+                .wait_and_process(|id| {
+                    let wake = if id.has_event_from(&tick) {
+                        Some(Wake::Tick)
+                    } else {
+                        guards.iter().enumerate().find_map(|(i, g)| {
+                            if id.has_missed_deadline(g) {
+                                Some(Wake::Timeout(i))
+                            } else if id.has_event_from(g) {
+                                Some(Wake::Input(i))
+                            } else {
+                                None
+                            }
+                        })
+                    };
+                    match wake.map(&mut on_wake) {
+                        Some(Flow::Break(())) => CallbackProgression::Stop,
+                        _ => CallbackProgression::Continue,
+                    }
+                })
+                .map_err(|e| RuntimeError::ipc("waiting", "event loop", e))?;
+            // iceoryx2 reports any interrupted wait as `Interrupt`; Linux interrupts epoll_wait
+            // also when a stopped process is continued (SIGSTOP, SIGCONT: a debugger, a
+            // terminal's Ctrl-Z and `fg`). Only SIGINT/SIGTERM stop the loop.
+            if result != WaitSetRunResult::Interrupt || SignalHandler::termination_requested() {
+                break result;
+            }
+        };
         Ok(match result {
             WaitSetRunResult::Interrupt => StopReason::Interrupt,
             WaitSetRunResult::TerminationRequest => StopReason::Terminate,
