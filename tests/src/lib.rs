@@ -262,6 +262,33 @@ impl Drop for Session {
     }
 }
 
+/// A node configuration for a test's sandbox: `text` naming the repository's Revo2 profile.
+pub fn with_profile(text: &str) -> String {
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
+}
+
+/// A force-feedback configuration the tests that run `teleop-feedback` share.
+pub const FEEDBACK_TOML: &str = r#"
+tactile_timeout_ms = 100
+hand_timeout_ms = 100
+tick_ms = 10
+[feedback]
+contact_threshold_n = 0.3
+gain_per_n = 250.0
+max_force = 800
+stale_ramp_s = 0.2
+"#;
+
+/// A live glove sample whose six positions are `i` modulo 1000.
+pub fn glove(i: u64) -> teleop_msgs::GloveState {
+    teleop_msgs::GloveState {
+        raw_position: [(i % 1000) as u16; 6],
+        link_up: 1,
+        ..Default::default()
+    }
+}
+
 /// Polls `f` every 5 ms until it returns `Some`, or panics with `what` after `timeout`.
 pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
     let start = Instant::now();

@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{wait_for, Sandbox};
+use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{
     command_flags, contact_source, force_flags, hand_model, units, GloveForceCommand, GloveState,
     HandCommand, HandState, Tactile,
@@ -18,23 +18,6 @@ glove_timeout_ms = 100
 max_speed = 5.0
 [retarget.joints.index]
 max = 0.6
-"#;
-
-/// A node configuration for this test's sandbox: `text` naming the repository's Revo2 profile.
-fn with_profile(text: &str) -> String {
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
-}
-
-const FEEDBACK_TOML: &str = r#"
-tactile_timeout_ms = 100
-hand_timeout_ms = 100
-tick_ms = 10
-[feedback]
-contact_threshold_n = 0.3
-gain_per_n = 250.0
-max_force = 800
-stale_ramp_s = 0.2
 "#;
 
 fn launch_toml(restart: &str) -> String {

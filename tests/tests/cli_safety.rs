@@ -9,18 +9,10 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{bin, wait_for, Sandbox};
+use teleop_e2e::{bin, glove, wait_for, Sandbox};
 use teleop_msgs::{EStop, GloveState, HandCommand, Message};
 use teleop_recording::{RecordedMessage, Recorder};
 use teleop_runtime::NodeRuntime;
-
-fn glove(i: u64) -> GloveState {
-    GloveState {
-        raw_position: [(i % 1000) as u16; 6],
-        link_up: 1,
-        ..Default::default()
-    }
-}
 
 /// Writes `n` samples of each of `glove/state`, `hand/command` and `estop` (engaged), one of
 /// each every 10 ms.

@@ -8,27 +8,10 @@
 use std::process::Output;
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{wait_for, Sandbox};
+use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{force_flags, hand_model, units, GloveForceCommand, GloveState, HandCommand};
 use teleop_msgs::{HandState, NodeHealth, Tactile};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
-
-/// A node configuration for this test's sandbox: `text` naming the repository's Revo2 profile.
-fn with_profile(text: &str) -> String {
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
-}
-
-const FEEDBACK_TOML: &str = r#"
-tactile_timeout_ms = 100
-hand_timeout_ms = 100
-tick_ms = 10
-[feedback]
-contact_threshold_n = 0.3
-gain_per_n = 250.0
-max_force = 800
-stale_ramp_s = 0.2
-"#;
 
 /// One process `name` running `program`, restarted 1.5 s after it dies (long enough to send an
 /// e-stop while it is down).

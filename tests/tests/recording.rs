@@ -5,17 +5,9 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{bin, wait_for, Sandbox};
+use teleop_e2e::{bin, glove, wait_for, Sandbox};
 use teleop_msgs::GloveState;
 use teleop_runtime::NodeRuntime;
-
-fn glove(i: u64) -> GloveState {
-    GloveState {
-        raw_position: [(i % 1000) as u16; 6],
-        link_up: 1,
-        ..Default::default()
-    }
-}
 
 #[test]
 fn a_recorder_killed_with_sigkill_loses_at_most_the_last_100_ms() {
