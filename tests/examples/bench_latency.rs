@@ -22,6 +22,10 @@
 //! - EtherCAT period deviation: |interval - 1 ms| between consecutive process-data frames at
 //!   the emulated Revo2 (stamped when it answered each one; mailbox frames left out).
 //!
+//! - Wake-up floor: a thread at SCHED_FIFO 90 sleeps to 1 ms absolute deadlines
+//!   (`clock_nanosleep`) through each case and records how late it wakes (what `cyclictest`
+//!   measures): no scheduling policy gets a loop closer to its deadline than this machine does.
+//!
 //! Four cases side by side in one run: the nodes at the normal policy and at a real-time policy
 //! (`launch.toml`: `sched_policy = "fifo"`, the Revo2 node at priority 70, the glove 60,
 //! retargeting and force feedback 50), each idle and under CPU stress (two `yes > /dev/null`
@@ -115,6 +119,7 @@ struct Summary {
     label: String,
     exchanges: f64,
     period: Option<[f64; 3]>,
+    floor: Option<[f64; 3]>,
     a: Option<[f64; 3]>,
     b: Option<[f64; 3]>,
 }
@@ -128,6 +133,26 @@ const NODE_PRIORITIES: [(&str, u8); 4] = [
 ];
 /// The simulators' priority (they stand in for devices).
 const SIM_PRIORITY: u8 = 80;
+
+/// Sleeps to 1 ms absolute deadlines at SCHED_FIFO 90 until `stop`; returns how late each
+/// wake-up was (ns).
+fn wake_probe(stop: Arc<AtomicBool>) -> std::thread::JoinHandle<Vec<u64>> {
+    std::thread::spawn(move || {
+        enter_realtime_with(&Realtime {
+            policy: SchedPolicy::Fifo,
+            priority: 90,
+            ..Default::default()
+        });
+        let mut late = Vec::with_capacity(SECONDS as usize * 1000 + 1000);
+        let mut deadline = now_ns();
+        while !stop.load(Ordering::SeqCst) {
+            deadline += 1_000_000;
+            teleop_runtime::sleep_until_ns(deadline);
+            late.push(now_ns().saturating_sub(deadline));
+        }
+        late
+    })
+}
 
 fn run(label: &str, realtime: bool) -> Summary {
     let sandbox = Sandbox::new();
@@ -214,6 +239,8 @@ fn run(label: &str, realtime: bool) -> Summary {
         frames.cycles.clear();
     }
     let (mut s_v, mut c_v, mut t_v, mut f_v) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let probe_stop = Arc::new(AtomicBool::new(false));
+    let probe = wake_probe(probe_stop.clone());
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(SECONDS) {
         std::thread::sleep(Duration::from_millis(2));
@@ -223,6 +250,8 @@ fn run(label: &str, realtime: bool) -> Summary {
         forces.drain(|m| f_v.push(*m));
     }
     glove.record_answers(false);
+    probe_stop.store(true, Ordering::SeqCst);
+    let floor = probe.join().unwrap();
     session.stop();
     stop.store(true, Ordering::SeqCst);
     let _ = serve.join();
@@ -313,6 +342,7 @@ fn run(label: &str, realtime: bool) -> Summary {
         label: label.to_string(),
         exchanges: answers.len() as f64 / SECONDS as f64,
         period: quantiles(&period),
+        floor: quantiles(&floor),
         a: quantiles(&a_total),
         b: quantiles(&b_total),
     };
@@ -324,6 +354,10 @@ fn run(label: &str, realtime: bool) -> Summary {
     println!(
         "E  EtherCAT period deviation |interval - 1 ms|     {}",
         percentiles(period)
+    );
+    println!(
+        "W  wake-up lateness, SCHED_FIFO 90, 1 ms sleeps   {}",
+        percentiles(floor)
     );
     println!(
         "A  glove sample -> EtherCAT cycle carrying its hand command (floor: one cycle, 1.000 ms)"
@@ -391,15 +425,21 @@ fn main() {
     };
     println!("\nside by side (ms: p50 p99 max)");
     println!(
-        "{:<32} {:>10}  {:<22}  {:<22}  {:<22}",
-        "case", "glove ex/s", "EtherCAT period dev", "path A total", "path B total"
+        "{:<32} {:>10}  {:<22}  {:<22}  {:<22}  {:<22}",
+        "case",
+        "glove ex/s",
+        "EtherCAT period dev",
+        "wake-up floor",
+        "path A total",
+        "path B total"
     );
     for s in &summaries {
         println!(
-            "{:<32} {:>10.0}  {}  {}  {}",
+            "{:<32} {:>10.0}  {}  {}  {}  {}",
             s.label,
             s.exchanges,
             ms(s.period),
+            ms(s.floor),
             ms(s.a),
             ms(s.b)
         );
