@@ -252,3 +252,44 @@ fn without_the_right_a_node_warns_once_and_runs_on_at_normal_priority() {
     }
     session.stop();
 }
+
+#[test]
+fn scheduling_settings_in_the_launchers_environment_do_not_reach_its_processes() {
+    if !is_root() {
+        eprintln!("skipped: not root (a real-time policy would be refused anyway)");
+        return;
+    }
+    let sandbox = Sandbox::new();
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    let launch = sandbox.write(
+        "launch.toml",
+        &format!(
+            "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--profile\", {:?}]\n",
+            profile.display().to_string()
+        ),
+    );
+    // `teleop launch` itself started with settings meant for no process of this file.
+    let mut launcher = sandbox
+        .teleop()
+        .arg("launch")
+        .arg(&launch)
+        .env(teleop_runtime::realtime::ENV_SCHED_POLICY, "fifo")
+        .env(teleop_runtime::realtime::ENV_SCHED_PRIORITY, "33")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let retarget = wait_for(Duration::from_secs(30), "retarget node", || {
+        sandbox.pid_of("retarget")
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    let threads = threads(retarget);
+    let _ = launcher.kill();
+    let _ = launcher.wait();
+    assert!(!threads.is_empty());
+    assert!(
+        threads.iter().all(|(_, policy, _)| *policy == 0),
+        "a thread runs real-time: {threads:?}"
+    );
+}

@@ -25,6 +25,14 @@ pub const ENV_CPU_AFFINITY: &str = "TELEOP_CPU_AFFINITY";
 pub const ENV_LOCK_MEMORY: &str = "TELEOP_LOCK_MEMORY";
 /// Nice value, -20..=19 (threads that stay under `other`).
 pub const ENV_NICE: &str = "TELEOP_NICE";
+/// Every variable of the scheduling settings.
+pub const ENV_ALL: [&str; 5] = [
+    ENV_SCHED_POLICY,
+    ENV_SCHED_PRIORITY,
+    ENV_CPU_AFFINITY,
+    ENV_LOCK_MEMORY,
+    ENV_NICE,
+];
 
 /// A thread scheduling policy.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

@@ -266,6 +266,10 @@ fn spawn(
 ) -> anyhow::Result<Child> {
     let program = launch.resolve_program(process);
     let mut command = Command::new(&program);
+    // No scheduling settings that `teleop launch` itself was given: only the process's own.
+    for name in teleop_runtime::realtime::ENV_ALL {
+        command.env_remove(name);
+    }
     command
         .args(&process.args)
         .current_dir(launch.base_dir())
