@@ -317,7 +317,7 @@ impl Devices {
                 known.retain(|k| !same_device(k, d));
                 known.push(*d);
                 result = rec.add_metadata(
-                    &format!("{prefix}device.{}", kind_name(d.kind)),
+                    &format!("{prefix}device.{}", device_kind::name(d.kind)),
                     device_fields(d),
                 );
             }
@@ -335,14 +335,6 @@ fn same_identity(a: &DeviceInfo, b: &DeviceInfo) -> bool {
     same_device(a, b)
         && (a.model, a.firmware_a, a.firmware_b, a.serial_a, a.serial_b)
             == (b.model, b.firmware_a, b.firmware_b, b.serial_a, b.serial_b)
-}
-
-fn kind_name(kind: u8) -> &'static str {
-    match kind {
-        device_kind::GLOVE => "glove",
-        device_kind::REVO2 => "revo2",
-        _ => "other",
-    }
 }
 
 /// A device identity as metadata fields.

@@ -1135,11 +1135,7 @@ fn node_health(m: &NodeHealth, out: &mut Vec<Entry>) {
 }
 
 fn device_info(m: &DeviceInfo, out: &mut Vec<Entry>) {
-    let kind = match m.kind {
-        device_kind::GLOVE => "glove",
-        device_kind::REVO2 => "revo2",
-        _ => "other",
-    };
+    let kind = device_kind::name(m.kind);
     let mut text = format!("**{}** (id {})\n", text_of(&m.model), m.id);
     for (name, field) in [
         ("firmware", &m.firmware_a),
