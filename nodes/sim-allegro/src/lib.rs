@@ -1,0 +1,3 @@
+//! The simulated Allegro Hand: its CAN firmware per protocol generation, 16-joint dynamics, a virtual object, a simulated slcan adapter.
+
+pub mod hand;
