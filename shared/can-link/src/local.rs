@@ -1,0 +1,758 @@
+//! A local CAN bus: in-process ([`LocalBus`], for tests) and over a Unix socket
+//! ([`BusServer`] in the simulator, [`SocketLink`] in the node) so that the node's code runs
+//! against a simulated hand in another process.
+//!
+//! A CAN bus is a broadcast medium: every end sees the frames every other end sends, never its
+//! own. Each end has a bounded receive queue ([`QUEUE`] frames); when it is full the oldest
+//! frame is dropped and counted as an overrun.
+//!
+//! Frame-level timing: with [`LocalBus::set_timing`] the bus carries one frame at a time at the
+//! bit rate, each taking its exact time on the wire ([`crate::timing::frame_time_exact`]):
+//! a frame reaches the other ends when its transmission would end, frames queue behind each
+//! other, and a sender whose own [`TX_QUEUE`] frames are all still waiting blocks until the
+//! first has gone (as a controller's transmit queue). So bus time is real time.
+//!
+//! Bus-off can be simulated with [`LocalBus::set_bus_state`]: every end's
+//! [`CanLink::bus_state`] follows, [`CanLink::recv`] returns [`LinkError::BusOff`] once when
+//! the bus goes off, and while it is off frames are dropped (a send counts an error).
+//!
+//! Socket protocol: a stream of 16-byte records, like Linux's `struct can_frame`: u32
+//! little-endian id word (bit 31 extended, bit 30 remote, bit 29 bus-state record), u8 DLC,
+//! 3 reserved bytes, 8 data bytes (a state record carries the state in data byte 0: 0
+//! active, 1 warning, 2 passive, 3 bus-off).
+
+use std::collections::VecDeque;
+use std::io::{Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::timing::frame_time_exact;
+use crate::{Bitrate, BusState, CanFrame, CanLink, LinkCounters, LinkError};
+
+/// Frames each end's receive queue holds.
+pub const QUEUE: usize = 1024;
+/// Frames an end may have waiting for the bus (with timing on) before `send` blocks (Linux's
+/// default `txqueuelen` for CAN interfaces).
+pub const TX_QUEUE: usize = 10;
+/// Size of one record on the socket.
+pub const RECORD: usize = 16;
+
+const FLAG_EXTENDED: u32 = 1 << 31;
+const FLAG_REMOTE: u32 = 1 << 30;
+const FLAG_STATE: u32 = 1 << 29;
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// What an end receives: a frame, or a change of bus state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Event {
+    Frame(CanFrame),
+    State(BusState),
+}
+
+struct Queue {
+    inner: Mutex<QueueInner>,
+    ready: Condvar,
+}
+
+struct QueueInner {
+    /// Events and the time from which they may be received.
+    events: VecDeque<(Instant, Event)>,
+    closed: bool,
+    overruns: u64,
+    state: BusState,
+}
+
+struct Hub {
+    inner: Mutex<HubInner>,
+}
+
+struct HubInner {
+    ends: Vec<(u64, Arc<Queue>)>,
+    next_id: u64,
+    timing: Option<Bitrate>,
+    bus_free_at: Instant,
+    state: BusState,
+}
+
+/// An in-process CAN bus. Cloning gives another handle to the same bus.
+#[derive(Clone)]
+pub struct LocalBus {
+    hub: Arc<Hub>,
+}
+
+impl Default for LocalBus {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl LocalBus {
+    /// A bus without timing (frames arrive at once) and no ends yet.
+    pub fn new() -> Self {
+        Self {
+            hub: Arc::new(Hub {
+                inner: Mutex::new(HubInner {
+                    ends: Vec::new(),
+                    next_id: 1,
+                    timing: None,
+                    bus_free_at: Instant::now(),
+                    state: BusState::ErrorActive,
+                }),
+            }),
+        }
+    }
+
+    /// A bus that serialises frames at `bitrate` (see [`Self::set_timing`]).
+    pub fn with_timing(bitrate: Bitrate) -> Self {
+        let bus = Self::new();
+        bus.set_timing(Some(bitrate));
+        bus
+    }
+
+    /// Serialises frames at this bit rate from now on (`None`: frames arrive at once).
+    pub fn set_timing(&self, bitrate: Option<Bitrate>) {
+        lock(&self.hub.inner).timing = bitrate.filter(|b| b.0 > 0);
+    }
+
+    /// The bit rate frames are serialised at, if any.
+    pub fn timing(&self) -> Option<Bitrate> {
+        lock(&self.hub.inner).timing
+    }
+
+    /// A new end of the bus (a node on it), described as `local:bus/N`.
+    pub fn end(&self) -> LocalEnd {
+        self.end_named(None)
+    }
+
+    fn end_named(&self, what: Option<String>) -> LocalEnd {
+        let mut hub = lock(&self.hub.inner);
+        let id = hub.next_id;
+        hub.next_id += 1;
+        let queue = Arc::new(Queue {
+            inner: Mutex::new(QueueInner {
+                events: VecDeque::with_capacity(QUEUE),
+                closed: false,
+                overruns: 0,
+                state: hub.state,
+            }),
+            ready: Condvar::new(),
+        });
+        hub.ends.push((id, queue.clone()));
+        LocalEnd {
+            hub: self.hub.clone(),
+            id,
+            queue,
+            what: what.unwrap_or_else(|| format!("local:bus/{id}")),
+            counters: LinkCounters::default(),
+            tx_pending: VecDeque::with_capacity(TX_QUEUE),
+            bus_off_reported: false,
+        }
+    }
+
+    /// Ends attached now.
+    pub fn ends(&self) -> usize {
+        lock(&self.hub.inner).ends.len()
+    }
+
+    /// Sets the bus state every end sees (to simulate error-passive or bus-off).
+    pub fn set_bus_state(&self, state: BusState) {
+        let mut hub = lock(&self.hub.inner);
+        if hub.state == state {
+            return;
+        }
+        hub.state = state;
+        let now = Instant::now();
+        for (_, queue) in &hub.ends {
+            let mut q = lock(&queue.inner);
+            q.state = state;
+            push_event(&mut q, now, Event::State(state));
+            queue.ready.notify_all();
+        }
+    }
+
+    /// The bus state set with [`Self::set_bus_state`].
+    pub fn bus_state(&self) -> BusState {
+        lock(&self.hub.inner).state
+    }
+}
+
+fn push_event(q: &mut QueueInner, at: Instant, event: Event) {
+    if q.events.len() >= QUEUE {
+        q.events.pop_front();
+        q.overruns += 1;
+    }
+    q.events.push_back((at, event));
+}
+
+/// One end of a [`LocalBus`] (a node on it). Dropping it detaches it from the bus.
+pub struct LocalEnd {
+    hub: Arc<Hub>,
+    id: u64,
+    queue: Arc<Queue>,
+    what: String,
+    counters: LinkCounters,
+    /// When this end's frames waiting for the bus will have been sent (timing on).
+    tx_pending: VecDeque<Instant>,
+    bus_off_reported: bool,
+}
+
+impl LocalEnd {
+    /// Puts `frame` on the bus; false when the bus is off (the frame is dropped).
+    fn broadcast(&mut self, frame: &CanFrame) -> bool {
+        let timed = lock(&self.hub.inner).timing.is_some();
+        if timed {
+            // A full transmit queue: wait until its oldest frame has gone.
+            let now = Instant::now();
+            while self.tx_pending.front().is_some_and(|&t| t <= now) {
+                self.tx_pending.pop_front();
+            }
+            if self.tx_pending.len() >= TX_QUEUE {
+                if let Some(first) = self.tx_pending.pop_front() {
+                    std::thread::sleep(first.saturating_duration_since(now));
+                }
+            }
+        }
+        let mut hub = lock(&self.hub.inner);
+        if hub.state == BusState::BusOff {
+            return false;
+        }
+        let now = Instant::now();
+        let at = match hub.timing {
+            Some(bitrate) => {
+                let start = hub.bus_free_at.max(now);
+                let end = start + frame_time_exact(frame, bitrate);
+                hub.bus_free_at = end;
+                self.tx_pending.push_back(end);
+                end
+            }
+            None => now,
+        };
+        for (id, queue) in &hub.ends {
+            if *id == self.id {
+                continue;
+            }
+            let mut q = lock(&queue.inner);
+            push_event(&mut q, at, Event::Frame(*frame));
+            queue.ready.notify_all();
+        }
+        true
+    }
+
+    /// Waits up to `timeout` for the next event; Err when the end was closed.
+    fn recv_event(&mut self, timeout: Duration) -> Result<Option<Event>, LinkError> {
+        let deadline = Instant::now() + timeout;
+        let mut q = lock(&self.queue.inner);
+        loop {
+            let now = Instant::now();
+            let wake = match q.events.front() {
+                Some(&(at, _)) if at <= now => {
+                    return Ok(q.events.pop_front().map(|(_, e)| e));
+                }
+                Some(&(at, _)) => at.min(deadline),
+                None if q.closed => {
+                    return Err(LinkError::Disconnected {
+                        what: self.what.clone(),
+                        detail: "the bus was closed".into(),
+                    })
+                }
+                None => deadline,
+            };
+            if now >= deadline {
+                return Ok(None);
+            }
+            q = self
+                .queue
+                .ready
+                .wait_timeout(q, wake.saturating_duration_since(now))
+                .map(|(g, _)| g)
+                .unwrap_or_else(|e| e.into_inner().0);
+        }
+    }
+
+    fn close(&self) {
+        lock(&self.hub.inner).ends.retain(|(id, _)| *id != self.id);
+        let mut q = lock(&self.queue.inner);
+        q.closed = true;
+        self.queue.ready.notify_all();
+    }
+}
+
+impl CanLink for LocalEnd {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), LinkError> {
+        if self.broadcast(frame) {
+            self.counters.tx += 1;
+        } else {
+            self.counters.errors += 1;
+        }
+        Ok(())
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<CanFrame>, LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.recv_event(left)? {
+                Some(Event::Frame(f)) => {
+                    self.counters.rx += 1;
+                    return Ok(Some(f));
+                }
+                Some(Event::State(BusState::BusOff)) => {
+                    if !self.bus_off_reported {
+                        self.bus_off_reported = true;
+                        return Err(LinkError::BusOff {
+                            what: self.what.clone(),
+                        });
+                    }
+                }
+                Some(Event::State(_)) => self.bus_off_reported = false,
+                None => return Ok(None),
+            }
+        }
+    }
+
+    fn bus_state(&self) -> BusState {
+        lock(&self.queue.inner).state
+    }
+
+    fn counters(&self) -> LinkCounters {
+        LinkCounters {
+            overruns: lock(&self.queue.inner).overruns,
+            ..self.counters
+        }
+    }
+
+    fn describe(&self) -> &str {
+        &self.what
+    }
+}
+
+impl Drop for LocalEnd {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+fn encode_record(event: &Event) -> [u8; RECORD] {
+    let mut r = [0u8; RECORD];
+    match event {
+        Event::Frame(f) => {
+            let mut word = f.raw_id();
+            if f.is_extended() {
+                word |= FLAG_EXTENDED;
+            }
+            if f.is_remote() {
+                word |= FLAG_REMOTE;
+            }
+            r[..4].copy_from_slice(&word.to_le_bytes());
+            // At most 8.
+            r[4] = f.dlc() as u8;
+            r[8..8 + f.data().len()].copy_from_slice(f.data());
+        }
+        Event::State(s) => {
+            r[..4].copy_from_slice(&FLAG_STATE.to_le_bytes());
+            r[4] = 1;
+            r[8] = match s {
+                BusState::ErrorActive => 0,
+                BusState::ErrorWarning => 1,
+                BusState::ErrorPassive => 2,
+                BusState::BusOff => 3,
+            };
+        }
+    }
+    r
+}
+
+/// Decodes one record; a description of what is wrong otherwise.
+fn decode_record(r: &[u8; RECORD]) -> Result<Event, String> {
+    let word = u32::from_le_bytes([r[0], r[1], r[2], r[3]]);
+    let dlc = r[4];
+    if word & FLAG_STATE != 0 {
+        return match (word & !FLAG_STATE, dlc, r[8]) {
+            (0, 1, 0) => Ok(Event::State(BusState::ErrorActive)),
+            (0, 1, 1) => Ok(Event::State(BusState::ErrorWarning)),
+            (0, 1, 2) => Ok(Event::State(BusState::ErrorPassive)),
+            (0, 1, 3) => Ok(Event::State(BusState::BusOff)),
+            _ => Err(format!("bad bus-state record {r:02X?}")),
+        };
+    }
+    let id = word & !(FLAG_EXTENDED | FLAG_REMOTE);
+    let n = usize::from(dlc.min(8));
+    let frame = match (word & FLAG_EXTENDED != 0, word & FLAG_REMOTE != 0) {
+        (false, false) => u16::try_from(id)
+            .ok()
+            .and_then(|id| CanFrame::standard(id, &r[8..8 + n])),
+        (false, true) => u16::try_from(id)
+            .ok()
+            .and_then(|id| CanFrame::standard_remote(id, dlc)),
+        (true, false) => CanFrame::extended(id, &r[8..8 + n]),
+        (true, true) => CanFrame::extended_remote(id, dlc),
+    };
+    match frame {
+        Some(f) if dlc <= 8 => Ok(Event::Frame(f)),
+        _ => Err(format!(
+            "bad frame record {r:02X?} (id or DLC out of range)"
+        )),
+    }
+}
+
+/// The simulator's side of the socket bus: a [`LocalBus`] served on a Unix socket. Each
+/// connected client is one more end; the server's own ends ([`Self::end`]) are in-process.
+/// Dropping it disconnects the clients and removes the socket file.
+pub struct BusServer {
+    bus: LocalBus,
+    path: PathBuf,
+    stop: Arc<AtomicBool>,
+    clients: Arc<Mutex<Vec<(u64, UnixStream)>>>,
+    threads: Arc<Mutex<Vec<JoinHandle<()>>>>,
+    accept: Option<JoinHandle<()>>,
+}
+
+impl BusServer {
+    /// Binds `path` (replacing a stale socket file nobody listens on) and accepts clients
+    /// in a thread. Fails with `AddrInUse` when another server is listening there.
+    pub fn bind(path: &Path) -> std::io::Result<Self> {
+        Self::serve(path, LocalBus::new())
+    }
+
+    /// As [`Self::bind`], serving an existing bus (its in-process ends see the clients).
+    pub fn serve(path: &Path, bus: LocalBus) -> std::io::Result<Self> {
+        if path.exists() {
+            if UnixStream::connect(path).is_ok() {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::AddrInUse,
+                    format!("{}: another bus server is listening", path.display()),
+                ));
+            }
+            std::fs::remove_file(path)?;
+        }
+        let listener = UnixListener::bind(path)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let clients = Arc::new(Mutex::new(Vec::new()));
+        let threads = Arc::new(Mutex::new(Vec::new()));
+        let accept = {
+            let (bus, stop, clients, threads) =
+                (bus.clone(), stop.clone(), clients.clone(), threads.clone());
+            let path = path.to_path_buf();
+            std::thread::Builder::new()
+                .name("can-bus-accept".into())
+                .spawn(move || accept_loop(listener, &path, &bus, &stop, &clients, &threads))?
+        };
+        Ok(Self {
+            bus,
+            path: path.to_path_buf(),
+            stop,
+            clients,
+            threads,
+            accept: Some(accept),
+        })
+    }
+
+    /// A new in-process end of the served bus.
+    pub fn end(&self) -> LocalEnd {
+        self.bus.end()
+    }
+
+    /// The served bus (timing, bus state).
+    pub fn bus(&self) -> &LocalBus {
+        &self.bus
+    }
+
+    /// The socket path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Clients connected now.
+    pub fn clients(&self) -> usize {
+        lock(&self.clients).len()
+    }
+}
+
+impl Drop for BusServer {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for (_, stream) in lock(&self.clients).iter() {
+            let _ = stream.shutdown(std::net::Shutdown::Both);
+        }
+        // Wake the accept loop.
+        let _ = UnixStream::connect(&self.path);
+        if let Some(t) = self.accept.take() {
+            let _ = t.join();
+        }
+        let threads = std::mem::take(&mut *lock(&self.threads));
+        for t in threads {
+            let _ = t.join();
+        }
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+fn accept_loop(
+    listener: UnixListener,
+    path: &Path,
+    bus: &LocalBus,
+    stop: &AtomicBool,
+    clients: &Arc<Mutex<Vec<(u64, UnixStream)>>>,
+    threads: &Arc<Mutex<Vec<JoinHandle<()>>>>,
+) {
+    for stream in listener.incoming() {
+        if stop.load(Ordering::SeqCst) {
+            break;
+        }
+        let stream = match stream {
+            Ok(s) => s,
+            Err(e) => {
+                tracing::warn!(socket = %path.display(), "accept failed: {e}");
+                std::thread::sleep(Duration::from_millis(10));
+                continue;
+            }
+        };
+        if let Err(e) = start_client(stream, path, bus, clients, threads) {
+            tracing::warn!(socket = %path.display(), "cannot serve a client: {e}");
+        }
+    }
+}
+
+fn start_client(
+    stream: UnixStream,
+    path: &Path,
+    bus: &LocalBus,
+    clients: &Arc<Mutex<Vec<(u64, UnixStream)>>>,
+    threads: &Arc<Mutex<Vec<JoinHandle<()>>>>,
+) -> std::io::Result<()> {
+    let reader = stream.try_clone()?;
+    let mut writer = stream.try_clone()?;
+    let mut end = bus.end_named(None);
+    let id = end.id;
+    end.what = format!("local:{}#{id}", path.display());
+    // A client that stops reading must not stall the bus for long.
+    writer.set_write_timeout(Some(Duration::from_secs(1)))?;
+    lock(clients).push((id, stream));
+    // The client learns the bus state first.
+    let state = lock(&end.queue.inner).state;
+    writer.write_all(&encode_record(&Event::State(state)))?;
+    let queue = end.queue.clone();
+    let hub = end.hub.clone();
+    let tx = std::thread::Builder::new()
+        .name(format!("can-bus-tx-{id}"))
+        .spawn(move || {
+            // This end's receive side: bus -> client.
+            let mut end = end;
+            loop {
+                match end.recv_event(Duration::from_millis(500)) {
+                    Ok(Some(event)) => {
+                        if writer.write_all(&encode_record(&event)).is_err() {
+                            break;
+                        }
+                        if let Event::Frame(_) = event {
+                            end.counters.rx += 1;
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(_) => break,
+                }
+            }
+            let _ = writer.shutdown(std::net::Shutdown::Both);
+        })?;
+    let clients2 = clients.clone();
+    let rx = std::thread::Builder::new()
+        .name(format!("can-bus-rx-{id}"))
+        .spawn(move || {
+            // client -> bus, as this client's end.
+            let mut sender = LocalEnd {
+                hub,
+                id,
+                queue,
+                what: String::new(),
+                counters: LinkCounters::default(),
+                tx_pending: VecDeque::with_capacity(TX_QUEUE),
+                bus_off_reported: false,
+            };
+            let mut reader = reader;
+            let mut record = [0u8; RECORD];
+            loop {
+                if reader.read_exact(&mut record).is_err() {
+                    break;
+                }
+                match decode_record(&record) {
+                    Ok(Event::Frame(f)) => {
+                        sender.broadcast(&f);
+                    }
+                    Ok(Event::State(_)) => {}
+                    Err(e) => tracing::debug!("client {id}: {e}"),
+                }
+            }
+            // Detaches the end: the tx thread ends.
+            sender.close();
+            lock(&clients2).retain(|(c, _)| *c != id);
+        })?;
+    lock(threads).extend([tx, rx]);
+    Ok(())
+}
+
+/// The node's side of the socket bus: a client of a [`BusServer`].
+pub struct SocketLink {
+    stream: UnixStream,
+    what: String,
+    record: [u8; RECORD],
+    filled: usize,
+    read_timeout: Option<Duration>,
+    state: BusState,
+    bus_off_reported: bool,
+    counters: LinkCounters,
+}
+
+impl SocketLink {
+    /// Connects to the bus socket at `path`. [`LinkError::NotFound`] when nobody serves it.
+    pub fn connect(path: &Path) -> Result<Self, LinkError> {
+        let what = format!("local:{}", path.display());
+        let stream = UnixStream::connect(path).map_err(|e| match e.kind() {
+            std::io::ErrorKind::NotFound | std::io::ErrorKind::ConnectionRefused => {
+                LinkError::NotFound {
+                    what: what.clone(),
+                    detail: format!(
+                        "no bus server there ({e}); is the simulator running with --socket {}?",
+                        path.display()
+                    ),
+                }
+            }
+            _ => LinkError::Io {
+                what: what.clone(),
+                source: e,
+            },
+        })?;
+        stream
+            .set_write_timeout(Some(Duration::from_secs(1)))
+            .map_err(|source| LinkError::Io {
+                what: what.clone(),
+                source,
+            })?;
+        Ok(Self {
+            stream,
+            what,
+            record: [0; RECORD],
+            filled: 0,
+            read_timeout: None,
+            state: BusState::ErrorActive,
+            bus_off_reported: false,
+            counters: LinkCounters::default(),
+        })
+    }
+
+    fn disconnected(&self, detail: String) -> LinkError {
+        LinkError::Disconnected {
+            what: self.what.clone(),
+            detail,
+        }
+    }
+}
+
+impl CanLink for SocketLink {
+    fn send(&mut self, frame: &CanFrame) -> Result<(), LinkError> {
+        if self.state == BusState::BusOff {
+            self.counters.errors += 1;
+            return Ok(());
+        }
+        match self.stream.write_all(&encode_record(&Event::Frame(*frame))) {
+            Ok(()) => {
+                self.counters.tx += 1;
+                Ok(())
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock
+                ) =>
+            {
+                Err(LinkError::Io {
+                    what: self.what.clone(),
+                    source: std::io::Error::new(e.kind(), "the bus server takes no frames"),
+                })
+            }
+            Err(e) => Err(self.disconnected(format!("write failed: {e}; the bus server is gone"))),
+        }
+    }
+
+    fn recv(&mut self, timeout: Duration) -> Result<Option<CanFrame>, LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if self.filled == RECORD {
+                self.filled = 0;
+                match decode_record(&self.record) {
+                    Ok(Event::Frame(f)) => {
+                        self.counters.rx += 1;
+                        return Ok(Some(f));
+                    }
+                    Ok(Event::State(s)) => {
+                        self.state = s;
+                        if s != BusState::BusOff {
+                            self.bus_off_reported = false;
+                        } else if !self.bus_off_reported {
+                            self.bus_off_reported = true;
+                            return Err(LinkError::BusOff {
+                                what: self.what.clone(),
+                            });
+                        }
+                    }
+                    Err(e) => {
+                        self.counters.errors += 1;
+                        tracing::debug!(link = %self.what, "{e}");
+                    }
+                }
+                continue;
+            }
+            let now = Instant::now();
+            // SO_RCVTIMEO cannot be zero (that means "forever"): a microsecond instead.
+            let wait = deadline
+                .saturating_duration_since(now)
+                .max(Duration::from_micros(1));
+            if self.read_timeout != Some(wait) {
+                self.stream
+                    .set_read_timeout(Some(wait))
+                    .map_err(|source| LinkError::Io {
+                        what: self.what.clone(),
+                        source,
+                    })?;
+                self.read_timeout = Some(wait);
+            }
+            match self.stream.read(&mut self.record[self.filled..]) {
+                Ok(0) => {
+                    return Err(self.disconnected("the bus server closed the connection".into()))
+                }
+                Ok(n) => self.filled += n,
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock
+                            | std::io::ErrorKind::TimedOut
+                            | std::io::ErrorKind::Interrupted
+                    ) =>
+                {
+                    if Instant::now() >= deadline {
+                        return Ok(None);
+                    }
+                }
+                Err(e) => return Err(self.disconnected(format!("read failed: {e}"))),
+            }
+        }
+    }
+
+    fn bus_state(&self) -> BusState {
+        self.state
+    }
+
+    fn counters(&self) -> LinkCounters {
+        self.counters
+    }
+
+    fn describe(&self) -> &str {
+        &self.what
+    }
+}
