@@ -481,10 +481,12 @@ impl Drop for BusServer {
         for (_, stream) in lock(&self.clients).iter() {
             let _ = stream.shutdown(std::net::Shutdown::Both);
         }
-        // Wake the accept loop.
-        let _ = UnixStream::connect(&self.path);
-        if let Some(t) = self.accept.take() {
-            let _ = t.join();
+        // Wake the accept loop; if the socket file was taken away meanwhile it cannot be
+        // woken, and is left to end with the process rather than hang here.
+        if UnixStream::connect(&self.path).is_ok() {
+            if let Some(t) = self.accept.take() {
+                let _ = t.join();
+            }
         }
         let threads = std::mem::take(&mut *lock(&self.threads));
         for t in threads {
@@ -754,5 +756,255 @@ impl CanLink for SocketLink {
 
     fn describe(&self) -> &str {
         &self.what
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn frame(id: u16, data: &[u8]) -> CanFrame {
+        CanFrame::standard(id, data).expect("valid frame")
+    }
+
+    const NO_WAIT: Duration = Duration::ZERO;
+    const WAIT: Duration = Duration::from_secs(2);
+
+    #[test]
+    fn every_end_sees_the_others_never_its_own() {
+        let bus = LocalBus::new();
+        let (mut a, mut b, mut c) = (bus.end(), bus.end(), bus.end());
+        assert_eq!(bus.ends(), 3);
+        a.send(&frame(0x100, &[1])).expect("send");
+        b.send(&frame(0x200, &[2])).expect("send");
+        assert_eq!(a.recv(WAIT).expect("recv"), Some(frame(0x200, &[2])));
+        assert_eq!(a.recv(NO_WAIT).expect("recv"), None);
+        assert_eq!(b.recv(WAIT).expect("recv"), Some(frame(0x100, &[1])));
+        assert_eq!(b.recv(NO_WAIT).expect("recv"), None);
+        assert_eq!(c.recv(WAIT).expect("recv"), Some(frame(0x100, &[1])));
+        assert_eq!(c.recv(WAIT).expect("recv"), Some(frame(0x200, &[2])));
+        let counters = c.counters();
+        assert_eq!((counters.rx, counters.tx), (2, 0));
+        assert_eq!(a.counters().tx, 1);
+        drop(c);
+        assert_eq!(bus.ends(), 2);
+        assert!(a.describe().starts_with("local:bus/"));
+    }
+
+    #[test]
+    fn recv_blocks_until_a_frame_or_the_timeout() {
+        let bus = LocalBus::new();
+        let (mut a, mut b) = (bus.end(), bus.end());
+        let start = Instant::now();
+        assert_eq!(b.recv(Duration::from_millis(30)).expect("recv"), None);
+        assert!(start.elapsed() >= Duration::from_millis(30));
+        let sender = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(20));
+            a.send(&frame(0x7FF, &[])).expect("send");
+            a
+        });
+        assert_eq!(b.recv(WAIT).expect("recv"), Some(frame(0x7FF, &[])));
+        drop(sender.join().expect("sender"));
+    }
+
+    #[test]
+    fn full_queue_drops_the_oldest_as_overruns() {
+        let bus = LocalBus::new();
+        let (mut a, mut b) = (bus.end(), bus.end());
+        for i in 0..QUEUE + 5 {
+            a.send(&frame((i % 0x800) as u16, &[])).expect("send");
+        }
+        assert_eq!(b.counters().overruns, 5);
+        assert_eq!(b.recv(NO_WAIT).expect("recv"), Some(frame(5, &[])));
+    }
+
+    #[test]
+    fn timing_serialises_frames_at_the_bit_rate() {
+        let bus = LocalBus::with_timing(Bitrate::MBIT_1);
+        assert_eq!(bus.timing(), Some(Bitrate::MBIT_1));
+        let (mut a, mut b) = (bus.end(), bus.end());
+        let frames: Vec<CanFrame> = (0..8u8)
+            .map(|i| frame(0x3D3, &[i, 0x80, 0, 0x80, 0, 0x80, 0, 0x80]))
+            .collect();
+        let bus_time: Duration = frames
+            .iter()
+            .map(|f| frame_time_exact(f, Bitrate::MBIT_1))
+            .sum();
+        let start = Instant::now();
+        for f in &frames {
+            a.send(f).expect("send");
+        }
+        // Queued, not waited for: the sender is not held up by 8 frames (TX_QUEUE is 10).
+        let mut got = Vec::new();
+        while got.len() < frames.len() {
+            got.push(b.recv(WAIT).expect("recv").expect("a frame"));
+        }
+        let took = start.elapsed();
+        assert_eq!(got, frames);
+        // About 1 ms of bus time: the last frame cannot arrive before it.
+        assert!(took >= bus_time, "{took:?} < {bus_time:?}");
+        // Nothing arrives before its own transmission ended.
+        let start = Instant::now();
+        a.send(&frames[0]).expect("send");
+        assert_eq!(b.recv(NO_WAIT).expect("recv"), None);
+        assert_eq!(b.recv(WAIT).expect("recv"), Some(frames[0]));
+        assert!(start.elapsed() >= frame_time_exact(&frames[0], Bitrate::MBIT_1));
+    }
+
+    #[test]
+    fn timing_blocks_a_sender_with_a_full_transmit_queue() {
+        // At 10 kbit/s an 8-byte frame takes over 11 ms: the 11th send waits for the first.
+        let bus = LocalBus::with_timing(Bitrate(10_000));
+        let (mut a, _b) = (bus.end(), bus.end());
+        let f = frame(0x100, &[0; 8]);
+        let start = Instant::now();
+        for _ in 0..TX_QUEUE {
+            a.send(&f).expect("send");
+        }
+        assert!(start.elapsed() < frame_time_exact(&f, Bitrate(10_000)));
+        a.send(&f).expect("send");
+        assert!(start.elapsed() >= frame_time_exact(&f, Bitrate(10_000)));
+    }
+
+    #[test]
+    fn bus_off_is_reported_once_and_drops_frames() {
+        let bus = LocalBus::new();
+        let (mut a, mut b) = (bus.end(), bus.end());
+        bus.set_bus_state(BusState::BusOff);
+        assert_eq!(b.bus_state(), BusState::BusOff);
+        let err = b.recv(WAIT).expect_err("bus-off");
+        assert!(matches!(err, LinkError::BusOff { .. }), "{err}");
+        a.send(&frame(0x100, &[])).expect("send");
+        assert_eq!(a.counters().errors, 1);
+        assert_eq!(b.recv(Duration::from_millis(10)).expect("recv"), None);
+        bus.set_bus_state(BusState::ErrorActive);
+        assert!(a.recv(WAIT).is_err(), "a sees the bus-off too");
+        assert_eq!(a.recv(NO_WAIT).expect("recv"), None);
+        a.send(&frame(0x100, &[])).expect("send");
+        assert_eq!(b.recv(WAIT).expect("recv"), Some(frame(0x100, &[])));
+        assert_eq!(b.bus_state(), BusState::ErrorActive);
+    }
+
+    fn wait_for_clients(server: &BusServer, n: usize) {
+        let deadline = Instant::now() + WAIT;
+        while server.clients() != n && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert_eq!(server.clients(), n);
+    }
+
+    #[test]
+    fn socket_bus_connects_processes() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bus.sock");
+        let server = BusServer::bind(&path).expect("bind");
+        let mut sim = server.end();
+        let mut node = SocketLink::connect(&path).expect("connect");
+        let mut other = SocketLink::connect(&path).expect("connect");
+        wait_for_clients(&server, 2);
+        assert_eq!(node.describe(), format!("local:{}", path.display()));
+
+        sim.send(&frame(0x3D3, &[1, 2, 3, 4, 5, 6, 7, 8]))
+            .expect("send");
+        assert_eq!(
+            node.recv(WAIT).expect("recv"),
+            Some(frame(0x3D3, &[1, 2, 3, 4, 5, 6, 7, 8]))
+        );
+        assert_eq!(
+            other.recv(WAIT).expect("recv"),
+            Some(frame(0x3D3, &[1, 2, 3, 4, 5, 6, 7, 8]))
+        );
+        let rtr = CanFrame::standard_remote(0x200, 0).expect("valid");
+        node.send(&rtr).expect("send");
+        assert_eq!(sim.recv(WAIT).expect("recv"), Some(rtr));
+        // The other client sees it, the sender does not.
+        assert_eq!(other.recv(WAIT).expect("recv"), Some(rtr));
+        assert_eq!(node.recv(Duration::from_millis(20)).expect("recv"), None);
+        let ext = CanFrame::extended(0x1ABC_DEF0, &[9]).expect("valid");
+        other.send(&ext).expect("send");
+        assert_eq!(node.recv(WAIT).expect("recv"), Some(ext));
+        assert_eq!(node.counters().rx, 2);
+        assert_eq!(node.counters().tx, 1);
+
+        // Bus state reaches the clients.
+        server.bus().set_bus_state(BusState::BusOff);
+        let err = node.recv(WAIT).expect_err("bus-off");
+        assert!(matches!(err, LinkError::BusOff { .. }), "{err}");
+        assert_eq!(node.bus_state(), BusState::BusOff);
+        server.bus().set_bus_state(BusState::ErrorActive);
+        assert_eq!(node.recv(Duration::from_millis(50)).expect("recv"), None);
+        assert_eq!(node.bus_state(), BusState::ErrorActive);
+
+        // A client that leaves is detached.
+        drop(other);
+        wait_for_clients(&server, 1);
+
+        // The server going away disconnects the client.
+        drop(sim);
+        drop(server);
+        assert!(!path.exists());
+        let err = node.recv(WAIT).expect_err("server gone");
+        assert!(matches!(err, LinkError::Disconnected { .. }), "{err}");
+        assert!(err.is_recoverable());
+    }
+
+    #[test]
+    fn socket_bus_through_the_link_spec() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bus.sock");
+        let server = BusServer::bind(&path).expect("bind");
+        let mut sim = server.end();
+        let spec: crate::LinkSpec = format!("local:{}", path.display()).parse().expect("spec");
+        let mut link = crate::open(&spec, Bitrate::MBIT_1).expect("open");
+        link.send(&frame(0x04A, &[])).expect("send");
+        assert_eq!(sim.recv(WAIT).expect("recv"), Some(frame(0x04A, &[])));
+    }
+
+    #[test]
+    fn stale_socket_is_replaced_and_a_live_one_refused() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bus.sock");
+        {
+            let _listener = UnixListener::bind(&path).expect("bind");
+        }
+        // The listener is gone; its file is left behind.
+        assert!(path.exists());
+        let server = BusServer::bind(&path).expect("replaces the stale file");
+        let err = BusServer::bind(&path).err().expect("in use");
+        assert_eq!(err.kind(), std::io::ErrorKind::AddrInUse);
+        drop(server);
+    }
+
+    #[test]
+    fn connect_without_a_server_is_not_found() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let err = SocketLink::connect(&dir.path().join("none.sock"))
+            .err()
+            .expect("no server");
+        assert!(matches!(err, LinkError::NotFound { .. }), "{err}");
+        assert!(err.to_string().contains("--socket"), "{err}");
+    }
+
+    proptest! {
+        #[test]
+        fn records_decode_totally(bytes in proptest::array::uniform16(any::<u8>())) {
+            if let Ok(event) = decode_record(&bytes) {
+                // Whatever decodes encodes to a record that decodes the same.
+                prop_assert_eq!(decode_record(&encode_record(&event)), Ok(event));
+            }
+        }
+
+        #[test]
+        fn records_round_trip(id in 0u32..=0x1FFF_FFFF, ext: bool, remote: bool,
+                              data in proptest::collection::vec(any::<u8>(), 0..=8)) {
+            let f = match (ext, remote) {
+                (false, false) => CanFrame::standard((id & 0x7FF) as u16, &data),
+                (false, true) => CanFrame::standard_remote((id & 0x7FF) as u16, data.len() as u8),
+                (true, false) => CanFrame::extended(id, &data),
+                (true, true) => CanFrame::extended_remote(id, data.len() as u8),
+            }.expect("valid");
+            prop_assert_eq!(decode_record(&encode_record(&Event::Frame(f))), Ok(Event::Frame(f)));
+        }
     }
 }

@@ -44,7 +44,6 @@ const QUEUE: usize = 1024;
 pub struct SlcanLink {
     port: TTYPort,
     path: PathBuf,
-    what: String,
     decoder: slcan::Decoder,
     rx: RxState,
     out: Vec<u8>,
@@ -60,7 +59,7 @@ struct RxState {
     counters: LinkCounters,
     state: BusState,
     bus_off_reported: bool,
-    what_for_logs: String,
+    what: String,
 }
 
 impl RxState {
@@ -78,7 +77,7 @@ impl RxState {
             Item::Ok | Item::FrameAck | Item::Version(_) | Item::Serial(_) => {}
             Item::Error => {
                 self.counters.errors += 1;
-                tracing::debug!(link = %self.what_for_logs, "the adapter refused a command or frame (BEL)");
+                tracing::debug!(link = %self.what, "the adapter refused a command or frame (BEL)");
             }
             Item::Status(flags) => {
                 if flags & (slcan::status::RX_FIFO_FULL | slcan::status::DATA_OVERRUN) != 0 {
@@ -96,7 +95,7 @@ impl RxState {
             Item::Garbage(line) => {
                 self.counters.errors += 1;
                 tracing::debug!(
-                    link = %self.what_for_logs,
+                    link = %self.what,
                     "unparsable line from the adapter: \"{}\"",
                     line.escape_ascii()
                 );
@@ -106,7 +105,7 @@ impl RxState {
 
     fn set_state(&mut self, state: BusState) {
         if state != self.state {
-            tracing::debug!(link = %self.what_for_logs, "bus state {} -> {}", self.state, state);
+            tracing::debug!(link = %self.what, "bus state {} -> {}", self.state, state);
         }
         if state != BusState::BusOff {
             self.bus_off_reported = false;
@@ -155,14 +154,13 @@ impl SlcanLink {
         let mut link = Self {
             port,
             path: path.to_path_buf(),
-            what: what.clone(),
             decoder: slcan::Decoder::new(),
             rx: RxState {
                 frames: VecDeque::with_capacity(QUEUE),
                 counters: LinkCounters::default(),
                 state: BusState::ErrorActive,
                 bus_off_reported: false,
-                what_for_logs: what,
+                what,
             },
             out: Vec::with_capacity(64),
             buf: [0; 512],
@@ -190,7 +188,7 @@ impl SlcanLink {
                 self.status_supported = true;
                 self.rx.set_state(slcan::status_bus_state(flags));
             }
-            _ => tracing::debug!(link = %self.what, "no answer to F: no bus-state reports"),
+            _ => tracing::debug!(link = %self.rx.what, "no answer to F: no bus-state reports"),
         }
         match self.command(Command::Open, COMMAND_TIMEOUT)? {
             Answer::Ok | Answer::Status(_) => {}
@@ -198,7 +196,7 @@ impl SlcanLink {
             Answer::None => return Err(self.no_answer(Command::Open)),
         }
         self.next_status = Instant::now() + STATUS_INTERVAL;
-        tracing::debug!(link = %self.what, "open (status flags {})",
+        tracing::debug!(link = %self.rx.what, "open (status flags {})",
             if self.status_supported { "supported" } else { "not supported" });
         Ok(())
     }
@@ -262,14 +260,14 @@ impl SlcanLink {
 
     fn refused(&self, cmd: Command) -> LinkError {
         LinkError::Adapter {
-            what: self.what.clone(),
+            what: self.rx.what.clone(),
             detail: format!("the adapter refused `{cmd}` ({}) with BEL", cmd.meaning()),
         }
     }
 
     fn no_answer(&self, cmd: Command) -> LinkError {
         LinkError::Adapter {
-            what: self.what.clone(),
+            what: self.rx.what.clone(),
             detail: format!(
                 "no answer to `{cmd}` ({}) within {COMMAND_TIMEOUT:?}: is this an slcan \
                  adapter, at the right serial baud?",
@@ -320,7 +318,7 @@ impl SlcanLink {
         match self.port.write_all(bytes) {
             Ok(()) => Ok(()),
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Err(LinkError::Io {
-                what: self.what.clone(),
+                what: self.rx.what.clone(),
                 source: std::io::Error::new(
                     e.kind(),
                     format!("the adapter took no bytes for {WRITE_TIMEOUT:?}"),
@@ -332,7 +330,7 @@ impl SlcanLink {
 
     fn disconnected(&self, detail: &str) -> LinkError {
         LinkError::Disconnected {
-            what: self.what.clone(),
+            what: self.rx.what.clone(),
             detail: format!("{detail}; was the adapter unplugged? reopen to recover"),
         }
     }
@@ -373,7 +371,7 @@ impl CanLink for SlcanLink {
             if self.rx.state == BusState::BusOff && !self.rx.bus_off_reported {
                 self.rx.bus_off_reported = true;
                 return Err(LinkError::BusOff {
-                    what: self.what.clone(),
+                    what: self.rx.what.clone(),
                 });
             }
             self.poll_status()?;
@@ -397,7 +395,7 @@ impl CanLink for SlcanLink {
     }
 
     fn describe(&self) -> &str {
-        &self.what
+        &self.rx.what
     }
 }
 
