@@ -14,6 +14,18 @@
 //! `local:/tmp/allegro.sock`) and [`open`] opens it. This crate knows nothing of any device's
 //! protocol (that lives in e.g. `teleop-allegro-protocol`, generic over
 //! [`embedded_can::Frame`], which [`CanFrame`] implements) and must not depend on one.
+//!
+//! ```
+//! use std::time::Duration;
+//! use teleop_can_link::{local::LocalBus, CanFrame, CanLink};
+//!
+//! let bus = LocalBus::new();
+//! let (mut node, mut hand) = (bus.end(), bus.end());
+//! node.send(&CanFrame::standard(0x04A, &[]).expect("an 11-bit id"))?;
+//! let got = hand.recv(Duration::from_millis(100))?;
+//! assert_eq!(got.map(|f| f.to_string()), Some("04A#".to_string()));
+//! # Ok::<(), teleop_can_link::LinkError>(())
+//! ```
 
 mod error;
 mod frame;

@@ -9,7 +9,7 @@
 //! frame with a bare CR (CANable), with `z`/`Z` (CAN232, CANUSB), or not at all, and acks come
 //! mixed with received frames. So acks are skipped wherever they come, a BEL counts as an
 //! error, and nothing assumes one ack per frame. When the adapter answered `F` at open, `F` is
-//! asked again every [`STATUS_INTERVAL`] while receiving: its flags give the bus state
+//! asked again every [`SlcanLink::STATUS_INTERVAL`] while receiving: its flags give the bus state
 //! (bus error -> bus-off, error passive, error warning) and overruns; Linux-driver-style `s`
 //! state lines are taken too. Entering bus-off is returned once from [`CanLink::recv`] as
 //! [`LinkError::BusOff`]; reopen to restart the controller.
@@ -27,11 +27,8 @@ use serialport::{SerialPort, TTYPort};
 use crate::slcan::{self, Command, Item};
 use crate::{Bitrate, BusState, CanFrame, CanLink, LinkCounters, LinkError};
 
-/// How long a setup command may take to be answered.
-pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
-/// How often the status flags are asked for while the link is in use (when the adapter
-/// answers `F`).
-pub const STATUS_INTERVAL: Duration = Duration::from_millis(100);
+const COMMAND_TIMEOUT: Duration = SlcanLink::COMMAND_TIMEOUT;
+const STATUS_INTERVAL: Duration = SlcanLink::STATUS_INTERVAL;
 /// How long a write may block (the adapter not taking bytes).
 const WRITE_TIMEOUT: Duration = Duration::from_millis(200);
 /// Quiet time that ends the drain at open.
@@ -123,6 +120,12 @@ enum Answer {
 }
 
 impl SlcanLink {
+    /// How long a setup command may take to be answered.
+    pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(500);
+    /// How often the status flags are asked for while the link is in use (when the adapter
+    /// answers `F`).
+    pub const STATUS_INTERVAL: Duration = Duration::from_millis(100);
+
     /// Opens the adapter at `path` (`serial_baud` for a UART; USB-CDC adapters ignore it),
     /// sets `bitrate` and opens the CAN channel.
     ///
@@ -246,7 +249,7 @@ impl SlcanLink {
     }
 
     /// Reads and discards until the line has been quiet for [`DRAIN_QUIET`] (at most
-    /// [`COMMAND_TIMEOUT`]).
+    /// [`Self::COMMAND_TIMEOUT`]).
     fn drain_until_quiet(&mut self) -> Result<(), LinkError> {
         let limit = Instant::now() + COMMAND_TIMEOUT;
         while Instant::now() < limit {
@@ -287,7 +290,7 @@ impl SlcanLink {
     }
 
     /// How often to ask for status flags while in use (`None`: never). Default
-    /// [`STATUS_INTERVAL`]; has no effect when the adapter does not answer `F`.
+    /// [`Self::STATUS_INTERVAL`]; has no effect when the adapter does not answer `F`.
     pub fn set_status_interval(&mut self, interval: Option<Duration>) {
         self.status_interval = interval;
     }
