@@ -170,12 +170,13 @@ pub struct Ball {
 
 impl Ball {
     /// A ball of 8 cm under the palm, in front of the middle finger: the middle finger closing
-    /// meets it about half closed; the index and ring fingers brush its sides (pushing their
-    /// first joints outwards) and the opposed thumb its thumb side.
+    /// meets it about half closed and the opposed thumb presses on it from its side; the index
+    /// and ring fingers only brush its sides (pushing their first joints outwards) and close
+    /// beside it.
     pub fn default_ball() -> Self {
         Self {
             shape: Shape::Sphere,
-            centre: [0.0, 0.125, -0.062],
+            centre: [0.0, 0.11, -0.07],
             radius: 0.04,
             stiffness: 2000.0,
             damping: 4.0,
@@ -568,6 +569,42 @@ mod tests {
         stops_at(Ball::default_ball(), 1);
         for f in 0..3 {
             stops_at(Ball::bar(), f);
+        }
+    }
+
+    /// Closes every finger with a PD towards a fist (as the node does); returns the hand.
+    fn close_with_pd(object: Option<Ball>) -> Hand {
+        let target = [
+            0.0, 1.2, 1.2, 1.2, 0.0, 1.2, 1.2, 1.2, 0.0, 1.2, 1.2, 1.2, 1.3, 0.6, 1.2, 1.2,
+        ];
+        let mut h = hand(object);
+        h.set_position(12, 1.3);
+        while h.time() < 1.5 {
+            let q = h.positions();
+            let qd = h.velocities();
+            let t: [f64; JOINTS] =
+                core::array::from_fn(|j| 0.6 * (target[j] - q[j]) - 0.012 * qd[j]);
+            h.set_torques(&t);
+            let next = h.time() + 0.003;
+            h.advance_to(next);
+        }
+        h
+    }
+
+    #[test]
+    fn a_pd_closing_the_hand_stops_at_the_ball_with_the_effort_rising() {
+        let free = close_with_pd(None);
+        assert!(free.positions()[5] > 1.15, "{:?}", free.positions());
+        assert!(free.torques()[5].abs() < 0.05, "{:?}", free.torques());
+        let ball = close_with_pd(Some(Ball::default_ball()));
+        let (q, t, c) = (ball.positions(), ball.torques(), ball.contact_forces());
+        assert!(q[5] < 0.8 && t[5] > 0.2, "middle stops, effort rises: {q:?} {t:?}");
+        assert!(c[1] > 2.0 && c[3] > 2.0, "middle and thumb press on it: {c:?}");
+        let bar = close_with_pd(Some(Ball::bar()));
+        let (q, t) = (bar.positions(), bar.torques());
+        for f in 0..3 {
+            let j = f * 4 + 1;
+            assert!(q[j] < 0.8 && t[j] > 0.2, "finger {f}: {q:?} {t:?}");
         }
     }
 
