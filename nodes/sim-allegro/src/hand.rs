@@ -598,8 +598,14 @@ mod tests {
         assert!(free.torques()[5].abs() < 0.05, "{:?}", free.torques());
         let ball = close_with_pd(Some(Ball::default_ball()));
         let (q, t, c) = (ball.positions(), ball.torques(), ball.contact_forces());
-        assert!(q[5] < 0.8 && t[5] > 0.2, "middle stops, effort rises: {q:?} {t:?}");
-        assert!(c[1] > 2.0 && c[3] > 2.0, "middle and thumb press on it: {c:?}");
+        assert!(
+            q[5] < 0.8 && t[5] > 0.2,
+            "middle stops, effort rises: {q:?} {t:?}"
+        );
+        assert!(
+            c[1] > 2.0 && c[3] > 2.0,
+            "middle and thumb press on it: {c:?}"
+        );
         let bar = close_with_pd(Some(Ball::bar()));
         let (q, t) = (bar.positions(), bar.torques());
         for f in 0..3 {

@@ -19,6 +19,7 @@ macro_rules! out {
     };
 }
 
+mod allegro;
 mod calibrate;
 mod glove;
 mod inspect;
@@ -120,6 +121,13 @@ enum Command {
         target: revo2::Target,
         #[command(subcommand)]
         command: revo2::Revo2Command,
+    },
+    /// Talk to the Allegro Hand directly over CAN (with the Allegro node stopped).
+    Allegro {
+        #[command(flatten)]
+        target: allegro::Target,
+        #[command(subcommand)]
+        command: allegro::AllegroCommand,
     },
     /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
     Record {
@@ -335,6 +343,7 @@ fn main() -> ExitCode {
             },
         ),
         Command::Revo2 { target, command } => revo2::run(&target, &command),
+        Command::Allegro { target, command } => allegro::run(&target, &command),
         Command::Calibrate {
             out,
             yes,

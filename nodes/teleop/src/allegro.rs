@@ -1,0 +1,406 @@
+//! `teleop allegro ...`: talk to the Allegro Hand directly over its CAN link (the Allegro node
+//! must not be running: both would send torque). `info` brings the hand up, reads what it
+//! tells and stops it again; `home` and `move` run the node's own PD loop for a few seconds and
+//! release the hand (zero torque, SYSTEM_OFF).
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::Subcommand;
+use teleop_allegro::bringup::{self, Hand, Identity};
+use teleop_allegro::can_link::{CanLink, LinkError};
+use teleop_allegro::driver::{self, Connected, Cycle, Down, Host, Target as Goal};
+use teleop_allegro::protocol::{v4, Generation, Protocol, JOINTS};
+use teleop_allegro::wire::{Incoming, Wire};
+use teleop_allegro::{ProtocolSetting, Settings};
+use teleop_hand_profile::HandProfile;
+
+/// Where the hand is and how it speaks.
+#[derive(clap::Args)]
+pub struct Target {
+    /// The CAN link: `slcan:/dev/ttyACM0`, `socketcan:can0`, `local:SOCKET` (default: the
+    /// configuration's `link`).
+    #[arg(long, env = "TELEOP_ALLEGRO_LINK")]
+    link: Option<String>,
+    /// `auto`, `v1`, `v2`, `v3` or `v4` (default: the configuration's `protocol`).
+    #[arg(long)]
+    protocol: Option<ProtocolSetting>,
+    /// The node's configuration (gains, limits, calibration, device id); default: the built-in
+    /// defaults (link `slcan:/tmp/teleop-allegro`, protocol `auto`).
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+/// The Allegro commands.
+#[derive(Subcommand)]
+pub enum AllegroCommand {
+    /// Protocol generation, versions, serial number, temperatures, joint positions.
+    Info,
+    /// Drive the hand to the home pose (notes: index and middle 0 -10 45 45, ring 5 -5 50 45,
+    /// thumb 60 25 15 45 degrees) with the PD loop, then release it.
+    Home {
+        /// Seconds to hold the pose before releasing.
+        #[arg(long, default_value = "3", value_parser = crate::parse_seconds, allow_hyphen_values = true)]
+        seconds: Duration,
+    },
+    /// Move one joint to an angle (the others hold where they are), then release the hand.
+    Move {
+        /// The joint: 0..15 (index 0-3, middle 4-7, ring 8-11, thumb 12-15) or its profile name
+        /// (`index_1`).
+        joint: String,
+        /// The angle in degrees (clamped to the joint's limits).
+        #[arg(allow_hyphen_values = true)]
+        degrees: f64,
+        /// Seconds to hold before releasing.
+        #[arg(long, default_value = "2", value_parser = crate::parse_seconds, allow_hyphen_values = true)]
+        seconds: Duration,
+    },
+}
+
+/// The home pose, degrees (notes/allegro.md, "Joints, limits, gains").
+const HOME_DEG: [f64; JOINTS] = [
+    0.0, -10.0, 45.0, 45.0, 0.0, -10.0, 45.0, 45.0, 5.0, -5.0, 50.0, 45.0, 60.0, 25.0, 15.0, 45.0,
+];
+
+const FINGER_NAMES: [&str; 4] = ["index", "middle", "ring", "thumb"];
+
+pub fn run(target: &Target, command: &AllegroCommand) -> anyhow::Result<ExitCode> {
+    let (mut config, profile) = teleop_allegro::load(target.config.as_deref())?;
+    if let Some(link) = &target.link {
+        config.link = link.clone();
+    }
+    if let Some(p) = target.protocol {
+        config.protocol = p;
+    }
+    let settings = config.validate().map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {e}",
+            target
+                .config
+                .as_ref()
+                .map_or("defaults".into(), |p| p.display().to_string())
+        )
+    })?;
+    let link = open(&settings)?;
+    match command {
+        AllegroCommand::Info => info(link, &settings),
+        AllegroCommand::Home { seconds } => {
+            let mut goal = [0.0; JOINTS];
+            for (g, d) in goal.iter_mut().zip(HOME_DEG) {
+                *g = d.to_radians();
+            }
+            drive(link, &settings, &profile, Aim::Pose(goal), *seconds)
+        }
+        AllegroCommand::Move {
+            joint,
+            degrees,
+            seconds,
+        } => {
+            let j = joint_index(&profile, joint)?;
+            drive(
+                link,
+                &settings,
+                &profile,
+                Aim::Joint(j, degrees.to_radians()),
+                *seconds,
+            )
+        }
+    }?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Opens the link, naming a missing adapter plainly.
+fn open(settings: &Settings) -> anyhow::Result<Box<dyn CanLink>> {
+    teleop_allegro::can_link::open(&settings.link, teleop_allegro::node::BITRATE).map_err(|e| {
+        match e {
+            LinkError::NotFound { detail, .. } => anyhow::anyhow!(
+                "{}: no such device; is the adapter plugged in? ({detail})",
+                settings.link
+            ),
+            other => anyhow::anyhow!("{other}"),
+        }
+    })
+}
+
+fn joint_index(profile: &HandProfile, text: &str) -> anyhow::Result<usize> {
+    if let Ok(j) = text.parse::<usize>() {
+        if j < JOINTS {
+            return Ok(j);
+        }
+        anyhow::bail!("joint {j}: the Allegro's joints are 0..15");
+    }
+    profile.joint_index(text).ok_or_else(|| {
+        anyhow::anyhow!(
+            "joint {text:?}: not a joint of the Allegro profile (0..15 or one of {})",
+            profile.joint_names().collect::<Vec<_>>().join(", ")
+        )
+    })
+}
+
+/// `info`: bring the hand up as set (`auto`: detected), listen a little for temperatures and the
+/// info answer, stop it again, print what it told.
+fn info(mut link: Box<dyn CanLink>, settings: &Settings) -> anyhow::Result<()> {
+    let (hand, detected) = match settings.protocol {
+        ProtocolSetting::Fixed(g) => (bringup::bring_up(&mut *link, g, settings)?, false),
+        ProtocolSetting::Auto => {
+            let generation = match bringup::detect_protocol(&mut *link, settings)? {
+                Protocol::V4 => Generation::V4,
+                // Reading only: within the document protocol the generation changes nothing
+                // that is read.
+                Protocol::Doc => Generation::V2,
+            };
+            (bringup::bring_up(&mut *link, generation, settings)?, true)
+        }
+    };
+    let wire = Wire::new(hand.generation, settings.device_id, settings.calibration);
+    let mut identity = hand.identity.clone();
+    let mut positions = identity.positions;
+    // Temperatures stream every `temperature_period_ms` (v4): wait for one round.
+    let listen = match wire.protocol() {
+        Protocol::V4 => Duration::from_millis(u64::from(settings.temperature_period_ms) + 100),
+        Protocol::Doc => Duration::from_millis(100),
+    };
+    let end = Instant::now() + listen;
+    let mut frames = 0u64;
+    let mut unknown = 0u64;
+    while let Some(left) = end.checked_duration_since(Instant::now()) {
+        if let Some(frame) = link.recv(left)? {
+            frames += 1;
+            match wire.decode(&frame) {
+                Incoming::Position { finger, q } => {
+                    let base = usize::from(finger) * 4;
+                    positions[base..base + 4].copy_from_slice(&q);
+                }
+                Incoming::Unknown | Incoming::Bad | Incoming::Foreign(_) => unknown += 1,
+                other => {
+                    identity.take(&other);
+                }
+            }
+        }
+    }
+    bringup::shut_down(&mut *link, &wire)?;
+    print_info(
+        &*link, &hand, &identity, &positions, detected, frames, unknown,
+    )?;
+    Ok(())
+}
+
+fn print_info(
+    link: &dyn CanLink,
+    hand: &Hand,
+    identity: &Identity,
+    positions: &[f64; JOINTS],
+    detected: bool,
+    frames: u64,
+    unknown: u64,
+) -> std::io::Result<()> {
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "link          {}", link.describe())?;
+    let protocol = match (hand.generation.protocol(), detected) {
+        (Protocol::V4, true) => "v4 (detected)".to_string(),
+        (Protocol::Doc, true) => {
+            "v1-v3, the document's protocol (detected; set protocol = v1, v2 or v3 by the \
+             hand's version before driving it)"
+                .to_string()
+        }
+        (_, false) => hand.generation.to_string(),
+    };
+    writeln!(out, "protocol      {protocol}")?;
+    if let Some(i) = &identity.info {
+        writeln!(
+            out,
+            "hardware      {:#06x} ({} PWM per N m)",
+            i.hw_version,
+            i.pwm_per_nm()
+        )?;
+        writeln!(out, "firmware      {:#06x}", i.fw_version)?;
+        let side = match i.hand_type {
+            0 => "right",
+            1 => "left",
+            _ => "unknown",
+        };
+        writeln!(out, "hand          {side} (type {})", i.hand_type)?;
+        writeln!(
+            out,
+            "status        {:#04x}: servo {}",
+            i.status,
+            if i.servo_on() { "on" } else { "off" }
+        )?;
+        writeln!(out, "temperature   {} C (hand)", i.temperature)?;
+    }
+    if let Some((revision, firmware, hw_type)) = identity.doc_id {
+        writeln!(
+            out,
+            "identity      revision {revision}, firmware {firmware}, hardware type {hw_type}"
+        )?;
+    }
+    match &identity.serial {
+        Some(s) => writeln!(out, "serial        {}", v4::serial_text(s))?,
+        None if hand.generation.protocol() == Protocol::V4 => {
+            writeln!(out, "serial        (no answer)")?
+        }
+        None => {}
+    }
+    for (f, name) in FINGER_NAMES.iter().enumerate() {
+        let q = &positions[f * 4..f * 4 + 4];
+        write!(out, "{name:<13} ")?;
+        for v in q {
+            write!(out, "{:>7.1}", v.to_degrees())?;
+        }
+        write!(out, " deg")?;
+        let temps = &identity.temperatures[f * 4..f * 4 + 4];
+        if temps.iter().any(Option::is_some) {
+            write!(out, "   ")?;
+            for t in temps {
+                match t {
+                    Some(t) => write!(out, " {t:>3}")?,
+                    None => write!(out, "   ?")?,
+                }
+            }
+            write!(out, " C")?;
+        }
+        writeln!(out)?;
+    }
+    writeln!(
+        out,
+        "frames        {frames} in the last listen ({unknown} unknown or bad)"
+    )?;
+    Ok(())
+}
+
+/// What `home` and `move` aim at.
+#[derive(Debug, Clone, Copy)]
+enum Aim {
+    /// Every joint.
+    Pose([f64; JOINTS]),
+    /// One joint; the others where they were at the first cycle.
+    Joint(usize, f64),
+}
+
+/// The CLI as the loop's host: the aim for `seconds` after the hand came up, then stop (the loop
+/// sends zero torque and SYSTEM_OFF).
+struct CliHost {
+    aim: Aim,
+    limits: [(f64, f64); JOINTS],
+    seconds: Duration,
+    until: Option<Instant>,
+    start: Option<[f64; JOINTS]>,
+    goal: [f64; JOINTS],
+    last: Option<Cycle>,
+    generation: Option<Generation>,
+}
+
+impl Host for CliHost {
+    fn stop_requested(&self) -> bool {
+        teleop_runtime::stop_signal().is_some() || self.until.is_some_and(|t| Instant::now() >= t)
+    }
+
+    fn target(&mut self) -> Goal {
+        if self.start.is_none() {
+            return Goal::Hold;
+        }
+        Goal::Follow(self.goal)
+    }
+
+    fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {
+        self.until = Some(Instant::now() + self.seconds);
+        self.generation = Some(hand.generation);
+        Ok(())
+    }
+
+    fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
+        if self.start.is_none() {
+            self.start = Some(cycle.q);
+            self.goal = match self.aim {
+                Aim::Pose(p) => p,
+                Aim::Joint(j, rad) => {
+                    let mut g = cycle.q;
+                    g[j] = rad;
+                    g
+                }
+            };
+            for (g, (lo, hi)) in self.goal.iter_mut().zip(self.limits) {
+                *g = g.clamp(lo, hi);
+            }
+        }
+        self.last = Some(*cycle);
+        Ok(())
+    }
+
+    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("{}", down.why)
+    }
+}
+
+fn drive(
+    link: Box<dyn CanLink>,
+    settings: &Settings,
+    profile: &HandProfile,
+    aim: Aim,
+    seconds: Duration,
+) -> anyhow::Result<()> {
+    teleop_runtime::install_stop_handlers();
+    let mut limits = [(0.0, 0.0); JOINTS];
+    for (l, j) in limits.iter_mut().zip(&profile.joints) {
+        *l = (f64::from(j.lower), f64::from(j.upper));
+    }
+    let mut host = CliHost {
+        aim,
+        limits,
+        seconds,
+        until: None,
+        start: None,
+        goal: [0.0; JOINTS],
+        last: None,
+        generation: None,
+    };
+    // The link is open already (a missing adapter was named there); the loop does not reopen
+    // it: any fault ends the command through `link_down`.
+    let mut first = Some(link);
+    let mut open = move || {
+        first.take().ok_or_else(|| LinkError::Disconnected {
+            what: "the link".into(),
+            detail: "lost during the command".into(),
+        })
+    };
+    driver::run(settings, &mut host, &mut open)?;
+    let Some(last) = host.last else {
+        anyhow::bail!("stopped before the hand's first cycle");
+    };
+    let mut out = std::io::stdout().lock();
+    writeln!(
+        out,
+        "{} on {}: released (zero torque, SYSTEM_OFF) after {:.1} s",
+        host.generation.map_or("?".into(), |g| g.to_string()),
+        settings.link,
+        seconds.as_secs_f64()
+    )?;
+    let joints: Vec<usize> = match aim {
+        Aim::Pose(_) => (0..JOINTS).collect(),
+        Aim::Joint(j, _) => vec![j],
+    };
+    let mut worst = (0usize, 0.0f64);
+    for &j in &joints {
+        let err = (host.goal[j] - last.q[j]).abs();
+        if err > worst.1 {
+            worst = (j, err);
+        }
+        writeln!(
+            out,
+            "{:<10} target {:>7.1} deg  reached {:>7.1} deg  effort {:>6.3} N m",
+            profile.joints[j].name,
+            host.goal[j].to_degrees(),
+            last.q[j].to_degrees(),
+            last.torque[j]
+        )?;
+    }
+    writeln!(
+        out,
+        "largest error {:.2} deg ({})",
+        worst.1.to_degrees(),
+        profile.joints[worst.0].name
+    )?;
+    Ok(())
+}
