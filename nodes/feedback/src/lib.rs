@@ -269,6 +269,14 @@ pub fn hand_from_msgs(
         input.commanded[i] = input.measured[i];
         input.current_ma[i] = joint.current_ma;
         input.effort_nm[i] = joint.effort;
+        input.speed_rad_s[i] = match state.units {
+            // Travel per second: the joint's open..closed span per second.
+            units::NORMALISED => {
+                let j = &profile.joints[i];
+                joint.speed * (j.closed - j.open)
+            }
+            _ => joint.speed,
+        };
     }
     if let Some(cmd) = command.filter(|c| c.hand_model == state.hand_model) {
         for (i, joint) in cmd.active_joints().iter().enumerate().take(count) {

@@ -91,6 +91,12 @@ pub struct EstimateConfig {
     pub effort_threshold_nm: f32,
     /// Glove units per N m above the threshold. Default 2000.
     pub effort_gain_per_nm: f32,
+    /// Effort counts as contact only while the joint moves slower than this (rad/s): a joint
+    /// that pushes and does not move is stopped by something, while the effort of a joint in
+    /// motion is what moving it takes (Drake's Allegro example calls a joint in contact below
+    /// 0.07 rad/s, notes/allegro.md). 0 (the default) counts effort at any speed; a joint whose
+    /// speed is unknown counts too.
+    pub effort_stall_speed_rad_s: f32,
 }
 
 impl Default for EstimateConfig {
@@ -105,6 +111,7 @@ impl Default for EstimateConfig {
             use_effort: true,
             effort_threshold_nm: 0.05,
             effort_gain_per_nm: 2000.0,
+            effort_stall_speed_rad_s: 0.0,
         }
     }
 }
@@ -236,6 +243,10 @@ impl FeedbackConfig {
         check_non_negative("estimate.current_gain_per_ma", e.current_gain_per_ma)?;
         check_non_negative("estimate.effort_threshold_nm", e.effort_threshold_nm)?;
         check_non_negative("estimate.effort_gain_per_nm", e.effort_gain_per_nm)?;
+        check_non_negative(
+            "estimate.effort_stall_speed_rad_s",
+            e.effort_stall_speed_rad_s,
+        )?;
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
                 return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));

@@ -59,6 +59,7 @@
 //! use_effort = true
 //! effort_threshold_nm = 0.05       # N m, on |effort|
 //! effort_gain_per_nm = 2000.0      # glove units per N m
+//! effort_stall_speed_rad_s = 0.0   # effort counts only below this joint speed (0: always)
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
 //! assert_eq!(config, FeedbackConfig::default());
@@ -106,6 +107,8 @@ pub struct HandInput {
     pub current_ma: [f32; MAX_JOINTS],
     /// Joint efforts in N m (signed; the magnitude is used; NaN = unknown).
     pub effort_nm: [f32; MAX_JOINTS],
+    /// Joint speeds in rad/s (signed; NaN = unknown).
+    pub speed_rad_s: [f32; MAX_JOINTS],
 }
 
 /// State of the tactile input at this step.
@@ -294,7 +297,11 @@ impl ForceFeedback {
             }
         }
         let effort = hand.effort_nm[joint];
-        if e.use_effort && effort.is_finite() {
+        let speed = hand.speed_rad_s[joint];
+        let stalled = e.effort_stall_speed_rad_s <= 0.0
+            || !speed.is_finite()
+            || speed.abs() < e.effort_stall_speed_rad_s;
+        if e.use_effort && effort.is_finite() && stalled {
             let above = non_negative(effort.abs() - e.effort_threshold_nm);
             let d = non_negative(e.effort_gain_per_nm * above);
             if d > best.0 {

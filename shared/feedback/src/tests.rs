@@ -665,19 +665,27 @@ fn estimate_config() -> BoxedStrategy<EstimateConfig> {
         any::<bool>(),
         non_neg(0.0, 2000.0),
         non_neg(0.0, 5.0),
-        (any::<bool>(), non_neg(0.0, 2.0), non_neg(0.0, 10_000.0)),
+        (
+            any::<bool>(),
+            non_neg(0.0, 2.0),
+            non_neg(0.0, 10_000.0),
+            non_neg(0.0, 1.0),
+        ),
     )
-        .prop_map(|(up, pt, pg, uc, ct, cg, (ue, et, eg))| EstimateConfig {
-            use_position_error: up,
-            position_error_threshold: pt,
-            position_gain: pg,
-            use_current: uc,
-            current_threshold_ma: ct,
-            current_gain_per_ma: cg,
-            use_effort: ue,
-            effort_threshold_nm: et,
-            effort_gain_per_nm: eg,
-        })
+        .prop_map(
+            |(up, pt, pg, uc, ct, cg, (ue, et, eg, es))| EstimateConfig {
+                use_position_error: up,
+                position_error_threshold: pt,
+                position_gain: pg,
+                use_current: uc,
+                current_threshold_ma: ct,
+                current_gain_per_ma: cg,
+                use_effort: ue,
+                effort_threshold_nm: et,
+                effort_gain_per_nm: eg,
+                effort_stall_speed_rad_s: es,
+            },
+        )
         .boxed()
 }
 
@@ -768,6 +776,7 @@ fn any_hand() -> BoxedStrategy<Option<HandInput>> {
                 measured,
                 current_ma,
                 effort_nm,
+                speed_rad_s: effort_nm,
             }),
     )
     .boxed()
@@ -873,4 +882,53 @@ proptest! {
             }
         }
     }
+}
+
+#[test]
+fn effort_counts_as_contact_only_while_the_joint_is_stalled() {
+    // The Allegro's glove middle finger feels its middle flexion joints' effort (profile).
+    let allegro = HandProfile::builtin("allegro").expect("shipped profile");
+    let middle_1 = allegro.joint_index("middle_1").expect("joint");
+    let mut config = direct_config();
+    config.estimate = EstimateConfig {
+        use_position_error: false,
+        use_current: false,
+        effort_threshold_nm: 0.03,
+        effort_gain_per_nm: 5000.0,
+        effort_stall_speed_rad_s: 0.07,
+        ..EstimateConfig::default()
+    };
+    let mut ff = ForceFeedback::new(config, &allegro).expect("valid config");
+    let hand = |speed: f32| {
+        let mut h = HandInput::default();
+        h.effort_nm[middle_1] = 0.1;
+        h.speed_rad_s[middle_1] = speed;
+        h
+    };
+    let mut t = 0;
+    // Closing fast through free space: the effort is what moving takes, not contact.
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(1.0)))
+    });
+    assert_eq!(out.force[2], 0);
+    assert_eq!(out.source[2], ContactSource::None);
+    // Stopped by the object while pushing: (0.1 - 0.03) N m x 5000 = 350.
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(0.01)))
+    });
+    assert_eq!(out.force[2], 350);
+    assert_eq!(out.source[2], ContactSource::Effort);
+    // Unknown speed: the effort counts.
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(f32::NAN)))
+    });
+    assert_eq!(out.source[2], ContactSource::Effort);
+    // Zero (the default) counts effort at any speed.
+    let mut config = direct_config();
+    config.estimate.use_position_error = false;
+    let mut ff = ForceFeedback::new(config, &allegro).expect("valid config");
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(1.0)))
+    });
+    assert_eq!(out.source[2], ContactSource::Effort);
 }
