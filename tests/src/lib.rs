@@ -97,11 +97,18 @@ impl Sandbox {
         self.write("launch.toml", &patch(relocate(launch)))
     }
 
-    /// Writes the bimanual session (the repository's `launch/bimanual.toml` and every file of
-    /// `config/`, at the same places) into the sandbox with every `/tmp/teleop-...` device path
-    /// and socket moved inside the sandbox; its recordings go to `recordings/` in the sandbox.
-    /// Returns the launch file's path.
+    /// Writes the bimanual session (`launch/bimanual.toml`) into the sandbox, as
+    /// [`Sandbox::session`] does. Returns the launch file's path.
     pub fn bimanual_session(&self) -> PathBuf {
+        self.session("launch/bimanual.toml")
+    }
+
+    /// Writes the session of the repository's launch file `launch` (a path relative to the
+    /// repository, e.g. `launch/allegro.toml`) and every file of `config/`, at the same places,
+    /// into the sandbox with every `/tmp/teleop-...` device path, socket and control socket moved
+    /// inside the sandbox (`/tmp/teleop-glove` becomes `<sandbox>/teleop-glove`); its recordings
+    /// go to `recordings/` in the sandbox. Returns the launch file's path.
+    pub fn session(&self, launch: &str) -> PathBuf {
         let repo = Self::repo();
         let inside = format!("{}/teleop-", self.dir.path().display());
         let relocate = |text: String| text.replace("/tmp/teleop-", &inside);
@@ -118,9 +125,9 @@ impl Sandbox {
                 }
             }
         }
-        let launch = std::fs::read_to_string(repo.join("launch/bimanual.toml"))
-            .expect("launch/bimanual.toml");
-        self.write("launch/bimanual.toml", &relocate(launch))
+        let text =
+            std::fs::read_to_string(repo.join(launch)).unwrap_or_else(|e| panic!("{launch}: {e}"));
+        self.write(launch, &relocate(text))
     }
 
     /// Sends one command to a simulator's control socket and returns its one-line answer.
