@@ -55,13 +55,15 @@ struct Sim {
 }
 
 impl Sim {
-    fn start(dir: &Path, generation: &str, object: &str) -> Self {
+    /// `extra`: more simulator options (the hand behaviours no document gives).
+    fn start(dir: &Path, generation: &str, object: &str, extra: &[&str]) -> Self {
         let slcan = dir.join("allegro-slcan");
         let control = dir.join("allegro.ctl");
         let log = dir.join("sim.log");
         let out = std::fs::File::create(&log).unwrap();
         let child = Command::new(binary("teleop-sim-allegro", "sim-allegro"))
             .args(["--generation", generation, "--object", object])
+            .args(extra)
             .arg("--slcan")
             .arg(&slcan)
             .arg("--control")
@@ -143,11 +145,16 @@ struct Rig {
 impl Rig {
     /// The simulator as `generation` with `object`, the node set to `protocol`.
     fn new(generation: &str, protocol: &str, object: &str) -> Self {
+        Self::with_sim_options(generation, protocol, object, &[])
+    }
+
+    /// As [`Rig::new`], the simulator started with `extra` options.
+    fn with_sim_options(generation: &str, protocol: &str, object: &str, extra: &[&str]) -> Self {
         let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
         teleop_runtime::init_logging();
         let dir = tempfile::tempdir().unwrap();
         let ipc = IpcSettings::isolated(&dir.path().join("iox"));
-        let sim = Sim::start(dir.path(), generation, object);
+        let sim = Sim::start(dir.path(), generation, object, extra);
         let config = dir.path().join("allegro.toml");
         std::fs::write(
             &config,
@@ -492,6 +499,45 @@ fn v4_against_the_simulator() {
     generation("v4");
 }
 
+/// What real v4 hands do is not published on two points (notes, "Open"): whether they zero
+/// torque when torque frames stop, and whether SET_PERIOD alone starts the stream. The node
+/// works with a hand that does both: it sends torque every period (holding included), and its
+/// bring-up sends SYSTEM_ON either way.
+#[test]
+fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
+    let mut rig = Rig::with_sim_options(
+        "v4",
+        "v4",
+        "ball",
+        &["--torque-timeout-ms", "20", "--v4-stream-on-period"],
+    );
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
+    let s = rig.command(&POSE, Duration::from_millis(2500));
+    let worst = positions(&s)
+        .iter()
+        .zip(POSE)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 0.05, "PD settle error {worst} rad");
+    // Stale: the hold keeps sending torque, so the watchdog never trips and the pose stays.
+    rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
+    std::thread::sleep(Duration::from_millis(500));
+    let status = rig.sim.control("status");
+    assert_eq!(field(&status, "torque_timeouts"), "0", "{status}");
+    let held = rig.states.poll_latest().unwrap();
+    let worst = positions(&held)
+        .iter()
+        .zip(POSE)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 0.05, "held pose error {worst} rad");
+    // The node stopped: the watchdog zeroes nothing it had not already zeroed.
+    let status = rig.stop_node();
+    assert!(status.success(), "{status:?}\n{}", rig.log());
+    let status = rig.sim.control("status");
+    assert!(sim_pwm(&status).iter().all(|p| *p == 0), "{status}");
+}
+
 #[test]
 fn the_other_generation_is_named_and_the_node_waits_for_the_right_one() {
     let rig = Rig::new("v4", "v3", "none");
@@ -525,7 +571,7 @@ fn teleop(args: &[&str]) -> std::process::Output {
 fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
-    let sim = Sim::start(dir.path(), "v4", "ball");
+    let sim = Sim::start(dir.path(), "v4", "ball", &[]);
     let link = format!("slcan:{}", sim.slcan.display());
     let out = teleop(&["allegro", "--link", &link, "info"]);
     let text = String::from_utf8_lossy(&out.stdout);
