@@ -1,0 +1,318 @@
+//! Benchmark: the Allegro node's loop on the hand's 333 Hz stream as the CAN bus sees it, the
+//! bus load, the glove sample -> torque frame latency and the hand sample -> glove force latency.
+//!
+//! Method: the simulated Allegro (`sim_allegro::Sim`, v4, the ball) runs in this process behind
+//! its simulated slcan adapter on a pseudo-terminal, as `teleop-sim-allegro` does; the real
+//! `teleop-allegro` process (release, `config/allegro.toml`: slcan, 3 ms period) drives it
+//! through `SlcanLink`, `teleop-retarget` (`config/allegro/retarget.toml` with the One Euro filter
+//! opened to 1 kHz and the slew limit at 100 travel/s, so that the path is measured, not the
+//! filter's lag) and `teleop-feedback` (`config/allegro/feedback.toml`) run as processes. A
+//! sniffer end on the simulated bus stamps every frame with CLOCK_MONOTONIC when it has ended on
+//! the bus (frames are serialised at 1 Mbit/s with their exact stuffed length).
+//!
+//! 1. Reaction = the end of the torque frame of the fourth finger (0x18C) - the end of the
+//!    fourth finger's position frame (0x08C) it answers: one period's frames up the adapter's
+//!    pty, the node's wait for all four, the PD step, four torque frames down the pty, the
+//!    adapter and the bus. Period = between consecutive 0x18C frames (nominal 3 ms).
+//! 2. Bus load = frame bits on the bus (exact stuffing, with intermission) / 1 Mbit/s.
+//! 3. Glove -> torque: this process publishes `glove/state` at 300 Hz (as the glove node does)
+//!    and every 200-300 ms (random) steps the middle-finger channel between 900 and 300; latency
+//!    = the end of the first middle-finger torque frame (0x184) whose joint 1 PWM moved more than
+//!    150 counts from its value before the step - the step's publish stamp.
+//! 4. Hand sample -> glove force: each `glove/force_command` received, its receive time - its
+//!    `origin_ns` (the node's receive time of the period's last position frame, carried through
+//!    `hand/state` by the feedback node); and `hand/state` stamp - origin (the node alone).
+//!
+//! 20 s after 2 s warm-up.
+//!
+//! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_allegro`
+#![allow(clippy::unwrap_used, clippy::print_stdout)]
+
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use sim_allegro::adapter::AckStyle;
+use sim_allegro::firmware::{Firmware, FirmwareOptions};
+use sim_allegro::hand::{Ball, Hand, HandParams};
+use sim_allegro::{Sim, SimOptions};
+use teleop_allegro_protocol::{v4, Generation};
+use teleop_can_link::{timing, CanLink};
+use teleop_e2e::{bin, Sandbox};
+use teleop_msgs::{GloveForceCommand, GloveState, HandState};
+use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+
+const WARM_UP: Duration = Duration::from_secs(2);
+const SECONDS: u64 = 20;
+/// The glove's middle channel (little, ring, middle, index, thumb, thumb rotation).
+const MIDDLE: usize = 2;
+
+/// One frame on the bus: when it ended there (ns, CLOCK_MONOTONIC), its id, its bits and for a
+/// middle-finger torque frame joint 1's PWM.
+#[derive(Clone, Copy)]
+struct Seen {
+    t_ns: u64,
+    id: u16,
+    bits: u32,
+    pwm1: i16,
+}
+
+fn main() {
+    println!(
+        "Allegro (v4, simulated slcan adapter on a pty), {SECONDS} s after {WARM_UP:?} warm-up"
+    );
+    println!("  load average (1 min) before: {}", loadavg());
+    let sandbox = Sandbox::new();
+    sandbox.session("launch/allegro.toml");
+    let dir = sandbox.dir.path();
+    let retarget = std::fs::read_to_string(dir.join("config/allegro/retarget.toml"))
+        .unwrap()
+        .replace("max_speed = 2.0", "max_speed = 100.0")
+        .replace("min_cutoff_hz = 1.5", "min_cutoff_hz = 1000.0")
+        .replace("beta = 0.5", "beta = 0.0");
+    sandbox.write("config/allegro/retarget-bench.toml", &retarget);
+
+    let hand = Hand::allegro(HandParams::default(), Some(Ball::default_ball())).unwrap();
+    let sim = Sim::start(
+        Firmware::new(FirmwareOptions::new(Generation::V4), hand),
+        SimOptions {
+            slcan: Some(dir.join("teleop-allegro")),
+            socket: None,
+            ack_style: AckStyle::Canable,
+            seed: 1,
+        },
+    )
+    .unwrap();
+    let seen = Arc::new(Mutex::new(Vec::<Seen>::with_capacity(200_000)));
+    let recording = Arc::new(AtomicBool::new(false));
+    let stop = Arc::new(AtomicBool::new(false));
+    let sniffer = {
+        let mut end = sim.bus().end();
+        let (seen, recording, stop) = (seen.clone(), recording.clone(), stop.clone());
+        std::thread::spawn(move || {
+            while !stop.load(Ordering::SeqCst) {
+                if let Ok(Some(frame)) = end.recv(Duration::from_millis(50)) {
+                    let t_ns = now_ns();
+                    if !recording.load(Ordering::SeqCst) {
+                        continue;
+                    }
+                    let id = u16::try_from(frame.raw_id()).unwrap_or(u16::MAX);
+                    let pwm1 = match v4::Request::decode(&frame) {
+                        Ok((_, v4::Request::Torque { finger: 1, pwm })) => pwm[1],
+                        _ => 0,
+                    };
+                    let bits = timing::frame_bits_exact(&frame);
+                    seen.lock().unwrap().push(Seen {
+                        t_ns,
+                        id,
+                        bits,
+                        pwm1,
+                    });
+                }
+            }
+        })
+    };
+
+    let node = NodeRuntime::new("bench-allegro", &sandbox.ipc).unwrap();
+    let mut glove: Publisher<GloveState> = node.publisher().unwrap();
+    let states: Subscriber<HandState> = node.subscriber().unwrap();
+    let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
+    let mut children: Vec<Child> = [
+        ("teleop-allegro", "config/allegro.toml"),
+        ("teleop-retarget", "config/allegro/retarget-bench.toml"),
+        ("teleop-feedback", "config/allegro/feedback.toml"),
+    ]
+    .iter()
+    .map(|(program, config)| {
+        Command::new(bin(program))
+            .args(["--config", config])
+            .envs(sandbox.ipc.to_env())
+            .current_dir(dir)
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap()
+    })
+    .collect();
+
+    // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
+    let mut steps: Vec<(u64, bool)> = Vec::new(); // (publish stamp, closing)
+    let mut state_latency = Vec::new();
+    let mut force_latency = Vec::new();
+    let mut raw = [900u16; 6];
+    let mut rng = 0x2545_F491_4F6C_DD1Du64;
+    let mut next_step = Instant::now() + WARM_UP;
+    let start = Instant::now();
+    let mut period = Instant::now();
+    while start.elapsed() < WARM_UP + Duration::from_secs(SECONDS) {
+        let measuring = start.elapsed() >= WARM_UP;
+        recording.store(measuring, Ordering::SeqCst);
+        let mut stepped = None;
+        if measuring && Instant::now() >= next_step {
+            let closing = raw[MIDDLE] == 900;
+            raw[MIDDLE] = if closing { 300 } else { 900 };
+            stepped = Some(closing);
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            next_step = Instant::now() + Duration::from_millis(200 + rng % 100);
+        }
+        let header = glove
+            .publish(&GloveState {
+                raw_position: raw,
+                link_up: 1,
+                ..Default::default()
+            })
+            .unwrap();
+        if let Some(closing) = stepped {
+            steps.push((header.stamp_ns, closing));
+        }
+        states.drain(|s| {
+            if measuring && s.link_up == 1 && s.header.origin_ns != 0 {
+                state_latency.push(s.header.stamp_ns.saturating_sub(s.header.origin_ns));
+            }
+        });
+        forces.drain(|f| {
+            if measuring && f.header.origin_ns != 0 {
+                force_latency.push(now_ns().saturating_sub(f.header.origin_ns));
+            }
+        });
+        period += Duration::from_micros(3333);
+        if let Some(wait) = period.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+    }
+    recording.store(false, Ordering::SeqCst);
+    for child in &mut children {
+        // SAFETY: kill(2) on our own, not yet reaped child.
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+        }
+    }
+    for child in &mut children {
+        let _ = child.wait();
+    }
+    stop.store(true, Ordering::SeqCst);
+    sniffer.join().unwrap();
+    let seen = seen.lock().unwrap().clone();
+    report(&seen, &steps, state_latency, force_latency);
+    println!("  load average (1 min) after: {}", loadavg());
+    drop(sim);
+}
+
+fn report(seen: &[Seen], steps: &[(u64, bool)], state: Vec<u64>, force: Vec<u64>) {
+    println!("        times in us: p50 / p99 / max");
+    // 1. Reaction and period.
+    let mut reaction = Vec::new();
+    let mut torque_times = Vec::new();
+    let mut last_position = None;
+    for f in seen {
+        match f.id {
+            0x08C => last_position = Some(f.t_ns),
+            0x18C => {
+                if let Some(t) = last_position.take() {
+                    reaction.push(f.t_ns - t);
+                }
+                torque_times.push(f.t_ns);
+            }
+            _ => {}
+        }
+    }
+    let periods: Vec<u64> = torque_times.windows(2).map(|w| w[1] - w[0]).collect();
+    let span_s = match (seen.first(), seen.last()) {
+        (Some(a), Some(b)) if b.t_ns > a.t_ns => (b.t_ns - a.t_ns) as f64 * 1e-9,
+        _ => 1.0,
+    };
+    let positions = seen.iter().filter(|f| f.id == 0x08C).count();
+    println!(
+        "  position periods {} ({:.1}/s), torque sets {} ({:.1}/s), periods without torque {}",
+        positions,
+        positions as f64 / span_s,
+        torque_times.len(),
+        torque_times.len() as f64 / span_s,
+        positions.saturating_sub(reaction.len())
+    );
+    println!(
+        "  last position frame -> last torque frame (reaction)   {}",
+        percentiles(reaction)
+    );
+    println!(
+        "  torque set period (nominal 3000 us)                   {}",
+        percentiles(periods.clone())
+    );
+    let late = |limit: u64| periods.iter().filter(|p| **p > limit).count();
+    println!(
+        "  torque periods > 4.5 ms / > 6 ms / > 10 ms: {} / {} / {} of {}",
+        late(4_500_000),
+        late(6_000_000),
+        late(10_000_000),
+        periods.len()
+    );
+    // 2. Bus load.
+    let bits: u64 = seen.iter().map(|f| u64::from(f.bits)).sum();
+    println!(
+        "  bus load: {:.1} % of 1 Mbit/s ({:.0} frames/s, {:.0} bits/s)",
+        bits as f64 / span_s / 1e6 * 100.0,
+        seen.len() as f64 / span_s,
+        bits as f64 / span_s
+    );
+    // 3. Glove -> torque.
+    let middle: Vec<&Seen> = seen.iter().filter(|f| f.id == 0x184).collect();
+    let mut glove = Vec::new();
+    for &(t, closing) in steps {
+        let i = middle.partition_point(|f| f.t_ns < t);
+        let Some(before) = i.checked_sub(1).map(|k| middle[k].pwm1) else {
+            continue;
+        };
+        let moved = middle[i..].iter().find(|f| {
+            let d = i32::from(f.pwm1) - i32::from(before);
+            if closing {
+                d > 150
+            } else {
+                d < -150
+            }
+        });
+        if let Some(f) = moved {
+            glove.push(f.t_ns - t);
+        }
+    }
+    println!(
+        "  glove/state published -> middle torque frame carrying the step ({} of {} steps)  {}",
+        glove.len(),
+        steps.len(),
+        percentiles(glove)
+    );
+    println!(
+        "  position frame at the node -> hand/state published    {}",
+        percentiles(state)
+    );
+    println!(
+        "  position frame at the node -> glove/force_command received  {}",
+        percentiles(force)
+    );
+}
+
+fn percentiles(mut v: Vec<u64>) -> String {
+    if v.is_empty() {
+        return "-".into();
+    }
+    v.sort_unstable();
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0;
+    format!(
+        "p50 {:>8.1}  p99 {:>8.1}  max {:>8.1}  (n {})",
+        at(0.5),
+        at(0.99),
+        at(1.0),
+        v.len()
+    )
+}
+
+/// The 1-minute load average: the machine is shared, and other work skews the numbers.
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| s.split_whitespace().next().map(str::to_string))
+        .unwrap_or_else(|| "?".into())
+}
