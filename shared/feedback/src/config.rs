@@ -86,7 +86,7 @@ pub struct EstimateConfig {
     /// Estimate contact from the magnitude of the joint effort (hands that
     /// measure or command torque). Default true.
     pub use_effort: bool,
-    /// Joint effort magnitude (N m) below which there is no contact.
+    /// Joint effort toward the closed angle (N m) below which there is no contact.
     /// Default 0.05.
     pub effort_threshold_nm: f32,
     /// Glove units per N m above the threshold. Default 2000.

@@ -57,7 +57,7 @@
 //! current_threshold_ma = 300.0     # mA, on |current|
 //! current_gain_per_ma = 1.0        # glove units per mA
 //! use_effort = true
-//! effort_threshold_nm = 0.05       # N m, on |effort|
+//! effort_threshold_nm = 0.05       # N m, of the effort toward the closed angle
 //! effort_gain_per_nm = 2000.0      # glove units per N m
 //! effort_stall_speed_rad_s = 0.0   # effort counts only below this joint speed (0: always)
 //! "#;
@@ -105,7 +105,8 @@ pub struct HandInput {
     pub measured: [f32; MAX_JOINTS],
     /// Motor currents in mA (signed; the magnitude is used; NaN = unknown).
     pub current_ma: [f32; MAX_JOINTS],
-    /// Joint efforts in N m (signed; the magnitude is used; NaN = unknown).
+    /// Joint efforts in N m (signed, positive toward larger angles; the part toward the joint's
+    /// closed angle is used; NaN = unknown).
     pub effort_nm: [f32; MAX_JOINTS],
     /// Joint speeds in rad/s (signed; NaN = unknown).
     pub speed_rad_s: [f32; MAX_JOINTS],
@@ -154,7 +155,7 @@ pub enum ContactSource {
     Ramping = 4,
     /// Emergency stop: force forced to zero.
     EStop = 5,
-    /// Joint effort magnitude above the threshold.
+    /// Joint effort toward the closed angle above the threshold.
     Effort = 6,
 }
 
@@ -190,6 +191,8 @@ pub struct ForceFeedback {
     config: FeedbackConfig,
     /// Per glove finger, what drives it (from the hand profile).
     sources: [FeedbackSource; GLOVE_FINGERS],
+    /// Per joint, +1 or -1: the sign of an effort toward the joint's closed angle (profile).
+    closing: [f32; MAX_JOINTS],
     /// Low-pass filter state per glove finger, in `[0, max_force]`.
     filtered: [f32; GLOVE_FINGERS],
     /// Rate-limited output per glove finger, in `[0, max_force]`.
@@ -230,9 +233,16 @@ impl ForceFeedback {
             s.tactile = s.tactile.filter(|&t| t < MAX_FINGERTIPS);
             s.joints.retain(|&j| j < MAX_JOINTS);
         }
+        let mut closing = [1.0; MAX_JOINTS];
+        for (c, joint) in closing.iter_mut().zip(&profile.joints) {
+            if joint.closed < joint.open {
+                *c = -1.0;
+            }
+        }
         Ok(Self {
             config,
             sources,
+            closing,
             filtered: [0.0; GLOVE_FINGERS],
             output: [0.0; GLOVE_FINGERS],
             last_t_ns: None,
@@ -301,8 +311,16 @@ impl ForceFeedback {
         let stalled = e.effort_stall_speed_rad_s <= 0.0
             || !speed.is_finite()
             || speed.abs() < e.effort_stall_speed_rad_s;
-        if e.use_effort && effort.is_finite() && stalled {
-            let above = non_negative(effort.abs() - e.effort_threshold_nm);
+        // A joint more open than its open angle is being pulled back from an overshoot or its
+        // stop, not pressed by something in the hand (seen when a starved host let a finger fly
+        // open into its joint limit and its PD then pushed it back).
+        // (Unknown, NaN, counts: nothing says it is beyond.)
+        let not_beyond_open = hand.measured[joint] >= 0.0 || hand.measured[joint].is_nan();
+        if e.use_effort && effort.is_finite() && stalled && not_beyond_open {
+            // Only an effort toward the closed angle: something resists the finger closing,
+            // which is what the glove renders (it pushes the operator's finger open). The
+            // effort of a finger pulled open, or held against a push from outside, is not.
+            let above = non_negative(effort * self.closing[joint] - e.effort_threshold_nm);
             let d = non_negative(e.effort_gain_per_nm * above);
             if d > best.0 {
                 best = (d, ContactSource::Effort);

@@ -669,7 +669,7 @@ fn estimate_config() -> BoxedStrategy<EstimateConfig> {
             any::<bool>(),
             non_neg(0.0, 2.0),
             non_neg(0.0, 10_000.0),
-            non_neg(0.0, 1.0),
+            prop_oneof![Just(0.0_f32), Just(0.07), Just(0.5), Just(f32::MAX)],
         ),
     )
         .prop_map(
@@ -931,4 +931,36 @@ fn effort_counts_as_contact_only_while_the_joint_is_stalled() {
         inputs(t, Tactile::Absent, Some(hand(1.0)))
     });
     assert_eq!(out.source[2], ContactSource::Effort);
+}
+
+#[test]
+fn only_effort_toward_the_closed_angle_is_contact() {
+    // A finger held open against its PD (effort pulling it open) is not closing on anything.
+    let allegro = HandProfile::builtin("allegro").expect("shipped profile");
+    let middle_1 = allegro.joint_index("middle_1").expect("joint");
+    let mut config = direct_config();
+    config.estimate.use_position_error = false;
+    let mut ff = ForceFeedback::new(config, &allegro).expect("valid config");
+    let hand = |effort: f32| {
+        let mut h = HandInput::default();
+        h.effort_nm[middle_1] = effort;
+        h
+    };
+    let mut t = 0;
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(-0.5)))
+    });
+    assert_eq!(out.source[2], ContactSource::None);
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(0.5)))
+    });
+    assert_eq!(out.source[2], ContactSource::Effort);
+    // More open than its open angle (normalised below 0): pulled back from its stop, not
+    // pressed by an object.
+    let mut beyond = hand(0.5);
+    beyond.measured[middle_1] = -0.1;
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(beyond))
+    });
+    assert_eq!(out.source[2], ContactSource::None);
 }
