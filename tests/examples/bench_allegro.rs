@@ -39,6 +39,7 @@ use sim_allegro::hand::{Ball, Hand, HandParams};
 use sim_allegro::{Sim, SimOptions};
 use teleop_allegro_protocol::{v4, Generation};
 use teleop_can_link::{timing, CanLink};
+use teleop_e2e::bench::{loadavg, percentiles};
 use teleop_e2e::{bin, Sandbox};
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
@@ -292,27 +293,4 @@ fn report(seen: &[Seen], steps: &[(u64, bool)], state: Vec<u64>, force: Vec<u64>
         "  position frame at the node -> glove/force_command received  {}",
         percentiles(force)
     );
-}
-
-fn percentiles(mut v: Vec<u64>) -> String {
-    if v.is_empty() {
-        return "-".into();
-    }
-    v.sort_unstable();
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0;
-    format!(
-        "p50 {:>8.1}  p99 {:>8.1}  max {:>8.1}  (n {})",
-        at(0.5),
-        at(0.99),
-        at(1.0),
-        v.len()
-    )
-}
-
-/// The 1-minute load average: the machine is shared, and other work skews the numbers.
-fn loadavg() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "?".into())
 }

@@ -18,6 +18,7 @@ use std::time::{Duration, Instant};
 
 use sim_glove::hand::{Hand, HandModel, Script};
 use sim_glove::{Faults, SimGlove, SimOptions};
+use teleop_e2e::bench::percentiles;
 use teleop_e2e::{bin, Sandbox};
 use teleop_glove_protocol::BaudRate;
 use teleop_msgs::GloveState;
@@ -123,18 +124,4 @@ fn run(baud: BaudRate) {
     ] {
         println!("  {name:<42} {}", percentiles(v));
     }
-}
-
-fn percentiles(mut v: Vec<u64>) -> String {
-    if v.is_empty() {
-        return "-".into();
-    }
-    v.sort_unstable();
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0;
-    format!(
-        "p50 {:>8.1}  p99 {:>8.1}  max {:>8.1}",
-        at(0.5),
-        at(0.99),
-        at(1.0)
-    )
 }

@@ -32,6 +32,7 @@ use std::time::{Duration, Instant};
 
 use sim_revo2::hand::Drive;
 use sim_revo2::{revo2_subdevice, Revo2};
+use teleop_e2e::bench::{loadavg, percentiles};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
 use teleop_ecat_sim::SubDevice;
@@ -197,14 +198,6 @@ fn run(stress: bool) {
     println!("  load average (1 min) before / after: {load_before} / {load_after}");
 }
 
-/// The 1-minute load average: the machine is shared, and other work skews the numbers.
-fn loadavg() -> String {
-    std::fs::read_to_string("/proc/loadavg")
-        .ok()
-        .and_then(|s| s.split_whitespace().next().map(str::to_string))
-        .unwrap_or_else(|| "?".into())
-}
-
 /// Serves the emulated Revo2 on a socket until `stop`; returns the frames recorded while
 /// `recording`.
 fn serve(
@@ -354,18 +347,4 @@ fn report(
         after.link_up,
         node_log.matches("dropped to SAFE-OP").count()
     );
-}
-
-fn percentiles(mut v: Vec<u64>) -> String {
-    if v.is_empty() {
-        return "-".into();
-    }
-    v.sort_unstable();
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0;
-    format!(
-        "p50 {:>8.1}  p99 {:>8.1}  max {:>8.1}",
-        at(0.5),
-        at(0.99),
-        at(1.0)
-    )
 }

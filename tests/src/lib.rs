@@ -310,3 +310,29 @@ pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<
         std::thread::sleep(Duration::from_millis(5));
     }
 }
+
+/// What the benchmark programs (`tests/examples/bench_*.rs`) share.
+pub mod bench {
+    /// `p50 .. p99 .. max ..` of samples in nanoseconds, printed in microseconds (`-` for none).
+    pub fn percentiles(mut v: Vec<u64>) -> String {
+        if v.is_empty() {
+            return "-".into();
+        }
+        v.sort_unstable();
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1000.0;
+        format!(
+            "p50 {:>8.1}  p99 {:>8.1}  max {:>8.1}",
+            at(0.5),
+            at(0.99),
+            at(1.0)
+        )
+    }
+
+    /// The 1-minute load average: the machine is shared, and other work skews the numbers.
+    pub fn loadavg() -> String {
+        std::fs::read_to_string("/proc/loadavg")
+            .ok()
+            .and_then(|s| s.split_whitespace().next().map(str::to_string))
+            .unwrap_or_else(|| "?".into())
+    }
+}
