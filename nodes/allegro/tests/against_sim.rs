@@ -590,6 +590,36 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         assert!(text.contains(want), "{want:?} in\n{text}");
     }
     assert!(text.contains(" C\n"), "temperatures in\n{text}");
+
+    // `move`: one joint to an angle with the PD loop, then the hand is released.
+    let out = teleop(&[
+        "allegro",
+        "--link",
+        &link,
+        "move",
+        "index_1",
+        "30",
+        "--seconds",
+        "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let status = sim.control("status");
+    let index_1: f64 = field(&status, "position")
+        .split(',')
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        (index_1 - 30f64.to_radians()).abs() < 0.05,
+        "index_1 at {index_1} rad after `move index_1 30`: {status}"
+    );
+    assert_eq!(field(&status, "system"), "off", "released: {status}");
     drop(sim);
 
     let missing = dir.path().join("ttyACM9");
