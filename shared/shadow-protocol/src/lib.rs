@@ -12,6 +12,7 @@
 //! - [`can`]: the CAN SID of motor and bootloader messages and the bootloader's commands;
 //! - [`hex`]: Intel HEX firmware images, checked against the bootloader's address rules and cut
 //!   into the 32-byte rows it writes;
+//! - [`flash`]: the flashing sequence as a sans-I/O state machine;
 //! - [`mapping`]: the Hand E's joint -> motor tables.
 //!
 //! Where the device document (`003_399e148eac7910e7.txt`) and the shipped driver and firmware
@@ -26,6 +27,7 @@
 
 pub mod can;
 pub mod data;
+pub mod flash;
 pub mod hex;
 pub mod layout;
 pub mod mapping;
