@@ -168,3 +168,60 @@ fn a_read_back_that_differs_is_a_mismatch_naming_the_address() {
     );
     assert!(e.to_string().contains("0x04c0"), "{e}");
 }
+
+/// The whole path but EtherCAT: the flasher's messages go one per 1 ms cycle into the palm's
+/// CAN bridge command in CAN direct mode (later cycles carry an idle bridge), and the bridge
+/// status carries the bootloader's replies back (an ERASE's echo on a later cycle).
+#[test]
+fn flashing_motor_13_through_the_palm_in_can_direct_mode() {
+    use sim_shadow::palm::Palm;
+    use teleop_shadow_protocol::can::BootMessage;
+    use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
+    use teleop_shadow_protocol::layout::{CanBridge, Command};
+
+    let app = application(700, 11);
+    let img = image(&app);
+    let mut palm = Palm::new();
+    let direct = Command {
+        edc_command: EdcCommand::CanDirectMode
+            .value(EdcNumbering::Shipped)
+            .unwrap(),
+        ..Command::default()
+    };
+    // Motor 13 is board 3 on bus 2.
+    let mut flasher = Flasher::new(3, img, Settings::default());
+    let mut now = Palm::BOOT_MS;
+    let result = loop {
+        let bridge = match flasher.poll(now) {
+            Poll::Send(m) => Some(CanBridge {
+                can_bus: 2,
+                length: m.len,
+                id: m.id,
+                data: m.data,
+            }),
+            Poll::Wait(_) => None,
+            Poll::Done => break Ok(()),
+            Poll::Failed(e) => break Err(e),
+        };
+        let (status, reply) = palm.cycle(&direct, bridge.as_ref(), now);
+        assert!(status.is_none());
+        if let Some(r) = reply.or_else(|| palm.pending_reply(now)) {
+            flasher.receive(&BootMessage {
+                id: r.id,
+                len: r.length,
+                data: r.data,
+            });
+        }
+        now += 1;
+        assert!(now < 100_000, "never ended");
+    };
+    result.unwrap();
+    assert_eq!(palm.boards[13].mode(), Mode::Application);
+    let start = APP_START as usize;
+    assert_eq!(&palm.boards[13].flash()[start..start + app.len()], &app[..]);
+    eprintln!(
+        "{} ms of 1 ms cycles for {} bytes",
+        now - Palm::BOOT_MS,
+        app.len()
+    );
+}

@@ -1,0 +1,349 @@
+//! The palm's PIC32 firmware, one EtherCAT cycle at a time (notes/shadow.md, "One 1 kHz cycle":
+//! E11 `this_node.c`), over the 20 motor boards on its two CAN buses.
+//!
+//! - Booting: until [`Palm::BOOT_MS`] the status says EDC_command 0xCC and every other word 0xDEAD.
+//! - SENSOR_DATA: the motors of the command's parity (`which_motors`, 0 even, 1 odd) answer the
+//!   requested type; each reply sets its packet (slot = motor / 2) and its arrival bit; a reply of
+//!   another type sets both its arrival and error bits and is dropped; the error mask is
+//!   cleared as the firmware does (`&= 0xFFFFFFFE << n`, which clears bits 0..n). The demands of
+//!   `to_motor_data_type` go to every motor; `idle_time_us` is the time since the previous status.
+//! - CAN_DIRECT_MODE: a bridge message that was written goes on its bus; a reply that comes within
+//!   600 us is written to the bridge status only; the status is not refilled.
+//! - Any other command: nothing is written (the firmware lights its error LED).
+//!
+//! A motor board here is its bootloader ([`crate::bootloader::Board`]) and, while that runs its
+//! application, a first-order torque loop with strain gauges, current, temperature and flags. The
+//! motor boards' own CAN payloads are not public, so the palm reads the motors directly.
+
+use teleop_shadow_protocol::can::{bus_of_motor, BootMessage};
+use teleop_shadow_protocol::data::{
+    flags, EdcCommand, EdcNumbering, FromMotor, ToMotor, EDC_BOOTING,
+};
+use teleop_shadow_protocol::layout::{CanBridge, Command, MotorPacket, Status, MOTORS};
+
+use crate::bootloader::{Board, Mode};
+
+/// One motor's application state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Motor {
+    /// Torque demand in effect (raw units).
+    pub demand: i16,
+    /// Whether the demand is PWM (else torque).
+    pub pwm_mode: bool,
+    /// Measured torque (raw units), following the demand with a 5 ms time constant.
+    pub torque: f64,
+    /// Temperature, deg C.
+    pub temperature: f64,
+    /// Time of the last demand, ms (the 20 ms no-demand stop).
+    pub last_demand_ms: Option<u64>,
+    /// Replies sent.
+    pub replies: u64,
+}
+
+/// The firmware's cut-out temperature (release notes: 60 deg C).
+pub const CUT_OUT_C: f64 = 60.0;
+
+impl Motor {
+    fn flags(&self, now_ms: u64) -> u16 {
+        let mut f = 0;
+        if self
+            .last_demand_ms
+            .is_none_or(|t| now_ms.saturating_sub(t) > 20)
+        {
+            f |= flags::NO_DEMAND_SEEN;
+        }
+        if self.temperature >= CUT_OUT_C {
+            f |= flags::OVER_TEMPERATURE;
+        }
+        f
+    }
+
+    fn value(&self, kind: FromMotor, now_ms: u64) -> u16 {
+        match kind {
+            FromMotor::StrainGaugeLeft => (2048.0 + self.torque / 16.0) as u16,
+            FromMotor::StrainGaugeRight => (2048.0 - self.torque / 16.0) as u16,
+            FromMotor::Pwm => (self.torque / 32.0) as i16 as u16,
+            FromMotor::Flags => self.flags(now_ms),
+            FromMotor::Current => (self.torque.abs() / 20.0) as u16,
+            FromMotor::Voltage => 24 * 256,
+            FromMotor::Temperature => (self.temperature * 256.0) as i16 as u16,
+            FromMotor::CanRx | FromMotor::CanTx => self.replies as u16,
+            _ => 0,
+        }
+    }
+
+    fn step(&mut self, dt_ms: f64, now_ms: u64) {
+        let serious = flags::serious(self.flags(now_ms));
+        let target = if serious { 0.0 } else { f64::from(self.demand) };
+        self.torque += (target - self.torque) * (dt_ms / 5.0).min(1.0);
+        // Heating with torque, cooling toward 30 deg C (a 20 s time constant).
+        let rise = (self.torque / 8000.0).powi(2) * 40.0;
+        self.temperature += (30.0 + rise - self.temperature) * (dt_ms / 20_000.0).min(1.0);
+    }
+}
+
+/// The palm and its motor boards.
+#[derive(Debug, Clone)]
+pub struct Palm {
+    /// The motor boards (motor n: bus n / 10 + 1, id n % 10).
+    pub boards: Vec<Board>,
+    /// Their applications.
+    pub motors: [Motor; MOTORS],
+    /// EDC command numbering of this firmware.
+    pub numbering: EdcNumbering,
+    last_status_ms: Option<u64>,
+    last_cycle_ms: Option<u64>,
+    /// Sensor words it reports (joint ADCs; the hand model behind them comes later).
+    pub sensors: [u16; 37],
+}
+
+impl Palm {
+    /// Milliseconds the palm reports boot status after power-up.
+    pub const BOOT_MS: u64 = 50;
+
+    /// A palm whose 20 boards run an application.
+    pub fn new() -> Self {
+        Self {
+            boards: (0..MOTORS as u8)
+                .map(|n| Board::new(n % 10, &[0x12, 0x34]))
+                .collect(),
+            motors: [Motor {
+                temperature: 30.0,
+                ..Motor::default()
+            }; MOTORS],
+            numbering: EdcNumbering::Shipped,
+            last_status_ms: None,
+            last_cycle_ms: None,
+            sensors: [0; 37],
+        }
+    }
+
+    /// One cycle at `now_ms`: the command and bridge message the host wrote, and the status and
+    /// bridge message the palm writes back (`None`: not written this cycle).
+    pub fn cycle(
+        &mut self,
+        command: &Command,
+        bridge: Option<&CanBridge>,
+        now_ms: u64,
+    ) -> (Option<Status>, Option<CanBridge>) {
+        let dt = self
+            .last_cycle_ms
+            .map_or(1.0, |t| now_ms.saturating_sub(t) as f64);
+        self.last_cycle_ms = Some(now_ms);
+        for (n, m) in self.motors.iter_mut().enumerate() {
+            if self.boards[n].mode() == Mode::Application {
+                m.step(dt, now_ms);
+            }
+        }
+        if now_ms < Self::BOOT_MS {
+            let mut s = Status {
+                edc_command: EDC_BOOTING,
+                sensors: [0xDEAD; 37],
+                ..Status::default()
+            };
+            s.which_motor_data_arrived = 0xDEAD_DEAD;
+            return (Some(s), None);
+        }
+        match EdcCommand::from_value(command.edc_command, self.numbering) {
+            Some(EdcCommand::SensorData) => (Some(self.sensor_data(command, now_ms)), None),
+            Some(EdcCommand::CanDirectMode) => (None, self.bridge(bridge, now_ms)),
+            _ => (None, None),
+        }
+    }
+
+    fn sensor_data(&mut self, c: &Command, now_ms: u64) -> Status {
+        let parity = usize::from(c.which_motors & 1 != 0);
+        let kind = FromMotor::from_value(c.from_motor_data_type);
+        let mut s = Status {
+            edc_command: 1,
+            sensors: self.sensors,
+            motor_data_type: c.from_motor_data_type,
+            which_motors: c.which_motors & 1,
+            ..Status::default()
+        };
+        for n in (parity..MOTORS).step_by(2) {
+            if self.boards[n].mode() != Mode::Application {
+                continue;
+            }
+            let m = &mut self.motors[n];
+            m.replies += 1;
+            match kind {
+                Some(kind) => {
+                    s.packets[n / 2] = MotorPacket {
+                        torque: m.torque as i16,
+                        misc: m.value(kind, now_ms),
+                    };
+                    s.which_motor_data_arrived |= 1 << n;
+                    s.which_motor_data_had_errors &= 0xFFFF_FFFEu32.wrapping_shl(n as u32);
+                }
+                None => {
+                    s.which_motor_data_arrived |= 1 << n;
+                    s.which_motor_data_had_errors |= 1 << n;
+                }
+            }
+        }
+        if let Some(to) = ToMotor::from_value(c.to_motor_data_type) {
+            for (n, m) in self.motors.iter_mut().enumerate() {
+                match to {
+                    ToMotor::TorqueDemand | ToMotor::PwmDemand => {
+                        m.demand = c.motor_data[n];
+                        m.pwm_mode = to == ToMotor::PwmDemand;
+                        m.last_demand_ms = Some(now_ms);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        s.idle_time_us = self.last_status_ms.map_or(0, |t| {
+            (now_ms.saturating_sub(t) * 1000).min(u64::from(u16::MAX)) as u16
+        });
+        self.last_status_ms = Some(now_ms);
+        s
+    }
+
+    fn bridge(&mut self, bridge: Option<&CanBridge>, now_ms: u64) -> Option<CanBridge> {
+        let msg = bridge.filter(|b| !b.is_idle())?;
+        let boot = BootMessage {
+            id: msg.id,
+            len: msg.length.min(8),
+            data: msg.data,
+        };
+        let bus = msg.can_bus;
+        let mut reply = None;
+        for (n, board) in self.boards.iter_mut().enumerate() {
+            if bus_of_motor(n as u8).map(|(b, _)| b) != Some(bus) {
+                continue;
+            }
+            board.receive(&boot, now_ms);
+            // The firmware waits up to 600 us: replies due by then come back this cycle.
+            if let Some(r) = board.take_sent(now_ms).into_iter().next() {
+                reply.get_or_insert(CanBridge {
+                    can_bus: bus,
+                    length: r.len,
+                    id: r.id,
+                    data: r.data,
+                });
+            }
+        }
+        reply
+    }
+
+    /// Replies that became due since (an ERASE's echo), as the palm forwards them in CAN direct
+    /// mode on a later cycle with an idle bridge.
+    pub fn pending_reply(&mut self, now_ms: u64) -> Option<CanBridge> {
+        for (n, board) in self.boards.iter_mut().enumerate() {
+            if let Some(r) = board.take_sent(now_ms).into_iter().next() {
+                let (bus, _) = bus_of_motor(n as u8)?;
+                return Some(CanBridge {
+                    can_bus: bus,
+                    length: r.len,
+                    id: r.id,
+                    data: r.data,
+                });
+            }
+        }
+        None
+    }
+}
+
+impl Default for Palm {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    fn sensor_command(which: i16, from: FromMotor) -> Command {
+        Command {
+            edc_command: 1,
+            from_motor_data_type: from as u32,
+            which_motors: which,
+            to_motor_data_type: ToMotor::TorqueDemand as u32,
+            ..Command::default()
+        }
+    }
+
+    #[test]
+    fn boot_status_then_even_and_odd_motors_answer() {
+        let mut palm = Palm::new();
+        let (s, _) = palm.cycle(&sensor_command(0, FromMotor::Flags), None, 0);
+        let s = s.unwrap();
+        assert_eq!(s.edc_command, EDC_BOOTING);
+        assert_eq!(s.sensors[0], 0xDEAD);
+        let (s, _) = palm.cycle(&sensor_command(1, FromMotor::Temperature), None, 60);
+        let s = s.unwrap();
+        assert_eq!(s.which_motors, 1);
+        assert_eq!(s.which_motor_data_arrived, 0xAAAAA, "the ten odd motors");
+        assert_eq!(s.which_motor_data_had_errors, 0);
+        assert_eq!(s.reply(3).unwrap().misc, 30 * 256, "30 deg C in 8.8");
+        assert!(s.reply(2).is_none());
+        let (s, _) = palm.cycle(&sensor_command(0, FromMotor::Flags), None, 61);
+        let s = s.unwrap();
+        assert_eq!(s.which_motor_data_arrived, 0x55555);
+        assert_eq!(s.idle_time_us, 1000);
+    }
+
+    #[test]
+    fn torque_follows_the_demand_and_over_temperature_stops_the_motor() {
+        let mut palm = Palm::new();
+        let mut c = sensor_command(0, FromMotor::Flags);
+        c.motor_data[4] = 4000;
+        for t in 60..120 {
+            palm.cycle(&c, None, t);
+        }
+        assert!((palm.motors[4].torque - 4000.0).abs() < 10.0);
+        palm.motors[4].temperature = 61.0;
+        let (s, _) = palm.cycle(&c, None, 120);
+        let f = s.unwrap().reply(4).unwrap().misc;
+        assert!(flags::serious(f), "{f:#x}");
+        assert_eq!(flags::names(f), vec!["over temperature"]);
+        for t in 121..200 {
+            palm.cycle(&c, None, t);
+        }
+        assert!(palm.motors[4].torque.abs() < 10.0, "the motor stopped");
+    }
+
+    #[test]
+    fn can_direct_mode_bridges_to_the_bootloader_and_writes_only_the_bridge_status() {
+        let mut palm = Palm::new();
+        let direct = Command {
+            edc_command: EdcCommand::CanDirectMode
+                .value(EdcNumbering::Shipped)
+                .unwrap(),
+            ..Command::default()
+        };
+        // MAGIC to motor 13 (bus 2, id 3): its application restarts into the bootloader, which
+        // announces itself.
+        let magic = BootMessage::magic(3);
+        let msg = CanBridge {
+            can_bus: 2,
+            length: magic.len,
+            id: magic.id,
+            data: magic.data,
+        };
+        let (status, reply) = palm.cycle(&direct, Some(&msg), 100);
+        assert!(
+            status.is_none(),
+            "the status is not refilled in CAN direct mode"
+        );
+        let reply = reply.unwrap();
+        assert_eq!((reply.can_bus, reply.id), (2, 0x600 | 3 << 5 | 0x1A));
+        assert_eq!(palm.boards[13].mode(), Mode::Bootloader);
+        assert_eq!(
+            palm.boards[3].mode(),
+            Mode::Application,
+            "bus 1's id 3 untouched"
+        );
+        // The document's numbering (CAN_TEST_MODE = 5) is not this firmware's: nothing written.
+        let doc = Command {
+            edc_command: 5,
+            ..Command::default()
+        };
+        assert_eq!(palm.cycle(&doc, Some(&msg), 101), (None, None));
+    }
+}
