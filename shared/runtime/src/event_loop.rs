@@ -108,10 +108,19 @@ impl EventLoop {
         let tick = waitset
             .attach_interval(self.tick)
             .map_err(|e| RuntimeError::ipc("attaching tick", "event loop", e))?;
+        // SIGINT/SIGTERM are recorded by this crate's handler, which nothing consumes:
+        // iceoryx2's own handler keeps one "last signal" that any check swaps out, so a signal
+        // that came while the node was starting (before this wait) could be taken by another
+        // check and the loop would then never stop. Checked on every wake (the tick bounds the
+        // delay) and after every interrupted wait.
+        crate::signals::install_stop_handlers();
 
         let result = loop {
             let result = waitset
                 .wait_and_process(|id| {
+                    if crate::signals::stop_signal().is_some() {
+                        return CallbackProgression::Stop;
+                    }
                     let wake = if id.has_event_from(&tick) {
                         Some(Wake::Tick)
                     } else {
@@ -134,16 +143,23 @@ impl EventLoop {
             // iceoryx2 reports any interrupted wait as `Interrupt`; Linux interrupts epoll_wait
             // also when a stopped process is continued (SIGSTOP, SIGCONT: a debugger, a
             // terminal's Ctrl-Z and `fg`). Only SIGINT/SIGTERM stop the loop.
-            if result != WaitSetRunResult::Interrupt || SignalHandler::termination_requested() {
+            if result != WaitSetRunResult::Interrupt
+                || crate::signals::stop_signal().is_some()
+                || SignalHandler::termination_requested()
+            {
                 break result;
             }
         };
-        Ok(match result {
-            WaitSetRunResult::Interrupt => StopReason::Interrupt,
-            WaitSetRunResult::TerminationRequest => StopReason::Terminate,
-            WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {
-                StopReason::Requested
-            }
+        Ok(match (crate::signals::stop_signal(), result) {
+            (Some(libc::SIGTERM), _) => StopReason::Terminate,
+            (Some(_), _) => StopReason::Interrupt,
+            (None, result) => match result {
+                WaitSetRunResult::Interrupt => StopReason::Interrupt,
+                WaitSetRunResult::TerminationRequest => StopReason::Terminate,
+                WaitSetRunResult::StopRequest | WaitSetRunResult::AllEventsHandled => {
+                    StopReason::Requested
+                }
+            },
         })
     }
 }
