@@ -45,8 +45,9 @@ use std::time::{Duration, Instant};
 use sim_glove::hand::{Hand as GloveHand, HandModel, Script};
 use sim_glove::{Faults, SimGlove, SimOptions};
 use sim_revo2::hand::{Drive, VirtualObject};
-use sim_revo2::{revo2_subdevice, serve_socket, Revo2};
+use sim_revo2::{revo2_subdevice, Revo2};
 use teleop_e2e::Sandbox;
+use teleop_ecat_link::serve_socket;
 use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::SubDevice;
 use teleop_glove_protocol::BaudRate;
@@ -75,7 +76,7 @@ fn serve_revo2(
     stop: Arc<AtomicBool>,
 ) {
     let stopping = || stop.load(Ordering::SeqCst);
-    let mut record = |_received: u64, dev: &SubDevice<Revo2>| {
+    let mut record = |_received: Instant, dev: &SubDevice<Revo2>| {
         let targets = dev.app().hand().drives().map(|d| match d {
             Drive::Position { target, .. } | Drive::Hold(target) => target,
             _ => f32::NAN,

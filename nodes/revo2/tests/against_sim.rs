@@ -9,7 +9,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice_with_loop, serve_socket, Revo2};
+use sim_revo2::{revo2_subdevice_with_loop, Revo2};
+use teleop_ecat_link::serve_socket;
 use teleop_ecat_link::StreamServer;
 use teleop_ecat_sim::{AlState, SubDevice};
 mod common;

@@ -6,17 +6,16 @@
 //! `foe-stall N|off` (the boot loader stops answering after N data packets of the next firmware
 //! transfer), `flash-time ERASE_MS PER_KIB_MS`, `power-cycle SECONDS`, `versions`, `stats`.
 
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixListener;
-use std::path::PathBuf;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use clap::Parser;
 use sim_revo2::hand::VirtualObject;
-use sim_revo2::{revo2_subdevice_with_loop, serve_link, serve_socket, Revo2};
-use teleop_ecat_link::{Accept, RawSocketLink, StreamServer};
+use sim_revo2::{revo2_subdevice_with_loop, Revo2};
+use teleop_ecat_link::{serve_link, serve_socket, Accept, RawSocketLink, StreamServer};
 use teleop_ecat_sim::SubDevice;
 
 #[derive(Parser)]
@@ -116,24 +115,8 @@ fn stopping() -> bool {
     teleop_runtime::stop_signal().is_some()
 }
 
-fn spawn_control(path: &PathBuf, sim: Sim, start: Instant) -> anyhow::Result<()> {
-    let _ = std::fs::remove_file(path);
-    let listener = UnixListener::bind(path)
-        .map_err(|e| anyhow::anyhow!("{}: cannot create control socket: {e}", path.display()))?;
-    std::thread::Builder::new()
-        .name("control".into())
-        .spawn(move || {
-            for stream in listener.incoming().flatten() {
-                let Ok(mut reply) = stream.try_clone() else {
-                    continue;
-                };
-                for line in BufReader::new(stream).lines() {
-                    let Ok(line) = line else { break };
-                    let answer = command(&sim, line.trim(), start);
-                    let _ = writeln!(reply, "{answer}");
-                }
-            }
-        })?;
+fn spawn_control(path: &Path, sim: Sim, start: Instant) -> anyhow::Result<()> {
+    teleop_runtime::control::spawn(path, move |line| command(&sim, line, start))?;
     Ok(())
 }
 

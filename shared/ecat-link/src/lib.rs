@@ -9,15 +9,20 @@
 //! - [`RawSocketLink`]: an AF_PACKET socket on a network interface for EtherType 0x88A4, as on
 //!   real hardware or one end of a veth pair (needs CAP_NET_RAW).
 //!
+//! [`serve_link`] and [`serve_socket`] are the SubDevice side: emulated devices (a
+//! [`Responder`]) answering a master's frames on any of these links.
+//!
 //! Must not depend on: the EtherCAT master (`ethercrab`) or any device: it moves bytes. The
 //! master's frame pump lives with the node; the device emulation in `teleop-ecat-sim`.
 
 mod raw;
+mod serve;
 mod stream;
 
 use std::time::Duration;
 
 pub use raw::{Accept, RawSocketLink};
+pub use serve::{serve_link, serve_socket, Responder};
 pub use stream::{ServerConnection, StreamLink, StreamServer};
 
 /// EtherType of EtherCAT frames.

@@ -17,6 +17,7 @@
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
 //!   deadlines (`clock_nanosleep`, `TIMER_ABSTIME`); [`init_logging`]: `tracing` through a
 //!   bounded queue that drops (and counts) instead of blocking a loop;
+//! - [`control`]: a simulator's line-based control socket;
 //! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
 //!   `launch.toml` gives a process, for its time-critical threads.
 //!
@@ -26,6 +27,7 @@
 
 mod clock;
 mod config_file;
+pub mod control;
 mod estop;
 mod event_loop;
 mod health;
