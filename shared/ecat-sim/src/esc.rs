@@ -15,7 +15,7 @@ use crate::registers::{self as reg, sii_control as sc, NUM_FMMUS, NUM_SMS};
 use crate::sii::{self, Eeprom};
 use crate::{
     al_status, AlState, AppRequest, Application, ConfigError, EscConfig, MailboxContext,
-    MailboxReply,
+    MailboxReply, Pdi, PdiAccess, SyncManagers,
 };
 
 /// ESC type register value.
@@ -148,6 +148,8 @@ pub struct SubDevice<A: Application> {
     /// When AL control was first written since the firmware last read it (with
     /// [`EscConfig::firmware_loop`]).
     al_control_written_at: Option<Duration>,
+    /// When each programmed one-buffer SM was last filled by the MainDevice.
+    sm_written_at: [Duration; NUM_SMS],
 }
 
 impl<A: Application> core::fmt::Debug for SubDevice<A> {
@@ -182,7 +184,14 @@ impl<A: Application> SubDevice<A> {
 
     fn power_on(config: EscConfig, app: A, sizes: (usize, usize)) -> Self {
         let image = sii::build_image(&config, sizes);
-        let areas = [
+        let programmed = match &config.sync_managers {
+            SyncManagers::Standard => Vec::new(),
+            SyncManagers::Programmed(sms) => sms
+                .iter()
+                .map(|sm| (sm.start, usize::from(sm.len)))
+                .collect(),
+        };
+        let standard = [
             (config.rx_mailbox.0, usize::from(config.rx_mailbox.1)),
             (config.tx_mailbox.0, usize::from(config.tx_mailbox.1)),
             (
@@ -197,8 +206,9 @@ impl<A: Application> SubDevice<A> {
             (config.inputs_address, sizes.1),
         ];
         let ram_start = usize::from(reg::RAM_START);
-        let end = areas
+        let end = standard
             .iter()
+            .chain(&programmed)
             .map(|(start, len)| usize::from(*start) + len)
             .fold(ram_start + MIN_RAM_KIB * 1024, usize::max);
         let ram_kib = (end - ram_start).div_ceil(1024).min(60);
@@ -218,6 +228,7 @@ impl<A: Application> SubDevice<A> {
             stats: Stats::default(),
             offline_until: None,
             al_control_written_at: None,
+            sm_written_at: [Duration::ZERO; NUM_SMS],
             config,
         };
         sd.init_registers();
@@ -371,6 +382,14 @@ impl<A: Application> SubDevice<A> {
         if let AppRequest::Restart { offline } = self.app.poll(now, self.state) {
             self.restart(now, offline);
             return;
+        }
+        if self.programmed() && matches!(self.state, AlState::SafeOp | AlState::Op) {
+            let mut buffers = Buffers {
+                mem: &mut self.mem,
+                written_at: &self.sm_written_at,
+            };
+            self.app
+                .pdi(now, self.state, &mut Pdi { esc: &mut buffers });
         }
         if self.state != AlState::Op {
             return;
@@ -783,10 +802,14 @@ impl<A: Application> SubDevice<A> {
         }
         for n in 0..NUM_SMS {
             if ev.sm_last_written[n] {
-                if self.sm(n).mailbox() {
-                    self.mailbox_written(n, now);
-                } else {
+                if !self.sm(n).mailbox() {
                     self.outputs_written(n, now);
+                } else if self.programmed() {
+                    // One-buffer process data: the buffer is full until the firmware takes it.
+                    self.set_sm_full(n, true);
+                    self.sm_written_at[n] = now;
+                } else {
+                    self.mailbox_written(n, now);
                 }
             }
             if ev.sm_last_read[n] && self.sm(n).mailbox() {
@@ -861,11 +884,16 @@ impl<A: Application> SubDevice<A> {
     /// SAFE-OP/OP; otherwise it keeps them deactivated (SM register +7 bit 0) and ECAT cannot
     /// access their buffers.
     fn sm_pdi_active(&self, sm: &Sm) -> bool {
-        if sm.mailbox() {
+        if sm.mailbox() && !self.programmed() {
             self.state != AlState::Init
         } else {
             matches!(self.state, AlState::SafeOp | AlState::Op)
         }
+    }
+
+    /// The firmware uses sync managers the MainDevice programs ([`SyncManagers::Programmed`]).
+    fn programmed(&self) -> bool {
+        matches!(self.config.sync_managers, SyncManagers::Programmed(_))
     }
 
     fn sm_full(&self, n: usize) -> bool {
@@ -1065,6 +1093,14 @@ impl<A: Application> SubDevice<A> {
 
     fn check(&self, check: Check) -> Result<(), u16> {
         let c = &self.config;
+        if let SyncManagers::Programmed(expected) = &c.sync_managers {
+            return match check {
+                // No mailbox to check, and none to boot with.
+                Check::StandardMailbox | Check::Nothing => Ok(()),
+                Check::BootstrapMailbox => Err(al_status::BOOTSTRAP_NOT_SUPPORTED),
+                Check::ProcessData => self.check_programmed(expected),
+            };
+        }
         match check {
             Check::StandardMailbox => self.check_mailboxes(
                 c.rx_mailbox,
@@ -1100,6 +1136,30 @@ impl<A: Application> SubDevice<A> {
             }
             Check::Nothing => Ok(()),
         }
+    }
+
+    /// Every sync manager the firmware expects is enabled with its start, length and control.
+    fn check_programmed(&self, expected: &[crate::SmSetting]) -> Result<(), u16> {
+        for (n, want) in expected.iter().enumerate() {
+            let sm = self.sm(n);
+            if !(sm.activate & 0x01 != 0
+                && sm.start == want.start
+                && sm.len == want.len
+                && sm.control == want.control)
+            {
+                tracing::warn!(
+                    sm = n,
+                    start = format!("{:#06x}", sm.start),
+                    len = sm.len,
+                    control = format!("{:#04x}", sm.control),
+                    enabled = sm.activate & 0x01 != 0,
+                    expected = ?want,
+                    "sync manager not programmed as the firmware expects: SAFE-OP refused"
+                );
+                return Err(al_status::INVALID_SM_CONFIG);
+            }
+        }
+        Ok(())
     }
 
     /// SM0 must be a mailbox the MainDevice writes, SM1 one it reads, both enabled at the SII
@@ -1290,6 +1350,9 @@ impl<A: Application> SubDevice<A> {
 
     /// Places the next queued reply in SM1 if it is free.
     fn try_deliver(&mut self) {
+        if self.programmed() {
+            return; // no mailbox: SM buffers are the application's
+        }
         let Some((n, sm)) = self.reply_sm() else {
             return;
         };
@@ -1329,6 +1392,72 @@ impl<A: Application> SubDevice<A> {
         let repeat = self.mem[usize::from(reg::sm(n, 6))] & 0x02;
         let ack = usize::from(reg::sm(n, 7));
         self.mem[ack] = (self.mem[ack] & !0x02) | repeat;
+    }
+}
+
+/// The firmware's side of programmed one-buffer sync managers (see [`Pdi`]).
+struct Buffers<'a> {
+    mem: &'a mut Vec<u8>,
+    written_at: &'a [Duration; NUM_SMS],
+}
+
+impl Buffers<'_> {
+    fn sm(&self, n: usize) -> Option<(Sm, usize)> {
+        if n >= NUM_SMS {
+            return None;
+        }
+        let at = |a: u16| usize::from(a);
+        let u16_at = |a: u16| u16::from_le_bytes([self.mem[at(a)], self.mem[at(a) + 1]]);
+        let sm = Sm {
+            start: u16_at(reg::sm(n, 0)),
+            len: u16_at(reg::sm(n, 2)),
+            control: self.mem[at(reg::sm(n, 4))],
+            activate: self.mem[at(reg::sm(n, 6))],
+        };
+        (sm.active() && sm.mailbox() && sm.in_ram(self.mem.len()))
+            .then_some((sm, at(reg::sm(n, 5))))
+    }
+}
+
+impl PdiAccess for Buffers<'_> {
+    fn written(&self, n: usize) -> Option<Duration> {
+        let (_, status) = self.sm(n).filter(|(sm, _)| sm.ecat_writes())?;
+        (self.mem[status] & 0x08 != 0).then_some(self.written_at[n])
+    }
+
+    fn take(&mut self, n: usize) -> Option<&[u8]> {
+        let (sm, status) = self.sm(n).filter(|(sm, _)| sm.ecat_writes())?;
+        if self.mem[status] & 0x08 == 0 {
+            return None;
+        }
+        self.mem[status] &= !0x08;
+        Some(&self.mem[sm.range()])
+    }
+
+    fn put(&mut self, n: usize, data: &[u8]) -> bool {
+        let Some((sm, status)) = self.sm(n).filter(|(sm, _)| !sm.ecat_writes()) else {
+            return false;
+        };
+        if self.mem[status] & 0x08 != 0 {
+            return false;
+        }
+        let buffer = &mut self.mem[sm.range()];
+        let len = data.len().min(buffer.len());
+        buffer[..len].copy_from_slice(&data[..len]);
+        buffer[len..].fill(0);
+        self.mem[status] |= 0x08;
+        true
+    }
+}
+
+/// A SubDevice alone on a link answers its frames (see `teleop_ecat_link::serve_link`).
+impl<A: Application> teleop_ecat_link::Responder for SubDevice<A> {
+    fn respond(&mut self, frame: &[u8], out: &mut [u8], now: Duration) -> Option<usize> {
+        self.process_frame_into(frame, out, now)
+    }
+
+    fn idle(&mut self, now: Duration) {
+        self.tick(now);
     }
 }
 

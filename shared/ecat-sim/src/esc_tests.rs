@@ -2,7 +2,7 @@
 //! machine, mailbox handshake, process data, watchdog, faults.
 
 use super::*;
-use crate::{mailbox_protocols, SdoAbort};
+use crate::{mailbox_protocols, Pdi, SdoAbort, SmSetting, SyncManagers};
 use proptest::prelude::*;
 use std::collections::BTreeMap;
 
@@ -34,6 +34,11 @@ struct App {
     transitions: Vec<(AlState, AlState)>,
     refuse: Option<u16>,
     od: BTreeMap<(u16, u8), Vec<u8>>,
+    /// With programmed SMs: buffers taken from SM0, each echoed into SM2.
+    taken: Vec<Vec<u8>>,
+    echo_refused: u32,
+    /// The firmware's loop runs once per clock value, after time 0.
+    pdi_at: Duration,
 }
 
 impl App {
@@ -81,6 +86,19 @@ impl Application for App {
     }
     fn outputs_lost(&mut self) {
         self.lost += 1;
+    }
+    fn pdi(&mut self, now: Duration, _: AlState, pdi: &mut Pdi<'_>) {
+        if now <= self.pdi_at {
+            return;
+        }
+        self.pdi_at = now;
+        if let Some(buffer) = pdi.take(0) {
+            let buffer = buffer.to_vec();
+            if !pdi.put(2, &buffer) {
+                self.echo_refused += 1;
+            }
+            self.taken.push(buffer);
+        }
     }
 }
 
@@ -1161,4 +1179,133 @@ fn a_firmware_loop_reads_al_control_once_per_loop() {
         assert_eq!(bus.reg16(reg::AL_STATUS), 0x02);
         assert_eq!(bus.sd.al_state(), (AlState::PreOp, false, 0));
     }
+}
+
+/// The Shadow palm's layout (notes/shadow.md): command and bridge command written by the
+/// MainDevice, status and bridge status read, all one-buffer.
+fn palm_sms() -> Vec<SmSetting> {
+    vec![
+        SmSetting {
+            start: 0x1000,
+            len: 58,
+            control: 0x26,
+        },
+        SmSetting {
+            start: 0x103A,
+            len: 12,
+            control: 0x26,
+        },
+        SmSetting {
+            start: 0x1046,
+            len: 220,
+            control: 0x02,
+        },
+        SmSetting {
+            start: 0x1122,
+            len: 12,
+            control: 0x02,
+        },
+    ]
+}
+
+#[test]
+fn programmed_sync_managers_are_one_buffer_process_data() {
+    let config = EscConfig {
+        sync_managers: SyncManagers::Programmed(palm_sms()),
+        ..EscConfig::default()
+    };
+    let mut bus = Bus::with_config(config, App::new(0, 0));
+    // The SII announces no mailbox and no sync managers.
+    let image = bus.sd.sii_image().to_vec();
+    assert!(image[0x14 * 2..0x1D * 2].iter().all(|b| *b == 0));
+    let mut word = sii::FIRST_CATEGORY;
+    let mut kinds = Vec::new();
+    loop {
+        let kind = u16::from_le_bytes([image[word * 2], image[word * 2 + 1]]);
+        if kind == sii::CAT_END {
+            break;
+        }
+        kinds.push(kind);
+        word += 2 + usize::from(u16::from_le_bytes([
+            image[word * 2 + 2],
+            image[word * 2 + 3],
+        ]));
+    }
+    assert_eq!(kinds, [sii::CAT_STRINGS, sii::CAT_GENERAL]);
+    // PRE-OP needs no mailbox; SAFE-OP needs every SM as the firmware expects it.
+    assert_eq!(bus.request(0x02), (0x02, 0));
+    assert_eq!(bus.request(0x04), (0x12, 0x0017));
+    let sms = palm_sms();
+    for (n, sm) in sms.iter().enumerate() {
+        let len = if n == 2 { sm.len - 1 } else { sm.len };
+        bus.sm(n, sm.start, len, sm.control, true);
+    }
+    assert_eq!(bus.request(0x14), (0x12, 0x0017), "SM2 one byte short");
+    bus.sm(2, 0x1046, 220, 0x02, true);
+    bus.fmmu(0, 0x0001_0000, 70, 0x1000, 2);
+    bus.fmmu(1, 0x0001_0046, 232, 0x1046, 1);
+    assert_eq!(bus.request(0x14), (0x04, 0));
+    assert_eq!(bus.request(0x08), (0x08, 0));
+    assert_eq!(bus.request(0x03), (0x18, 0x0011), "no BOOT from OP");
+    assert_eq!(bus.request(0x18), (0x08, 0));
+
+    let lrw = |bus: &mut Bus, first: u8| {
+        let mut data = vec![0u8; 302];
+        for (i, b) in data[..58].iter_mut().enumerate() {
+            *b = first.wrapping_add(i as u8);
+        }
+        let (data, wkc) = bus.one(ldg(LRW, 0x0001_0000, &data));
+        (data[70..128].to_vec(), wkc)
+    };
+    // The command is written (+2); the status was never filled: not read, data untouched.
+    let (status, wkc) = lrw(&mut bus, 1);
+    assert_eq!((wkc, status), (2, vec![0; 58]));
+    // The firmware has not taken the command yet: the next one is refused, nothing to read.
+    assert_eq!(lrw(&mut bus, 100).1, 0);
+    // The firmware takes it and answers; the next command goes in, the answer comes out.
+    bus.now += Duration::from_millis(1);
+    bus.sd.tick(bus.now);
+    assert_eq!(bus.sd.app().taken.len(), 1);
+    let (status, wkc) = lrw(&mut bus, 7);
+    assert_eq!(wkc, 3);
+    assert_eq!(status[..3], [1, 2, 3], "the first command, echoed");
+    // Read once: the status is empty again until the firmware refills it.
+    assert_eq!(lrw(&mut bus, 9).1, 0);
+    bus.now += Duration::from_millis(1);
+    bus.sd.tick(bus.now);
+    let (status, wkc) = lrw(&mut bus, 11);
+    assert_eq!((wkc, status[0]), (3, 7));
+    // A firmware writing twice before the MainDevice read is refused the second time.
+    bus.now += Duration::from_millis(1);
+    bus.sd.tick(bus.now);
+    assert_eq!(bus.sd.app().echo_refused, 0);
+    assert_eq!(bus.fprd(0x1046, 1).1, 1, "the status is there");
+    bus.fpwr(0x1000, &[0; 58]);
+    bus.now += Duration::from_millis(1);
+    bus.sd.tick(bus.now);
+    assert_eq!(bus.sd.app().echo_refused, 1);
+}
+
+#[test]
+fn programmed_sync_managers_are_validated() {
+    let mut sms = palm_sms();
+    sms[1].start = 0x1030;
+    let overlap = EscConfig {
+        sync_managers: SyncManagers::Programmed(sms),
+        ..EscConfig::default()
+    };
+    assert_eq!(
+        overlap.validate((0, 0)),
+        Err(ConfigError::Overlap("SM0", "SM1"))
+    );
+    let mut five = palm_sms();
+    five.push(five[0]);
+    let five = EscConfig {
+        sync_managers: SyncManagers::Programmed(five),
+        ..EscConfig::default()
+    };
+    assert_eq!(
+        five.validate((0, 0)),
+        Err(ConfigError::TooManySyncManagers(5))
+    );
 }

@@ -21,7 +21,10 @@
 //!   (expedited, normal and segmented upload and download, abort codes);
 //! - **process data** through the configured FMMUs, only exchanged in SAFE-OP (inputs) and OP
 //!   (inputs and outputs), and the **SM watchdog** (OP -> SAFE-OP + ERR, AL status code 0x001B);
-//! - **fault injection** ([`Faults`]) and counters ([`Stats`]).
+//! - **fault injection** ([`Faults`]) and counters ([`Stats`]);
+//! - devices whose SII announces **no mailbox and no sync managers** ([`SyncManagers::Programmed`],
+//!   as the Shadow palm): the MainDevice programs the sync managers the firmware expects, and the
+//!   firmware reads and writes their one-buffer process data through [`Pdi`].
 //!
 //! The device behind the ESC (its object dictionary, its PDO mapping, its reaction to outputs) is
 //! an [`Application`] written by the user of this crate.
@@ -29,7 +32,8 @@
 //! # What it must not depend on
 //!
 //! No device specifics (the BrainCo Revo2 hand lives in its own crate as an [`Application`]), no
-//! IPC (no iceoryx2), no I/O (the caller moves the frames: in-process, veth, raw socket), and no
+//! IPC (no iceoryx2), no I/O (the caller moves the frames: in-process, veth, raw socket;
+//! `teleop-ecat-link` only for its `Responder` trait, which a [`SubDevice`] implements), and no
 //! EtherCAT MainDevice: ethercrab is only a dev-dependency, for the tests. The emulator must stay
 //! independent of the master so that a master bug is not hidden by a matching simulator bug.
 //!
@@ -335,6 +339,13 @@ pub trait Application {
         let _ = (now, state);
         AppRequest::None
     }
+
+    /// The firmware's access to programmed one-buffer sync managers (only with
+    /// [`SyncManagers::Programmed`]): called right after [`poll`](Self::poll), in SAFE-OP and
+    /// OP, before every frame and on every [`SubDevice::tick`].
+    fn pdi(&mut self, now: Duration, state: AlState, pdi: &mut Pdi<'_>) {
+        let _ = (now, state, pdi);
+    }
 }
 
 /// When and where a mailbox request arrived (see [`Application::mailbox_request`]).
@@ -449,6 +460,75 @@ pub struct EscConfig {
     /// `Duration::ZERO`: every write is acted on at once (an ESC whose PDI handles each AL
     /// event interrupt).
     pub firmware_loop: Duration,
+    /// How the firmware uses its sync managers: the standard layout the SII announces, or sync
+    /// managers the MainDevice must program itself (see [`SyncManagers`]).
+    pub sync_managers: SyncManagers,
+}
+
+/// How the firmware behind the ESC uses its sync managers.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum SyncManagers {
+    /// The standard layout: the SII announces the mailbox (SM0/SM1, served as a CoE/FoE
+    /// mailbox) and buffered process data (SM2/SM3, sized by the application's PDOs), with
+    /// their FMMU usage.
+    #[default]
+    Standard,
+    /// A device whose SII announces no mailbox, no FMMUs and no sync managers (as the Shadow
+    /// palm): the MainDevice must program SM *n* as entry *n* says (checked at PRE-OP ->
+    /// SAFE-OP, refused with [`al_status::INVALID_SM_CONFIG`] otherwise) and map them with
+    /// FMMUs of its own. The firmware serves them in SAFE-OP and OP; their buffers belong to
+    /// the application, through [`Application::pdi`]. The standard mailbox and process data
+    /// areas of the configuration are unused.
+    Programmed(Vec<SmSetting>),
+}
+
+/// One sync manager as a firmware expects the MainDevice to program it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SmSetting {
+    /// Physical start address.
+    pub start: u16,
+    /// Length in bytes.
+    pub len: u16,
+    /// Control byte (register +4): mode, direction, event enables.
+    pub control: u8,
+}
+
+/// The application's access to the buffers of one-buffer (mailbox-mode) sync managers, as its
+/// firmware has them through the PDI (see [`SyncManagers::Programmed`]): a buffer the
+/// MainDevice wrote is taken (which empties it for the next write), a buffer the MainDevice
+/// reads is put (refused while the previous one has not been read).
+pub struct Pdi<'a> {
+    pub(crate) esc: &'a mut dyn PdiAccess,
+}
+
+/// What [`Pdi`] needs of the ESC.
+pub(crate) trait PdiAccess {
+    fn written(&self, sm: usize) -> Option<Duration>;
+    fn take(&mut self, sm: usize) -> Option<&[u8]>;
+    fn put(&mut self, sm: usize, data: &[u8]) -> bool;
+}
+
+impl Pdi<'_> {
+    /// When the MainDevice completed the buffer of SM `sm` that waits to be taken (the "SM
+    /// written" AL event a firmware polls); `None` when nothing waits.
+    pub fn written(&self, sm: usize) -> Option<Duration> {
+        self.esc.written(sm)
+    }
+
+    /// The buffer of SM `sm` if the MainDevice wrote it completely since it was last taken
+    /// (the "SM written" AL event); taking it lets the MainDevice write the next one. `None`
+    /// when nothing new is there, or SM `sm` is not an enabled one-buffer SM the MainDevice
+    /// writes.
+    pub fn take(&mut self, sm: usize) -> Option<&[u8]> {
+        self.esc.take(sm)
+    }
+
+    /// Writes `data` (cut or zero-padded to its length) into SM `sm` for the MainDevice to
+    /// read; `false` (nothing written) while the MainDevice has not read the previous one, or
+    /// when SM `sm` is not an enabled one-buffer SM the MainDevice reads.
+    pub fn put(&mut self, sm: usize, data: &[u8]) -> bool {
+        self.esc.put(sm, data)
+    }
 }
 
 impl Default for EscConfig {
@@ -473,8 +553,35 @@ impl Default for EscConfig {
             mailbox_protocols: mailbox_protocols::COE,
             port1_linked: false,
             firmware_loop: Duration::ZERO,
+            sync_managers: SyncManagers::Standard,
         }
     }
+}
+
+/// Programmed sync managers must lie in the process RAM, not overlap, and be at most 4.
+fn validate_programmed(sms: &[SmSetting]) -> Result<(), ConfigError> {
+    const NAMES: [&str; 4] = ["SM0", "SM1", "SM2", "SM3"];
+    if sms.len() > NAMES.len() {
+        return Err(ConfigError::TooManySyncManagers(sms.len()));
+    }
+    let mut areas: Vec<(&'static str, (usize, usize))> = Vec::with_capacity(sms.len());
+    for (name, sm) in NAMES.iter().zip(sms) {
+        let end = usize::from(sm.start) + usize::from(sm.len);
+        if sm.start < 0x1000 || end > 0x1_0000 || sm.len == 0 {
+            return Err(ConfigError::Area {
+                what: name,
+                start: sm.start,
+                len: sm.len.into(),
+            });
+        }
+        for (other, (s, e)) in &areas {
+            if usize::from(sm.start) < *e && *s < end {
+                return Err(ConfigError::Overlap(other, name));
+            }
+        }
+        areas.push((name, (usize::from(sm.start), end)));
+    }
+    Ok(())
 }
 
 /// A configuration that the ESC cannot honour as given (see [`SubDevice::try_new`]).
@@ -497,6 +604,9 @@ pub enum ConfigError {
     /// Two areas of the same state overlap.
     #[error("{0} overlaps {1}")]
     Overlap(&'static str, &'static str),
+    /// More programmed sync managers than the ESC has.
+    #[error("{0} programmed sync managers, the ESC has 4")]
+    TooManySyncManagers(usize),
     /// The device name does not fit an SII string (255 bytes).
     #[error("device name is {0} bytes long, at most 255 fit the SII")]
     NameTooLong(usize),
@@ -512,6 +622,9 @@ impl EscConfig {
         }
         if self.name.len() > 255 {
             return Err(ConfigError::NameTooLong(self.name.len()));
+        }
+        if let SyncManagers::Programmed(sms) = &self.sync_managers {
+            return validate_programmed(sms);
         }
         let area = |what: &'static str, (start, len): (u16, usize), mailbox: bool| {
             let end = usize::from(start) + len;

@@ -11,7 +11,7 @@
 //! | 0x3F | version (1) |
 //! | 0x40.. | categories: Strings (10), General (30), FMMU (40), SyncManager (41), end 0xFFFF |
 
-use crate::{mailbox_protocols, EscConfig};
+use crate::{mailbox_protocols, EscConfig, SyncManagers};
 
 /// Category type: strings.
 pub const CAT_STRINGS: u16 = 10;
@@ -79,6 +79,7 @@ fn category(out: &mut Vec<u8>, kind: u16, mut data: Vec<u8>) {
 /// process image sizes `(outputs, inputs)`. The image is padded with 0xFF (blank EEPROM) to its
 /// announced size (a power of two, at least 2 KiBit).
 pub fn build_image(config: &EscConfig, image_sizes: (usize, usize)) -> Vec<u8> {
+    let standard = config.sync_managers == SyncManagers::Standard;
     let mut image = vec![0u8; FIRST_CATEGORY * 2];
     put_u16(&mut image, 0, PDI_CONTROL);
     let id = config.identity;
@@ -86,15 +87,18 @@ pub fn build_image(config: &EscConfig, image_sizes: (usize, usize)) -> Vec<u8> {
     put_u32(&mut image, 0x0A, id.product_code);
     put_u32(&mut image, 0x0C, id.revision);
     put_u32(&mut image, 0x0E, id.serial);
-    put_u16(&mut image, 0x14, config.bootstrap_rx_mailbox.0);
-    put_u16(&mut image, 0x15, config.bootstrap_rx_mailbox.1);
-    put_u16(&mut image, 0x16, config.bootstrap_tx_mailbox.0);
-    put_u16(&mut image, 0x17, config.bootstrap_tx_mailbox.1);
-    put_u16(&mut image, 0x18, config.rx_mailbox.0);
-    put_u16(&mut image, 0x19, config.rx_mailbox.1);
-    put_u16(&mut image, 0x1A, config.tx_mailbox.0);
-    put_u16(&mut image, 0x1B, config.tx_mailbox.1);
-    put_u16(&mut image, 0x1C, config.mailbox_protocols);
+    // A device with programmed sync managers has no mailbox: words 0x14..0x1C stay 0.
+    if standard {
+        put_u16(&mut image, 0x14, config.bootstrap_rx_mailbox.0);
+        put_u16(&mut image, 0x15, config.bootstrap_rx_mailbox.1);
+        put_u16(&mut image, 0x16, config.bootstrap_tx_mailbox.0);
+        put_u16(&mut image, 0x17, config.bootstrap_tx_mailbox.1);
+        put_u16(&mut image, 0x18, config.rx_mailbox.0);
+        put_u16(&mut image, 0x19, config.rx_mailbox.1);
+        put_u16(&mut image, 0x1A, config.tx_mailbox.0);
+        put_u16(&mut image, 0x1B, config.tx_mailbox.1);
+        put_u16(&mut image, 0x1C, config.mailbox_protocols);
+    }
     put_u16(&mut image, 0x3F, 1);
     image[14] = crc8(&image[..14]);
 
@@ -106,7 +110,11 @@ pub fn build_image(config: &EscConfig, image_sizes: (usize, usize)) -> Vec<u8> {
     category(&mut image, CAT_STRINGS, strings);
 
     // General (ETG.2010 table 8), 32 bytes; reserved fields stay 0 (decoders are strict).
-    let protocols = config.mailbox_protocols;
+    let protocols = if standard {
+        config.mailbox_protocols
+    } else {
+        0
+    };
     let mut general = vec![0u8; 32];
     general[2] = 1; // order string: the name (ethercrab shows it)
     general[3] = 1; // name string
@@ -122,8 +130,25 @@ pub fn build_image(config: &EscConfig, image_sizes: (usize, usize)) -> Vec<u8> {
     general[16] = 0x11;
     category(&mut image, CAT_GENERAL, general);
 
+    if standard {
+        standard_categories(&mut image, config, image_sizes);
+    }
+    image.extend_from_slice(&CAT_END.to_le_bytes());
+    image.extend_from_slice(&CAT_END.to_le_bytes());
+
+    let mut kibit = 2usize;
+    while kibit * 128 < image.len() {
+        kibit *= 2;
+    }
+    image.resize(kibit * 128, 0xFF);
+    put_u16(&mut image, 0x3E, (kibit - 1) as u16);
+    image
+}
+
+/// The FMMU and SyncManager categories of the standard layout.
+fn standard_categories(image: &mut Vec<u8>, config: &EscConfig, image_sizes: (usize, usize)) {
     // FMMU usage: outputs, inputs, mailbox state (0xFF pads to a word).
-    category(&mut image, CAT_FMMU, vec![0x01, 0x02, 0x03, 0xFF]);
+    category(image, CAT_FMMU, vec![0x01, 0x02, 0x03, 0xFF]);
 
     // SyncManagers: start, length, control, reserved, enable, type.
     let mut sms = Vec::with_capacity(32);
@@ -139,18 +164,7 @@ pub fn build_image(config: &EscConfig, image_sizes: (usize, usize)) -> Vec<u8> {
         sms.extend_from_slice(&len.to_le_bytes());
         sms.extend_from_slice(&[SM_CONTROL[i], 0, 0x01, kind]);
     }
-    category(&mut image, CAT_SYNC_MANAGER, sms);
-
-    image.extend_from_slice(&CAT_END.to_le_bytes());
-    image.extend_from_slice(&CAT_END.to_le_bytes());
-
-    let mut kibit = 2usize;
-    while kibit * 128 < image.len() {
-        kibit *= 2;
-    }
-    image.resize(kibit * 128, 0xFF);
-    put_u16(&mut image, 0x3E, (kibit - 1) as u16);
-    image
+    category(image, CAT_SYNC_MANAGER, sms);
 }
 
 /// The EEPROM behind the SII interface.
