@@ -95,7 +95,10 @@ impl Driver for Revo2 {
 
     /// Holds the last commanded position targets (a grasp keeps its squeeze), or the measured
     /// position when none was commanded, at the configured hold speed.
-    fn hold(&self, last: &Inputs, outputs: &mut Image) {
+    fn hold(&mut self, last: Option<&Inputs>, outputs: &mut Image) {
+        let Some(last) = last else {
+            return; // called with none only for drivers that hold every cycle
+        };
         let speeds = hold_speeds(&self.config, self.info.units());
         let out = hold_outputs(self.target.as_ref(), &last.joints, &speeds);
         let _ = out.pack(outputs.subdevice_mut(REVO2));

@@ -271,7 +271,7 @@ fn the_hold_keeps_squeezing_a_grasped_object() {
     let gripped = index(&last);
     assert!(gripped > 1.0, "index force on the ball: {gripped} N");
     // The command goes stale: the master sends the driver's hold for 2 s.
-    driver.hold(&last, &mut image);
+    driver.hold(Some(&last), &mut image);
     let held = drive(&clock, &bus, &group, &written(&image), 2000, &a);
     assert!(
         index(&held) > gripped / 2.0,

@@ -14,7 +14,7 @@ use futures_lite::future::block_on;
 use teleop_runtime::now_ns;
 
 use crate::bus::{expected_wkc, recover_op, scan, Bus, Found, OpGroup, PreOpGroup};
-use crate::driver::{Driver, Image};
+use crate::driver::{Driver, Image, OwnLayout};
 
 /// Cycles the device gets its hold outputs for before the master leaves OP on stop.
 const STOP_HOLD_CYCLES: u32 = 10;
@@ -134,7 +134,9 @@ pub fn run<D: Driver, H: Host<D>>(
             Ok(group) => {
                 tracing::info!(
                     period_us = settings.period.as_micros() as u64,
-                    expected_wkc = expected_wkc(&bus.md, &group),
+                    expected_wkc = driver
+                        .own_layout()
+                        .map_or_else(|| expected_wkc(&bus.md, &group), |l| l.expected_wkc),
                     "{} in OP",
                     driver.name()
                 );
@@ -200,6 +202,106 @@ fn read_inputs(md: &MainDevice<'static>, group: &OpGroup, inputs: &mut Image) {
     }
 }
 
+/// How the process data moves: ethercrab's group image, or one LRW the master builds from the
+/// driver's [`OwnLayout`] (the group's own exchange then only reads the AL states).
+enum Exchanger {
+    Group,
+    Own { layout: OwnLayout, frame: Vec<u8> },
+}
+
+impl Exchanger {
+    fn new(layout: Option<OwnLayout>) -> Self {
+        match layout {
+            Some(layout) => Self::Own {
+                frame: vec![0; layout.len()],
+                layout,
+            },
+            None => Self::Group,
+        }
+    }
+
+    fn images(&self, md: &MainDevice<'static>, group: &OpGroup) -> (Image, Image) {
+        match self {
+            Self::Group => (
+                Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().outputs().len())),
+                Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().inputs().len())),
+            ),
+            Self::Own { layout, .. } => (
+                Image::with_lengths(layout.parts.iter().map(|p| p.0)),
+                Image::with_lengths(layout.parts.iter().map(|p| p.1)),
+            ),
+        }
+    }
+
+    fn expected_wkc(&self, md: &MainDevice<'static>, group: &OpGroup) -> u16 {
+        match self {
+            Self::Group => expected_wkc(md, group),
+            Self::Own { layout, .. } => layout.expected_wkc,
+        }
+    }
+
+    /// Puts the outputs where the next exchange sends them.
+    fn write(&mut self, md: &MainDevice<'static>, group: &OpGroup, outputs: &Image) {
+        match self {
+            Self::Group => write_outputs(md, group, outputs),
+            Self::Own { layout, frame } => {
+                let mut at = 0;
+                for (i, (o, n)) in layout.parts.iter().enumerate() {
+                    frame[at..at + o].copy_from_slice(outputs.subdevice(i));
+                    at += o + n;
+                }
+            }
+        }
+    }
+
+    /// One exchange: the AL states and the working counter (of the process data), the inputs
+    /// copied into `inputs` when it came back.
+    fn exchange(
+        &mut self,
+        md: &MainDevice<'static>,
+        group: &OpGroup,
+        inputs: &mut Image,
+    ) -> Result<
+        (ethercrab::TxRxResponse<{ crate::bus::MAX_SUBDEVICES }>, u16),
+        ethercrab::error::Error,
+    > {
+        match self {
+            Self::Group => {
+                let response = block_on(group.tx_rx(md))?;
+                let wkc = response.working_counter;
+                read_inputs(md, group, inputs);
+                Ok((response, wkc))
+            }
+            Self::Own { layout, frame } => {
+                let mut at = 0;
+                for (o, n) in &layout.parts {
+                    frame[at + o..at + o + n].fill(0);
+                    at += o + n;
+                }
+                let sent = ethercrab::Command::lrw(layout.logical_start)
+                    .with_wkc(layout.expected_wkc)
+                    .send_receive_slice(md, &frame[..]);
+                let wkc = match block_on(sent) {
+                    Ok(pdu) => {
+                        let mut at = 0;
+                        for (i, (o, n)) in layout.parts.iter().enumerate() {
+                            if let Some(src) = pdu.get(at + o..at + o + n) {
+                                inputs.subdevice_mut(i).copy_from_slice(src);
+                            }
+                            at += o + n;
+                        }
+                        layout.expected_wkc
+                    }
+                    Err(ethercrab::error::Error::WorkingCounter { received, .. }) => received,
+                    Err(e) => return Err(e),
+                };
+                let response = block_on(group.tx_rx(md))?;
+                Ok((response, wkc))
+            }
+        }
+    }
+}
+
 /// Cycles until stop (`Ok`) or until the device is lost (`Err`).
 fn cycle<D: Driver, H: Host<D>>(
     bus: &Bus,
@@ -211,10 +313,10 @@ fn cycle<D: Driver, H: Host<D>>(
 ) -> anyhow::Result<()> {
     let md = &bus.md;
     let period = settings.period;
-    let expected = expected_wkc(md, group);
+    let mut exchanger = Exchanger::new(driver.own_layout());
+    let expected = exchanger.expected_wkc(md, group);
     let subdevices = group.len();
-    let mut outputs = Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().outputs().len()));
-    let mut inputs = Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().inputs().len()));
+    let (mut outputs, mut inputs) = exchanger.images(md, group);
     let polled: Mutex<Option<D::Polled>> = Mutex::new(None);
     let poll_period = driver.poll_period();
     let stop_poll = AtomicBool::new(false);
@@ -266,10 +368,10 @@ fn cycle<D: Driver, H: Host<D>>(
                             host.event(Event::Stale);
                             stale = true;
                         }
-                        if holding {
+                        if holding && !driver.hold_every_cycle() {
                             false // keep sending the hold already in the outputs
-                        } else if let Some(last) = &last_inputs {
-                            driver.hold(last, &mut outputs);
+                        } else if last_inputs.is_some() || driver.hold_every_cycle() {
+                            driver.hold(last_inputs.as_ref(), &mut outputs);
                             holding = true;
                             true
                         } else {
@@ -278,11 +380,11 @@ fn cycle<D: Driver, H: Host<D>>(
                     }
                 };
                 if write {
-                    write_outputs(md, group, &outputs);
+                    exchanger.write(md, group, &outputs);
                 }
-                let response = block_on(group.tx_rx(md));
+                let response = exchanger.exchange(md, group, &mut inputs);
                 let origin_ns = now_ns();
-                let response = match response {
+                let (response, working_counter) = match response {
                     Ok(r) => {
                         lost_in_a_row = 0;
                         r
@@ -338,12 +440,12 @@ fn cycle<D: Driver, H: Host<D>>(
                     holding = false; // re-send the hold/command after recovery
                     continue;
                 }
-                if response.working_counter != expected {
+                if working_counter != expected {
                     counters.wkc_errors += 1;
                     wrong_in_a_row += 1;
                     if counters.wkc_errors % 100 == 1 {
                         tracing::warn!(
-                            wkc = response.working_counter,
+                            wkc = working_counter,
                             expected,
                             total = counters.wkc_errors,
                             "wrong working counter: inputs of this cycle ignored"
@@ -358,7 +460,6 @@ fn cycle<D: Driver, H: Host<D>>(
                 }
                 wrong_in_a_row = 0;
                 last_good = Instant::now();
-                read_inputs(md, group, &mut inputs);
                 let side =
                     poll_period.and_then(|_| *polled.lock().unwrap_or_else(|e| e.into_inner()));
                 let Some(decoded) = driver.unpack(&inputs, side.as_ref()) else {
@@ -375,10 +476,10 @@ fn cycle<D: Driver, H: Host<D>>(
             }
             // Stopping: the driver's hold for a few cycles before leaving OP.
             if let Some(last) = &last_inputs {
-                driver.hold(last, &mut outputs);
-                write_outputs(md, group, &outputs);
+                driver.hold(Some(last), &mut outputs);
+                exchanger.write(md, group, &outputs);
                 for _ in 0..STOP_HOLD_CYCLES {
-                    let _ = block_on(group.tx_rx(md));
+                    let _ = exchanger.exchange(md, group, &mut inputs);
                     std::thread::sleep(period);
                 }
                 tracing::info!("sent hold before leaving OP");

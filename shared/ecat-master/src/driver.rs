@@ -66,6 +66,32 @@ impl Image {
     }
 }
 
+/// Process data a driver lays out itself, for a device whose SII announces no PDOs or sync
+/// managers (the Shadow palm): its [`Driver::configure`] programs the sync managers and FMMUs,
+/// and the master exchanges one LRW over the logical range: each SubDevice's outputs, then its
+/// inputs, in bus order (inputs sent as zeros, so a byte the device did not refill reads 0).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OwnLayout {
+    /// Logical address of the first byte.
+    pub logical_start: u32,
+    /// Output and input bytes of each SubDevice, in bus order.
+    pub parts: Vec<(usize, usize)>,
+    /// Working counter of an exchange in which every output was taken and every input fresh.
+    pub expected_wkc: u16,
+}
+
+impl OwnLayout {
+    /// Bytes of the LRW.
+    pub fn len(&self) -> usize {
+        self.parts.iter().map(|(o, i)| o + i).sum()
+    }
+
+    /// True without any byte.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 /// A device on the bus, as the master drives it: which SubDevices it is, how it is configured
 /// in PRE-OP, and how commands and inputs map to its process data. Everything else (the cycle,
 /// deadlines, working counter and AL-state checks, recovery, reconnect, stale command -> hold,
@@ -110,8 +136,23 @@ pub trait Driver {
     /// Writes the outputs that hold the device: sent when the command goes stale (the operator
     /// is lost, or the e-stop holds it), and for a few cycles before the master leaves OP. A
     /// driver holds the last commanded target where it has one, so that a grasp keeps its
-    /// grip; `last` (where the device is) is for when it has none.
-    fn hold(&self, last: &Self::Inputs, outputs: &mut Image);
+    /// grip; `last` (where the device is) is for when it has none. `last` is `None` only for a
+    /// driver that holds [every cycle](Self::hold_every_cycle), before its first inputs.
+    fn hold(&mut self, last: Option<&Self::Inputs>, outputs: &mut Image);
+
+    /// True for a device the host closes the loop for (the Shadow palm: its demands come from
+    /// the host's position control every cycle): [`hold`](Self::hold) is then called every
+    /// cycle the command is stale, not once, and also before the first inputs came.
+    fn hold_every_cycle(&self) -> bool {
+        false
+    }
+
+    /// The process data layout when the driver programs it itself (see [`OwnLayout`]); `None`
+    /// (the default): ethercrab's, from the PDO assignment. Asked after
+    /// [`configure`](Self::configure).
+    fn own_layout(&self) -> Option<OwnLayout> {
+        None
+    }
 
     /// How often the side channel runs, or `None` (the default) for none. The side channel is
     /// [`poll`](Self::poll), called on a thread of its own while the device is in OP, so that a

@@ -9,7 +9,8 @@
 //!   that task ends), the bus scan, the AL error acknowledge, and the working counter a healthy
 //!   cycle returns, computed from the SubDevices' process data;
 //! - [`driver`]: what a device provides (identity check, PRE-OP configuration, pack, unpack,
-//!   hold, an optional side channel);
+//!   hold, an optional side channel, and for a device without PDOs its own process data
+//!   layout, exchanged with one LRW of the master's);
 //! - [`cycle`]: bring-up with a driver and the cycle (absolute deadlines, stale command -> hold,
 //!   working-counter and AL-state checks of every SubDevice, recovery, reconnect, counters),
 //!   reporting to a [`Host`] (the node's ports);
@@ -35,6 +36,6 @@ pub use bus::{
     MAX_PDI, MAX_SUBDEVICES,
 };
 pub use cycle::{bring_up, discover, run, Counters, Event, Exchange, Host, Settings};
-pub use driver::{Driver, Image};
+pub use driver::{Driver, Image, OwnLayout};
 pub use pump::{Connect, Pump, PumpStatus};
 pub use transport::Transport;

@@ -311,7 +311,8 @@ impl Driver for Gripper {
         })
     }
 
-    fn hold(&self, last: &PalmInputs, outputs: &mut Image) {
+    fn hold(&mut self, last: Option<&PalmInputs>, outputs: &mut Image) {
+        let Some(last) = last else { return };
         if let Some(out) = outputs.subdevice_mut(1).get_mut(..4) {
             out[..2].copy_from_slice(&last.position.to_le_bytes());
             out[2..].copy_from_slice(&HOLD.to_le_bytes());
