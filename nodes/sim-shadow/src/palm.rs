@@ -17,11 +17,13 @@
 
 use teleop_shadow_protocol::can::{bus_of_motor, BootMessage};
 use teleop_shadow_protocol::data::{
-    flags, EdcCommand, EdcNumbering, FromMotor, ToMotor, EDC_BOOTING,
+    flags, tactile, EdcCommand, EdcNumbering, FromMotor, SlowData, ToMotor, EDC_BOOTING,
 };
-use teleop_shadow_protocol::layout::{CanBridge, Command, MotorPacket, Status, MOTORS};
+use teleop_shadow_protocol::layout::{CanBridge, Command, MotorPacket, Status, MOTORS, TACTILE};
+use teleop_shadow_protocol::mapping::Mapping;
 
 use crate::bootloader::{Board, Mode};
+use crate::hand::{Hand, Object};
 
 /// One motor's application state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -38,7 +40,12 @@ pub struct Motor {
     pub last_demand_ms: Option<u64>,
     /// Replies sent.
     pub replies: u64,
+    /// The slow data type the next SLOW_MISC reply carries (the motor picks: 1..0x10 in turn).
+    pub slow_next: u16,
 }
+
+/// This emulator's motor firmware: its SVN revision (slow data 1).
+pub const MOTOR_REVISION: u16 = 2035;
 
 /// The firmware's cut-out temperature (release notes: 60 deg C).
 pub const CUT_OUT_C: f64 = 60.0;
@@ -58,6 +65,23 @@ impl Motor {
         f
     }
 
+    /// A slow data value of motor `n`: revisions, serial `0x5A00_0000 + n`, a build date, the
+    /// gains, 5 kHz, coupled gauges.
+    fn slow(n: usize, kind: SlowData) -> u16 {
+        match kind {
+            SlowData::SvnRevision | SlowData::ServerRevision => MOTOR_REVISION,
+            SlowData::Modified => 0,
+            SlowData::SerialLow => n as u16,
+            SlowData::SerialHigh => 0x5A00,
+            SlowData::GearRatio => 131,
+            SlowData::Year => 2011,
+            SlowData::MonthDay => 0x0A1F,
+            SlowData::Frequency => 5000,
+            SlowData::GaugeType => 0x0C,
+            _ => 0,
+        }
+    }
+
     fn value(&self, kind: FromMotor, now_ms: u64) -> u16 {
         match kind {
             FromMotor::StrainGaugeLeft => (2048.0 + self.torque / 16.0) as u16,
@@ -74,7 +98,13 @@ impl Motor {
 
     fn step(&mut self, dt_ms: f64, now_ms: u64) {
         let serious = flags::serious(self.flags(now_ms));
-        let target = if serious { 0.0 } else { f64::from(self.demand) };
+        // A PWM demand (+-0x3FF) drives the motor as a torque demand 32 times as large would.
+        let scale = if self.pwm_mode { 32.0 } else { 1.0 };
+        let target = if serious {
+            0.0
+        } else {
+            f64::from(self.demand) * scale
+        };
         self.torque += (target - self.torque) * (dt_ms / 5.0).min(1.0);
         // Heating with torque, cooling toward 30 deg C (a 20 s time constant).
         let rise = (self.torque / 8000.0).powi(2) * 40.0;
@@ -93,16 +123,22 @@ pub struct Palm {
     pub numbering: EdcNumbering,
     last_status_ms: Option<u64>,
     last_cycle_ms: Option<u64>,
-    /// Sensor words it reports (joint ADCs; the hand model behind them comes later).
-    pub sensors: [u16; 37],
+    /// The joints the motors move, whose sensors the palm reads.
+    pub hand: Hand,
 }
 
 impl Palm {
     /// Milliseconds the palm reports boot status after power-up.
     pub const BOOT_MS: u64 = 50;
 
-    /// A palm whose 20 boards run an application.
+    /// A palm whose 20 boards run an application, in a hand of the E v3 mapping with the
+    /// ball under its middle finger.
     pub fn new() -> Self {
+        Self::with_hand(Hand::new(Mapping::EV3, Some(Object::ball())))
+    }
+
+    /// A palm whose 20 boards run an application, in `hand`.
+    pub fn with_hand(hand: Hand) -> Self {
         Self {
             boards: (0..MOTORS as u8)
                 .map(|n| Board::new(n % 10, &[0x12, 0x34]))
@@ -114,7 +150,7 @@ impl Palm {
             numbering: EdcNumbering::Shipped,
             last_status_ms: None,
             last_cycle_ms: None,
-            sensors: [0; 37],
+            hand,
         }
     }
 
@@ -130,11 +166,14 @@ impl Palm {
             .last_cycle_ms
             .map_or(1.0, |t| now_ms.saturating_sub(t) as f64);
         self.last_cycle_ms = Some(now_ms);
+        let mut torques = [0.0; MOTORS];
         for (n, m) in self.motors.iter_mut().enumerate() {
             if self.boards[n].mode() == Mode::Application {
                 m.step(dt, now_ms);
+                torques[n] = m.torque;
             }
         }
+        self.hand.step(&torques, dt / 1000.0);
         if now_ms < Self::BOOT_MS {
             let mut s = Status {
                 edc_command: EDC_BOOTING,
@@ -156,18 +195,29 @@ impl Palm {
         let kind = FromMotor::from_value(c.from_motor_data_type);
         let mut s = Status {
             edc_command: 1,
-            sensors: self.sensors,
+            sensors: self.hand.sensors(),
             motor_data_type: c.from_motor_data_type,
             which_motors: c.which_motors & 1,
             ..Status::default()
         };
         for n in (parity..MOTORS).step_by(2) {
-            if self.boards[n].mode() != Mode::Application {
+            if self.boards[n].mode() != Mode::Application || self.boards[n].silent {
                 continue;
             }
             let m = &mut self.motors[n];
             m.replies += 1;
             match kind {
+                Some(FromMotor::SlowMisc) => {
+                    // The torque word says which slow type this is.
+                    m.slow_next = m.slow_next % 0x10 + 1;
+                    let slow = SlowData::from_value(m.slow_next).unwrap_or(SlowData::SvnRevision);
+                    s.packets[n / 2] = MotorPacket {
+                        torque: m.slow_next as i16,
+                        misc: Motor::slow(n, slow),
+                    };
+                    s.which_motor_data_arrived |= 1 << n;
+                    s.which_motor_data_had_errors &= 0xFFFF_FFFEu32.wrapping_shl(n as u32);
+                }
                 Some(kind) => {
                     s.packets[n / 2] = MotorPacket {
                         torque: m.torque as i16,
@@ -192,6 +242,14 @@ impl Palm {
                     }
                     _ => {}
                 }
+            }
+        }
+        if c.tactile_data_type == tactile::PST3 {
+            // PST3: word 0 pressure, word 1 temperature (not emulated: 0).
+            s.tactile_data_type = tactile::PST3;
+            s.tactile_data_valid = (1 << TACTILE) - 1;
+            for (words, pressure) in s.tactile.iter_mut().zip(self.hand.pst()) {
+                words[0] = pressure;
             }
         }
         s.idle_time_us = self.last_status_ms.map_or(0, |t| {

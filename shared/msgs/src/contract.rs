@@ -430,14 +430,17 @@ pub mod device_kind {
     pub const REVO2: u8 = 2;
     /// The Wonik Allegro Hand.
     pub const ALLEGRO: u8 = 3;
+    /// The Shadow Dexterous Hand (its palm).
+    pub const SHADOW: u8 = 4;
 
-    /// The kind's short name (`glove`, `revo2`, `allegro`; `other` for an unknown value), as
+    /// The kind's short name (`glove`, `revo2`, `allegro`, `shadow`; `other` for an unknown value), as
     /// recording metadata keys (`device.allegro`) and the viewer use it.
     pub fn name(kind: u8) -> &'static str {
         match kind {
             GLOVE => "glove",
             REVO2 => "revo2",
             ALLEGRO => "allegro",
+            SHADOW => "shadow",
             _ => "other",
         }
     }

@@ -1,0 +1,238 @@
+//! The hand on an EtherCAT bus, as a real Hand E is: two SubDevices of `teleop-ecat-sim` in
+//! ring order, the bridge (product 0: no process data, no mailbox) and the palm (product 6,
+//! protocol 0220). Neither SII announces sync managers, FMMUs or a mailbox (the real ones are
+//! not public): the MainDevice must program the palm's four one-buffer sync managers as the
+//! shipped driver does, or the palm refuses SAFE-OP (0x0017).
+//!
+//! The palm's firmware ([`PalmFirmware`]) polls for the command sync manager being written
+//! (E11's AL event 0x220 bit 8), takes the command and the bridge message, runs one cycle of
+//! [`Palm`] at that time and writes the status (and the bridge status) [`PROCESS_TIME`] later,
+//! so a status read in a cycle answers the previous cycle's command. A status the MainDevice
+//! has not read yet is not overwritten (one-buffer): counted in [`PalmStats::unread_status`].
+
+use std::time::Duration;
+
+use teleop_ecat_sim::{
+    AlState, Application, EscConfig, Identity, Pdi, SdoAbort, SmSetting, SubDevice, SyncManagers,
+};
+use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
+use teleop_shadow_protocol::layout::{CanBridge, Command, Protocol, PRODUCT_BRIDGE, PRODUCT_SR06};
+
+use crate::palm::Palm;
+
+/// Vendor ID both SubDevices carry: Shadow's entry in the ETG vendor list (ethercrab's
+/// `vendors.rs`); no Shadow source names it (notes/shadow.md, "Open").
+pub const VENDOR_ID: u32 = 0x0000_0530;
+/// From the command being written to the status being written: the firmware's CAN round
+/// (it waits up to 610 us for the ten replies).
+pub const PROCESS_TIME: Duration = Duration::from_micros(610);
+/// Sync managers in the order the palm expects them: command, bridge command, status, bridge
+/// status.
+pub const SM_COMMAND: usize = 0;
+/// The bridge command's sync manager.
+pub const SM_BRIDGE_COMMAND: usize = 1;
+/// The status's sync manager.
+pub const SM_STATUS: usize = 2;
+/// The bridge status's sync manager.
+pub const SM_BRIDGE_STATUS: usize = 3;
+
+/// The palm's four sync managers for `protocol` (notes/shadow.md, "Sync managers and FMMUs"):
+/// one buffer each, AL event enabled on the two the MainDevice writes.
+pub fn palm_sync_managers(protocol: Protocol) -> Vec<SmSetting> {
+    let a = protocol.area();
+    let bridge = CanBridge::SIZE as u16;
+    vec![
+        SmSetting {
+            start: a.command,
+            len: a.command_len,
+            control: 0x26,
+        },
+        SmSetting {
+            start: a.bridge_command,
+            len: bridge,
+            control: 0x26,
+        },
+        SmSetting {
+            start: a.status,
+            len: a.status_len,
+            control: 0x02,
+        },
+        SmSetting {
+            start: a.bridge_status,
+            len: bridge,
+            control: 0x02,
+        },
+    ]
+}
+
+/// Neither SubDevice has an object dictionary or PDOs.
+macro_rules! no_coe {
+    () => {
+        fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, SdoAbort> {
+            Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
+        }
+        fn sdo_write(&mut self, _: u16, _: u8, _: &[u8], _: AlState) -> Result<(), SdoAbort> {
+            Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
+        }
+        fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
+            Ok((0, 0))
+        }
+        fn write_outputs(&mut self, _: &[u8], _: Duration) {}
+        fn read_inputs(&mut self, _: &mut [u8], _: Duration) {}
+    };
+}
+
+/// The bridge SubDevice: nothing behind its ESC.
+#[derive(Debug, Default)]
+pub struct Bridge;
+
+impl Application for Bridge {
+    no_coe!();
+}
+
+/// What the palm's firmware counted.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct PalmStats {
+    /// Commands taken (cycles run).
+    pub cycles: u64,
+    /// Statuses not written because the MainDevice had not read the previous one.
+    pub unread_status: u64,
+    /// Bridge messages taken that were not idle.
+    pub bridged: u64,
+}
+
+/// The palm's firmware behind its ESC.
+#[derive(Debug)]
+pub struct PalmFirmware {
+    /// The palm and its motor boards and hand.
+    pub palm: Palm,
+    /// Counters.
+    pub stats: PalmStats,
+}
+
+impl PalmFirmware {
+    /// Firmware around `palm`.
+    pub fn new(palm: Palm) -> Self {
+        Self {
+            palm,
+            stats: PalmStats::default(),
+        }
+    }
+}
+
+impl Application for PalmFirmware {
+    no_coe!();
+
+    fn pdi(&mut self, now: Duration, _: AlState, pdi: &mut Pdi<'_>) {
+        let Some(written) = pdi.written(SM_COMMAND) else {
+            return;
+        };
+        if now < written + PROCESS_TIME {
+            return; // still on the CAN buses
+        }
+        let Some(command) = pdi.take(SM_COMMAND).and_then(|b| Command::unpack(b).ok()) else {
+            return;
+        };
+        let bridge = pdi
+            .written(SM_BRIDGE_COMMAND)
+            .and_then(|_| pdi.take(SM_BRIDGE_COMMAND))
+            .and_then(|b| CanBridge::unpack(b).ok());
+        let at_ms = written.as_millis() as u64;
+        self.stats.cycles += 1;
+        if bridge.is_some_and(|b| !b.is_idle()) {
+            self.stats.bridged += 1;
+        }
+        let direct = EdcCommand::from_value(command.edc_command, self.palm.numbering)
+            == Some(EdcCommand::CanDirectMode);
+        let (status, reply) = self.palm.cycle(&command, bridge.as_ref(), at_ms);
+        // In CAN direct mode a reply that came later (an ERASE's echo) goes out with the next
+        // cycle.
+        let reply = reply.or_else(|| direct.then(|| self.palm.pending_reply(at_ms)).flatten());
+        if let Some(status) = status {
+            if !pdi.put(SM_STATUS, &status.pack()) {
+                self.stats.unread_status += 1;
+            }
+        }
+        if let Some(reply) = reply {
+            pdi.put(SM_BRIDGE_STATUS, &reply.pack());
+        }
+    }
+}
+
+/// The two SubDevices in ring order, answering frames as the hand's bus does.
+#[derive(Debug)]
+pub struct ShadowBus {
+    /// The first SubDevice (product 0).
+    pub bridge: SubDevice<Bridge>,
+    /// The second (product 6).
+    pub palm: SubDevice<PalmFirmware>,
+    between: Vec<u8>,
+}
+
+impl ShadowBus {
+    /// A hand whose palm has `serial` (it names the hand's namespace on a real system) and
+    /// reads AL control once per `firmware_loop`.
+    pub fn new(palm: Palm, serial: u32, firmware_loop: Duration) -> Self {
+        let bridge = EscConfig {
+            identity: Identity {
+                vendor_id: VENDOR_ID,
+                product_code: PRODUCT_BRIDGE,
+                revision: 0,
+                serial,
+            },
+            name: "Shadow EtherCAT bridge (emulated)".into(),
+            mac: [0x02, 0x00, 0x00, 0x00, 0x5a, 0x01],
+            port1_linked: true,
+            sync_managers: SyncManagers::Programmed(Vec::new()),
+            firmware_loop,
+            ..EscConfig::default()
+        };
+        let palm_config = EscConfig {
+            identity: Identity {
+                vendor_id: VENDOR_ID,
+                product_code: PRODUCT_SR06,
+                revision: 0,
+                serial,
+            },
+            name: "Shadow SR06 palm (emulated)".into(),
+            mac: [0x02, 0x00, 0x00, 0x00, 0x5a, 0x02],
+            sync_managers: SyncManagers::Programmed(palm_sync_managers(Protocol::P0220)),
+            firmware_loop,
+            ..EscConfig::default()
+        };
+        Self {
+            bridge: SubDevice::new(bridge, Bridge),
+            palm: SubDevice::new(palm_config, PalmFirmware::new(palm)),
+            between: vec![0; teleop_ecat_link::MAX_FRAME],
+        }
+    }
+
+    /// The palm.
+    pub fn palm(&self) -> &Palm {
+        &self.palm.app().palm
+    }
+
+    /// The palm, to change (faults, objects).
+    pub fn palm_mut(&mut self) -> &mut Palm {
+        &mut self.palm.app_mut().palm
+    }
+
+    /// The EDC numbering the palm's firmware uses.
+    pub fn numbering(&self) -> EdcNumbering {
+        self.palm().numbering
+    }
+}
+
+impl teleop_ecat_link::Responder for ShadowBus {
+    fn respond(&mut self, frame: &[u8], out: &mut [u8], now: Duration) -> Option<usize> {
+        let n = self
+            .bridge
+            .process_frame_into(frame, &mut self.between, now)?;
+        self.palm.process_frame_into(&self.between[..n], out, now)
+    }
+
+    fn idle(&mut self, now: Duration) {
+        self.bridge.tick(now);
+        self.palm.tick(now);
+    }
+}
