@@ -1,15 +1,24 @@
-//! The Shadow Hand node, built up from its parts. So far the host side of the palm's 1 kHz
-//! exchange, pure and tested without a bus:
+//! The Shadow Hand node: the Hand E's palm (protocol 0220) on the shared EtherCAT master at
+//! 1 kHz, driven from `hand/command` with position control on the host.
+//! - [`config`]: the configuration file (transport, mapping, demand mode, gains, calibration);
 //! - [`schedule`]: what each cycle's command asks of the motors (which motors, which data type,
 //!   which demand), as the shipped driver schedules it;
 //! - [`motors`]: what a status says about each motor: its replies by type, its flags by name,
-//!   and whether a serious flag stops its demand.
-//!
-//! Still to come (issue 14): the `Driver` on `teleop-ecat-master` (identity by product code,
-//! SM/FMMU programming), position control and calibration from the profile, `hand/state` and
-//! tactile, the `teleop-shadow` executable and `teleop shadow`.
+//!   and whether a serious flag stops its demand;
+//! - [`joints`]: sensor words to calibrated joint angles;
+//! - [`driver`]: the `teleop-ecat-master` driver: identity by product code, the palm's sync
+//!   managers and FMMUs programmed in PRE-OP, the LRW layout, position control every cycle;
+//! - [`node`]: the ports (`hand/command` in; `hand/state`, `hand/tactile`, device info and
+//!   health out).
 //!
 //! Must not depend on: the emulator.
 
+pub mod config;
+pub mod driver;
+pub mod joints;
 pub mod motors;
+pub mod node;
 pub mod schedule;
+
+pub use config::{Checked, ShadowConfig};
+pub use node::run;

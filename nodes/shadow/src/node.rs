@@ -1,0 +1,185 @@
+//! The Shadow node: the master's cycle (`teleop-ecat-master`) with the [`Shadow`] driver, and
+//! the node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp;
+//! none followed while the latched e-stop is engaged, so the hand holds its last target),
+//! `hand/state` (24 joints, efforts from the strain gauges, each joint's motor flags as its
+//! status) and `hand/tactile` (PST pressure) out for every valid exchange, the link state while
+//! the hand is away, health and device info periodically.
+
+use std::time::{Duration, Instant};
+
+use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
+use teleop_msgs::{
+    bus_state, device_kind, fingertip_sensor, fixed_text, hand_model, link_kind, units, DeviceInfo,
+    HandCommand, HandState, Tactile,
+};
+use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
+
+use crate::config::{Checked, ShadowConfig};
+use crate::driver::{Inputs, Shadow};
+
+/// The node's ports, the master's host.
+struct Ports {
+    device: Publisher<DeviceInfo>,
+    connected: Option<DeviceInfo>,
+    commands: Subscriber<HandCommand>,
+    estop: EStopInput,
+    state: Publisher<HandState>,
+    tactile: Publisher<Tactile>,
+    health: Health,
+    stale_after: Duration,
+    health_period: Duration,
+    last_health: Instant,
+}
+
+/// Runs until SIGINT/SIGTERM.
+pub fn run(
+    runtime: &NodeRuntime,
+    config: &ShadowConfig,
+    checked: Checked,
+    connect: Connect,
+) -> anyhow::Result<()> {
+    teleop_runtime::install_stop_handlers();
+    let mut ports = Ports {
+        device: runtime.publisher()?,
+        connected: None,
+        commands: runtime.subscriber()?,
+        estop: EStopInput::new(runtime)?,
+        state: runtime.publisher()?,
+        tactile: runtime.publisher()?,
+        health: Health::new(runtime)?,
+        stale_after: Duration::from_millis(config.stale_command_ms),
+        health_period: Duration::from_millis(config.health_period_ms),
+        last_health: Instant::now(),
+    };
+    let settings = Settings {
+        period: Duration::from_secs_f64(1.0 / config.cycle_hz),
+        link_timeout: Duration::from_millis(config.link_timeout_ms),
+    };
+    let bus = Bus::open(connect)?;
+    let mut driver = Shadow::new(config.clone(), checked);
+    teleop_ecat_master::run(&bus, &mut driver, &mut ports, &settings)
+}
+
+/// `hand/state` of one exchange.
+pub fn hand_state(inputs: &Inputs) -> HandState {
+    let mut state = HandState {
+        hand_model: hand_model::SHADOW,
+        joint_count: 24,
+        units: units::PHYSICAL,
+        link_up: 1,
+        link_kind: link_kind::ETHERCAT,
+        bus_state: bus_state::AL_OP,
+        ..Default::default()
+    };
+    for (j, out) in state.joints.iter_mut().enumerate() {
+        out.position = inputs.angles[j] as f32;
+        out.speed = inputs.speeds[j] as f32;
+        out.effort = inputs.efforts[j] as f32;
+        out.current_ma = inputs.currents_ma[j] as f32;
+        out.status = u32::from(inputs.flags[j]);
+    }
+    state
+}
+
+/// `hand/tactile` of one exchange, when the palm sent PST data.
+pub fn tactile(inputs: &Inputs) -> Option<Tactile> {
+    let pst = inputs.pst?;
+    let mut t = Tactile {
+        hand_model: hand_model::SHADOW,
+        fingertip_count: pst.len() as u8,
+        ..Default::default()
+    };
+    for (out, (pressure, temperature)) in t.fingertips.iter_mut().zip(pst) {
+        out.sensor_kind = fingertip_sensor::PST_PRESSURE;
+        out.normal_n = f32::NAN;
+        out.tangential_n = f32::NAN;
+        out.direction_deg = f32::NAN;
+        out.pressure = i32::from(pressure);
+        out.temperature = i32::from(temperature);
+    }
+    Some(t)
+}
+
+impl Host<Shadow> for Ports {
+    fn stop_requested(&self) -> bool {
+        teleop_runtime::stop_signal().is_some()
+    }
+
+    fn command(&mut self) -> Option<HandCommand> {
+        match self.estop.update() {
+            Ok(Some(true)) => tracing::warn!("e-stop engaged: the hand holds its last target"),
+            Ok(Some(false)) => tracing::info!("e-stop released: following hand commands"),
+            Ok(None) => {}
+            Err(e) => {
+                self.health.count_error();
+                tracing::warn!("e-stop acknowledgement: {e}");
+            }
+        }
+        let cmd = self.commands.poll_latest();
+        let fresh = self.commands.is_fresh(Instant::now(), self.stale_after);
+        cmd.filter(|_| fresh && !self.estop.engaged())
+    }
+
+    fn connected(&mut self, driver: &Shadow) {
+        let palm = driver.palm();
+        self.connected = Some(DeviceInfo {
+            kind: device_kind::SHADOW,
+            id: palm.serial,
+            model: fixed_text("Shadow Hand E (SR06 palm, 0220)"),
+            firmware_a: fixed_text(&format!("palm revision {}", palm.revision)),
+            serial_a: fixed_text(&palm.serial.to_string()),
+            ..Default::default()
+        });
+    }
+
+    fn exchanged(
+        &mut self,
+        _driver: &Shadow,
+        inputs: &Inputs,
+        exchange: &Exchange,
+    ) -> anyhow::Result<()> {
+        let mut state = hand_state(inputs);
+        state.holding = u8::from(exchange.holding);
+        state.link_errors = exchange.counters.wkc_errors;
+        state.lost_frames = exchange.counters.lost_frames;
+        state.header.origin_ns = exchange.origin_ns;
+        self.state.publish(&state)?;
+        if let Some(mut t) = tactile(inputs) {
+            t.header.origin_ns = exchange.origin_ns;
+            self.tactile.publish(&t)?;
+        }
+        self.health.count_loop();
+        if self.last_health.elapsed() >= self.health_period {
+            self.last_health = Instant::now();
+            self.health.set_dropped(self.commands.dropped());
+            self.health.publish(&[self.commands.age(Instant::now())])?;
+            if let Some(d) = &self.connected {
+                self.device.publish(d)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn event(&mut self, event: Event) {
+        match event {
+            Event::Stale => self.health.count_timeout(),
+            Event::Clamped(n) => self.health.count_clamps(u64::from(n)),
+            Event::Recovered | Event::Lost => self.health.count_error(),
+        }
+    }
+
+    fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()> {
+        let state = HandState {
+            hand_model: hand_model::SHADOW,
+            joint_count: 24,
+            units: units::PHYSICAL,
+            link_up: 0,
+            link_kind: link_kind::ETHERCAT,
+            link_errors: counters.wkc_errors,
+            lost_frames: counters.lost_frames,
+            ..Default::default()
+        };
+        self.state.publish(&state)?;
+        Ok(())
+    }
+}
