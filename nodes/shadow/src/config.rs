@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 pub use teleop_ecat_master::Transport;
 use teleop_shadow_protocol::data::EdcNumbering;
-use teleop_shadow_protocol::mapping::Mapping;
+use teleop_shadow_protocol::mapping::{Mapping, SENSOR_NAMES};
 
 use crate::joints::JOINTS;
 use crate::schedule::DemandMode;
@@ -61,6 +61,10 @@ pub struct ShadowConfig {
     pub calibration: Table,
     /// ... and per joint where this hand's differs (from its sr_hand_config calibration).
     pub joint_calibration: BTreeMap<String, Table>,
+    /// The ADC and channel each sensor word should come from (by sensor name: FFJ1 ... THJ5A,
+    /// THJ5B, WRJ1A, WRJ1B, WRJ2, ACCX ... AN3), as `[adc, channel]`; `teleop shadow channels`
+    /// checks the palm against it.
+    pub channels: BTreeMap<String, [u8; 2]>,
 }
 
 impl Default for ShadowConfig {
@@ -85,6 +89,7 @@ impl Default for ShadowConfig {
             // The emulated hand's sensors: 2048 counts at 0 rad, 1200 counts per radian.
             calibration: vec![[848.0, -1.0], [3248.0, 1.0]],
             joint_calibration: BTreeMap::new(),
+            channels: BTreeMap::new(),
         }
     }
 }
@@ -187,6 +192,14 @@ impl ShadowConfig {
             }
             check_table(&format!("joint_calibration.{joint}"), t)?;
         }
+        for name in self.channels.keys() {
+            if !SENSOR_NAMES.contains(&name.as_str()) {
+                return Err(format!(
+                    "channels.{name}: no such sensor (FFJ1 ... THJ5A, THJ5B, WRJ1A, WRJ1B, WRJ2, \
+                     ACCX ... AN3)"
+                ));
+            }
+        }
         Ok(Checked {
             transport,
             mapping,
@@ -213,6 +226,15 @@ mod tests {
     #![allow(clippy::unwrap_used)]
 
     use super::*;
+
+    #[test]
+    fn the_shipped_configuration_loads() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/shadow.toml");
+        let cfg: ShadowConfig = teleop_runtime::load_toml(std::path::Path::new(path)).unwrap();
+        cfg.validate().unwrap();
+        assert_eq!(cfg.channels["LFJ5"], [5, 6], "the document's example");
+        assert_eq!(cfg.channels.len(), 26);
+    }
 
     #[test]
     fn validation_names_the_field() {

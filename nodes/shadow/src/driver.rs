@@ -10,7 +10,7 @@ use std::time::Instant;
 use ethercrab::{Command as EcatCommand, MainDevice};
 use teleop_ecat_master::{Driver, Found, Image, OwnLayout, PreOpGroup};
 use teleop_msgs::{control_mode, hand_model, units, HandCommand};
-use teleop_shadow_protocol::data::{flags, tactile};
+use teleop_shadow_protocol::data::{flags, tactile, EdcNumbering};
 use teleop_shadow_protocol::layout::{
     CanBridge, Command, Protocol, Status, MOTORS, PRODUCT_BRIDGE, TACTILE,
 };
@@ -127,6 +127,16 @@ impl Shadow {
     /// The motors as the statuses describe them.
     pub fn motors(&self) -> &Motors {
         &self.motors
+    }
+
+    /// What each motor drives.
+    pub fn dofs(&self) -> [Option<Dof>; MOTORS] {
+        self.dofs
+    }
+
+    /// The EDC command numbering of the palm's firmware.
+    pub fn numbering(&self) -> EdcNumbering {
+        self.checked.numbering
     }
 
     fn now_ms(&self) -> u64 {

@@ -9,7 +9,9 @@
 //! - [`driver`]: the `teleop-ecat-master` driver: identity by product code, the palm's sync
 //!   managers and FMMUs programmed in PRE-OP, the LRW layout, position control every cycle;
 //! - [`node`]: the ports (`hand/command` in; `hand/state`, `hand/tactile`, device info and
-//!   health out).
+//!   health out);
+//! - [`service`]: the palm's service modes for `teleop shadow` (info, ADC channel numbers, a
+//!   crafted CAN message, motor-board flashing), one cycle at a time.
 //!
 //! Must not depend on: the emulator.
 
@@ -19,6 +21,7 @@ pub mod joints;
 pub mod motors;
 pub mod node;
 pub mod schedule;
+pub mod service;
 
 pub use config::{Checked, ShadowConfig};
 pub use node::run;

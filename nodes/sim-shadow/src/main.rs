@@ -2,8 +2,8 @@
 //! local socket (`--socket PATH`, no privileges) or on a network interface with a raw socket
 //! (`--interface IF`, e.g. one end of a veth pair; needs CAP_NET_RAW), and takes commands at
 //! run time on a control socket: `drop P`, `link-down SECONDS`, `silent MOTOR|none` (a motor
-//! board stops answering), `overheat MOTOR`, `flash-stall MOTOR N` (a board stops acking after
-//! N more messages), `object ball|none`, `joints`, `stats`.
+//! board stops answering), `overheat MOTOR`, `flash-stall MOTOR N|off` (a board stops acking
+//! after N more messages), `object ball|none`, `joints`, `stats`.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -187,6 +187,13 @@ fn command(sim: &Sim, line: &str, start: Instant) -> String {
                 format!("ok motor {m} at {} C", CUT_OUT_C + 5.0)
             }
             None => "error: overheat MOTOR (0..19)".into(),
+        },
+        "flash-stall" if rest.ends_with(" off") => match motor(rest.trim_end_matches(" off")) {
+            Some(m) => {
+                dev.palm_mut().boards[m].stop_after = None;
+                format!("ok motor {m} acks again")
+            }
+            None => "error: flash-stall MOTOR off".into(),
         },
         "flash-stall" => {
             let words: Vec<usize> = rest

@@ -15,7 +15,7 @@
 //! application, a first-order torque loop with strain gauges, current, temperature and flags. The
 //! motor boards' own CAN payloads are not public, so the palm reads the motors directly.
 
-use teleop_shadow_protocol::can::{bus_of_motor, BootMessage};
+use teleop_shadow_protocol::can::{bus_of_motor, BootMessage, APP_START};
 use teleop_shadow_protocol::data::{
     flags, tactile, EdcCommand, EdcNumbering, FromMotor, SlowData, ToMotor, EDC_BOOTING,
 };
@@ -44,8 +44,26 @@ pub struct Motor {
     pub slow_next: u16,
 }
 
-/// This emulator's motor firmware: its SVN revision (slow data 1).
-pub const MOTOR_REVISION: u16 = 2035;
+/// The SVN revision (slow data 1) a motor's application reports: in this emulator, the
+/// little-endian word at the start of the application area (0x04C0) of its flash, so a
+/// flashed image says which revision it is.
+pub fn motor_revision(board: &Board) -> u16 {
+    let at = APP_START as usize;
+    match board.flash().get(at..at + 2) {
+        Some(b) => u16::from_le_bytes([b[0], b[1]]),
+        None => 0,
+    }
+}
+
+/// The emulator's ADC wiring (the real one is not public): sensor word `sensor` comes from
+/// ADC `1 + sensor / 4`, channel `(2 * (sensor % 4) + 6) % 8`, which puts LFJ5 (sensor 16) on
+/// channel 6 of ADC 5 as the document's example has it. As SENSOR_CHANNEL_NUMBERS reports it:
+/// channel in the high byte, ADC in the low byte ("LFJ5 : 0x0605").
+pub fn wiring(sensor: usize) -> u16 {
+    let adc = 1 + sensor / 4;
+    let channel = (2 * (sensor % 4) + 6) % 8;
+    (channel << 8 | adc) as u16
+}
 
 /// The firmware's cut-out temperature (release notes: 60 deg C).
 pub const CUT_OUT_C: f64 = 60.0;
@@ -67,9 +85,9 @@ impl Motor {
 
     /// A slow data value of motor `n`: revisions, serial `0x5A00_0000 + n`, a build date, the
     /// gains, 5 kHz, coupled gauges.
-    fn slow(n: usize, kind: SlowData) -> u16 {
+    fn slow(n: usize, kind: SlowData, board: &Board) -> u16 {
         match kind {
-            SlowData::SvnRevision | SlowData::ServerRevision => MOTOR_REVISION,
+            SlowData::SvnRevision | SlowData::ServerRevision => motor_revision(board),
             SlowData::Modified => 0,
             SlowData::SerialLow => n as u16,
             SlowData::SerialHigh => 0x5A00,
@@ -131,7 +149,7 @@ impl Palm {
     /// Milliseconds the palm reports boot status after power-up.
     pub const BOOT_MS: u64 = 50;
 
-    /// A palm whose 20 boards run an application, in a hand of the E v3 mapping with the
+    /// A palm whose 20 boards run an application (revision 2035), in a hand of the E v3 mapping with the
     /// ball under its middle finger.
     pub fn new() -> Self {
         Self::with_hand(Hand::new(Mapping::EV3, Some(Object::ball())))
@@ -141,7 +159,7 @@ impl Palm {
     pub fn with_hand(hand: Hand) -> Self {
         Self {
             boards: (0..MOTORS as u8)
-                .map(|n| Board::new(n % 10, &[0x12, 0x34]))
+                .map(|n| Board::new(n % 10, &2035u16.to_le_bytes()))
                 .collect(),
             motors: [Motor {
                 temperature: 30.0,
@@ -185,6 +203,15 @@ impl Palm {
         }
         match EdcCommand::from_value(command.edc_command, self.numbering) {
             Some(EdcCommand::SensorData) => (Some(self.sensor_data(command, now_ms)), None),
+            Some(EdcCommand::SensorChannelNumbers) => {
+                // As SENSOR_DATA, with each sensor word's ADC and channel instead of its value.
+                let mut s = self.sensor_data(command, now_ms);
+                s.edc_command = command.edc_command;
+                for (i, w) in s.sensors.iter_mut().enumerate() {
+                    *w = wiring(i);
+                }
+                (Some(s), None)
+            }
             Some(EdcCommand::CanDirectMode) => (None, self.bridge(bridge, now_ms)),
             _ => (None, None),
         }
@@ -213,7 +240,7 @@ impl Palm {
                     let slow = SlowData::from_value(m.slow_next).unwrap_or(SlowData::SvnRevision);
                     s.packets[n / 2] = MotorPacket {
                         torque: m.slow_next as i16,
-                        misc: Motor::slow(n, slow),
+                        misc: Motor::slow(n, slow, &self.boards[n]),
                     };
                     s.which_motor_data_arrived |= 1 << n;
                     s.which_motor_data_had_errors &= 0xFFFF_FFFEu32.wrapping_shl(n as u32);

@@ -26,6 +26,7 @@ mod inspect;
 mod launch;
 mod recordings;
 mod revo2;
+mod shadow;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -128,6 +129,14 @@ enum Command {
         target: allegro::Target,
         #[command(subcommand)]
         command: allegro::AllegroCommand,
+    },
+    /// Talk to the Shadow Hand's palm directly over EtherCAT (with the Shadow node stopped):
+    /// info, motor-board flashing, a crafted CAN message, ADC channel numbers.
+    Shadow {
+        #[command(flatten)]
+        target: shadow::Target,
+        #[command(subcommand)]
+        command: shadow::ShadowCommand,
     },
     /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
     Record {
@@ -344,6 +353,7 @@ fn main() -> ExitCode {
         ),
         Command::Revo2 { target, command } => revo2::run(&target, &command),
         Command::Allegro { target, command } => allegro::run(&target, &command),
+        Command::Shadow { target, command } => shadow::run(&target, &command),
         Command::Calibrate {
             out,
             yes,

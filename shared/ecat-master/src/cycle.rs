@@ -14,7 +14,7 @@ use futures_lite::future::block_on;
 use teleop_runtime::now_ns;
 
 use crate::bus::{expected_wkc, recover_op, scan, Bus, Found, OpGroup, PreOpGroup};
-use crate::driver::{Driver, Image, OwnLayout};
+use crate::driver::{Driver, Image, OwnExchange, OwnLayout};
 
 /// Cycles the device gets its hold outputs for before the master leaves OP on stop.
 const STOP_HOLD_CYCLES: u32 = 10;
@@ -206,16 +206,13 @@ fn read_inputs(md: &MainDevice<'static>, group: &OpGroup, inputs: &mut Image) {
 /// driver's [`OwnLayout`] (the group's own exchange then only reads the AL states).
 enum Exchanger {
     Group,
-    Own { layout: OwnLayout, frame: Vec<u8> },
+    Own(OwnExchange),
 }
 
 impl Exchanger {
     fn new(layout: Option<OwnLayout>) -> Self {
         match layout {
-            Some(layout) => Self::Own {
-                frame: vec![0; layout.len()],
-                layout,
-            },
+            Some(layout) => Self::Own(OwnExchange::new(layout)),
             None => Self::Group,
         }
     }
@@ -226,17 +223,14 @@ impl Exchanger {
                 Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().outputs().len())),
                 Image::with_lengths(group.iter(md).map(|sd| sd.io_raw().inputs().len())),
             ),
-            Self::Own { layout, .. } => (
-                Image::with_lengths(layout.parts.iter().map(|p| p.0)),
-                Image::with_lengths(layout.parts.iter().map(|p| p.1)),
-            ),
+            Self::Own(own) => own.images(),
         }
     }
 
     fn expected_wkc(&self, md: &MainDevice<'static>, group: &OpGroup) -> u16 {
         match self {
             Self::Group => expected_wkc(md, group),
-            Self::Own { layout, .. } => layout.expected_wkc,
+            Self::Own(own) => own.layout().expected_wkc,
         }
     }
 
@@ -244,13 +238,7 @@ impl Exchanger {
     fn write(&mut self, md: &MainDevice<'static>, group: &OpGroup, outputs: &Image) {
         match self {
             Self::Group => write_outputs(md, group, outputs),
-            Self::Own { layout, frame } => {
-                let mut at = 0;
-                for (i, (o, n)) in layout.parts.iter().enumerate() {
-                    frame[at..at + o].copy_from_slice(outputs.subdevice(i));
-                    at += o + n;
-                }
-            }
+            Self::Own(own) => own.write(outputs),
         }
     }
 
@@ -272,29 +260,8 @@ impl Exchanger {
                 read_inputs(md, group, inputs);
                 Ok((response, wkc))
             }
-            Self::Own { layout, frame } => {
-                let mut at = 0;
-                for (o, n) in &layout.parts {
-                    frame[at + o..at + o + n].fill(0);
-                    at += o + n;
-                }
-                let sent = ethercrab::Command::lrw(layout.logical_start)
-                    .with_wkc(layout.expected_wkc)
-                    .send_receive_slice(md, &frame[..]);
-                let wkc = match block_on(sent) {
-                    Ok(pdu) => {
-                        let mut at = 0;
-                        for (i, (o, n)) in layout.parts.iter().enumerate() {
-                            if let Some(src) = pdu.get(at + o..at + o + n) {
-                                inputs.subdevice_mut(i).copy_from_slice(src);
-                            }
-                            at += o + n;
-                        }
-                        layout.expected_wkc
-                    }
-                    Err(ethercrab::error::Error::WorkingCounter { received, .. }) => received,
-                    Err(e) => return Err(e),
-                };
+            Self::Own(own) => {
+                let wkc = block_on(own.exchange(md, inputs))?;
                 let response = block_on(group.tx_rx(md))?;
                 Ok((response, wkc))
             }
@@ -524,8 +491,8 @@ fn side_channel<D: Driver>(
     }
 }
 
-/// Takes the device from OP down to INIT.
-fn leave_op(bus: &Bus, group: OpGroup, name: &str) {
+/// Takes the device from OP down to INIT (logs the outcome; `name` is the device's).
+pub fn leave_op(bus: &Bus, group: OpGroup, name: &str) {
     match block_on(async {
         let g = group.into_safe_op(&bus.md).await?;
         let g = g.into_pre_op(&bus.md).await?;

@@ -92,6 +92,112 @@ impl OwnLayout {
     }
 }
 
+/// One LRW over an [`OwnLayout`]: what the cycle exchanges for such a driver, and what a tool
+/// that drives the device outside the cycle (the Shadow palm's CAN direct mode) exchanges.
+#[derive(Debug, Clone)]
+pub struct OwnExchange {
+    layout: OwnLayout,
+    frame: Vec<u8>,
+}
+
+impl OwnExchange {
+    /// An exchange over `layout` (outputs zero until written).
+    pub fn new(layout: OwnLayout) -> Self {
+        Self {
+            frame: vec![0; layout.len()],
+            layout,
+        }
+    }
+
+    /// The layout.
+    pub fn layout(&self) -> &OwnLayout {
+        &self.layout
+    }
+
+    /// Output and input images with a part per SubDevice of the layout.
+    pub fn images(&self) -> (Image, Image) {
+        (
+            Image::with_lengths(self.layout.parts.iter().map(|p| p.0)),
+            Image::with_lengths(self.layout.parts.iter().map(|p| p.1)),
+        )
+    }
+
+    /// Puts the outputs where the next exchange sends them.
+    pub fn write(&mut self, outputs: &Image) {
+        let mut at = 0;
+        for (i, (o, n)) in self.layout.parts.iter().enumerate() {
+            let part = outputs.subdevice(i);
+            let len = part.len().min(*o);
+            self.frame[at..at + len].copy_from_slice(&part[..len]);
+            at += o + n;
+        }
+    }
+
+    /// Sends the LRW (inputs as zeros, so a byte the device did not refill reads 0) and copies
+    /// the inputs that came back into `inputs`; the working counter it came back with. With
+    /// another working counter than the layout's, ethercrab does not hand the data back: the
+    /// inputs then read as zeros.
+    pub async fn exchange(
+        &mut self,
+        md: &MainDevice<'static>,
+        inputs: &mut Image,
+    ) -> Result<u16, ethercrab::error::Error> {
+        self.zero_inputs();
+        let sent = ethercrab::Command::lrw(self.layout.logical_start)
+            .with_wkc(self.layout.expected_wkc)
+            .send_receive_slice(md, &self.frame[..])
+            .await;
+        match sent {
+            Ok(pdu) => {
+                self.copy_inputs(Some(&pdu), inputs);
+                Ok(self.layout.expected_wkc)
+            }
+            Err(ethercrab::error::Error::WorkingCounter { received, .. }) => {
+                self.copy_inputs(None, inputs);
+                Ok(received)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Like [`exchange`](Self::exchange), but hands back the inputs whatever the working
+    /// counter (which ethercrab then does not report): for a tool that judges freshness by
+    /// content, each input byte the device did not refill reading 0.
+    pub async fn exchange_any(
+        &mut self,
+        md: &MainDevice<'static>,
+        inputs: &mut Image,
+    ) -> Result<(), ethercrab::error::Error> {
+        self.zero_inputs();
+        let pdu = ethercrab::Command::lrw(self.layout.logical_start)
+            .ignore_wkc()
+            .send_receive_slice(md, &self.frame[..])
+            .await?;
+        self.copy_inputs(Some(&pdu), inputs);
+        Ok(())
+    }
+
+    fn zero_inputs(&mut self) {
+        let mut at = 0;
+        for (o, n) in &self.layout.parts {
+            self.frame[at + o..at + o + n].fill(0);
+            at += o + n;
+        }
+    }
+
+    fn copy_inputs(&self, data: Option<&[u8]>, inputs: &mut Image) {
+        let mut at = 0;
+        for (i, (o, n)) in self.layout.parts.iter().enumerate() {
+            let part = inputs.subdevice_mut(i);
+            match data.and_then(|d| d.get(at + o..at + o + n)) {
+                Some(src) if src.len() == part.len() => part.copy_from_slice(src),
+                _ => part.fill(0),
+            }
+            at += o + n;
+        }
+    }
+}
+
 /// A device on the bus, as the master drives it: which SubDevices it is, how it is configured
 /// in PRE-OP, and how commands and inputs map to its process data. Everything else (the cycle,
 /// deadlines, working counter and AL-state checks, recovery, reconnect, stale command -> hold,

@@ -78,6 +78,14 @@ pub const HAND_CHANNELS: [(usize, Option<usize>); 24] = {
     c
 };
 
+/// The palm's sensor words by index (notes/shadow.md, "Sensors"); the rest up to 37 unused.
+pub const SENSOR_NAMES: [&str; 36] = [
+    "FFJ1", "FFJ2", "FFJ3", "FFJ4", "MFJ1", "MFJ2", "MFJ3", "MFJ4", "RFJ1", "RFJ2", "RFJ3", "RFJ4",
+    "LFJ1", "LFJ2", "LFJ3", "LFJ4", "LFJ5", "THJ1", "THJ2", "THJ3", "THJ4", "THJ5A", "THJ5B",
+    "WRJ1A", "WRJ1B", "WRJ2", "ACCX", "ACCY", "ACCZ", "GYRX", "GYRY", "GYRZ", "AN0", "AN1", "AN2",
+    "AN3",
+];
+
 /// What a motor drives: one joint of [`HAND_JOINTS`], or a finger's J1 and J2 together (its
 /// J0 = J1 + J2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
