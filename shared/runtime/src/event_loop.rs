@@ -6,7 +6,6 @@ use std::time::Duration;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::{CallbackProgression, WaitSetBuilder};
 use iceoryx2::waitset::WaitSetRunResult;
-use iceoryx2_bb_posix::signal::SignalHandler;
 
 use crate::ipc::RuntimeError;
 use crate::Service;
@@ -59,6 +58,11 @@ pub enum StopReason {
     Requested,
 }
 
+/// A stop signal recorded by this crate's handler or by iceoryx2's (moved into this crate's).
+fn stop_requested() -> bool {
+    crate::signals::carry_over()
+}
+
 /// Whether the loop goes on after a wake-up.
 pub type Flow = core::ops::ControlFlow<()>;
 
@@ -108,17 +112,15 @@ impl EventLoop {
         let tick = waitset
             .attach_interval(self.tick)
             .map_err(|e| RuntimeError::ipc("attaching tick", "event loop", e))?;
-        // SIGINT/SIGTERM are recorded by this crate's handler, which nothing consumes:
-        // iceoryx2's own handler keeps one "last signal" that any check swaps out, so a signal
-        // that came while the node was starting (before this wait) could be taken by another
-        // check and the loop would then never stop. Checked on every wake (the tick bounds the
-        // delay) and after every interrupted wait.
-        crate::signals::install_stop_handlers();
+        // SIGINT/SIGTERM: recorded by this crate's handler, where nothing consumes them (see
+        // `take_over_stop_signals`), and checked on every wake (the tick bounds the delay) and
+        // after every interrupted wait.
+        crate::signals::take_over_stop_signals();
 
         let result = loop {
             let result = waitset
                 .wait_and_process(|id| {
-                    if crate::signals::stop_signal().is_some() {
+                    if stop_requested() {
                         return CallbackProgression::Stop;
                     }
                     let wake = if id.has_event_from(&tick) {
@@ -143,10 +145,7 @@ impl EventLoop {
             // iceoryx2 reports any interrupted wait as `Interrupt`; Linux interrupts epoll_wait
             // also when a stopped process is continued (SIGSTOP, SIGCONT: a debugger, a
             // terminal's Ctrl-Z and `fg`). Only SIGINT/SIGTERM stop the loop.
-            if result != WaitSetRunResult::Interrupt
-                || crate::signals::stop_signal().is_some()
-                || SignalHandler::termination_requested()
-            {
+            if result != WaitSetRunResult::Interrupt || stop_requested() {
                 break result;
             }
         };

@@ -210,6 +210,7 @@ impl NodeRuntime {
     /// Creates the iceoryx2 node `name` (visible in `teleop nodes`). In a namespace the node is
     /// called `<namespace>/<name>` and its ports use the namespace's topics.
     pub fn new(name: &str, settings: &IpcSettings) -> Result<Self, RuntimeError> {
+        crate::signals::take_over_stop_signals();
         crate::signals::follow_supervisor();
         crate::realtime::setup_process();
         let namespace = settings.namespace()?;

@@ -48,7 +48,10 @@ pub use ipc::{
 };
 pub use logging::{dropped_log_lines, init_logging};
 pub use ports::{sample_time, Publisher, Subscriber};
-pub use signals::{follow_supervisor, install_stop_handlers, stop_signal, ENV_SUPERVISOR_PID};
+pub use signals::{
+    follow_supervisor, install_stop_handlers, stop_signal, take_over_stop_signals,
+    ENV_SUPERVISOR_PID,
+};
 pub use teleop_namespace::{qualified, split, Namespace, NamespaceError};
 
 /// iceoryx2 service type used everywhere (inter-process, shared memory).

@@ -56,6 +56,39 @@ pub fn follow_supervisor() {
     }
 }
 
+/// Records a stop signal another handler caught (iceoryx2's), as if this crate's had.
+pub(crate) fn record(signal: i32) {
+    SIGNAL.store(signal, Ordering::SeqCst);
+}
+
+/// Moves a SIGINT/SIGTERM that iceoryx2's handler recorded into this crate's record; true when
+/// there was one (or this crate's handler had one).
+pub(crate) fn carry_over() -> bool {
+    use iceoryx2_bb_posix::signal::{NonFatalFetchableSignal, SignalHandler};
+    if stop_signal().is_some() {
+        return true;
+    }
+    let signal = match SignalHandler::last_signal() {
+        Some(NonFatalFetchableSignal::Interrupt) => libc::SIGINT,
+        Some(NonFatalFetchableSignal::Terminate) => libc::SIGTERM,
+        _ => return false,
+    };
+    record(signal);
+    true
+}
+
+/// Makes this crate's handler the one for SIGINT and SIGTERM for good. iceoryx2 installs its
+/// own once, when its signal handler is first used, and keeps a single "last signal" that its
+/// checks swap out and that every shared-memory creation clears (`call_and_fetch` around the
+/// memset): a Ctrl-C that came while a node was creating its ports was wiped there, and the
+/// node's loop never stopped (seen in CI). So iceoryx2's handler is made to exist first (what it
+/// recorded carried over), then replaced by this crate's, whose record nothing consumes.
+/// [`crate::NodeRuntime::new`] and the event loop call it.
+pub fn take_over_stop_signals() {
+    carry_over();
+    install_stop_handlers();
+}
+
 /// The stop signal received so far (`libc::SIGINT` or `libc::SIGTERM`), if any.
 pub fn stop_signal() -> Option<i32> {
     match SIGNAL.load(Ordering::SeqCst) {
