@@ -5,10 +5,13 @@
 
 use std::path::{Path, PathBuf};
 
-use teleop_feedback::{FeedbackConfig, ForceFeedback, HandInput, Inputs, Tactile, TactileInput};
+use teleop_feedback::{
+    FeedbackConfig, ForceFeedback, HandInput, Inputs, PstConfig, Tactile, TactileInput,
+};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    force_flags, units, EStop, GloveForceCommand, HandCommand, HandState, Tactile as TactileMsg,
+    fingertip_sensor, force_flags, units, EStop, GloveForceCommand, HandCommand, HandState,
+    Tactile as TactileMsg,
 };
 use teleop_runtime::sample_time;
 
@@ -211,7 +214,7 @@ impl FeedbackEngine {
             Some((_, at)) if !fresh(*at, self.config.tactile_timeout_ms) => Tactile::Stale,
             Some((msg, _)) => {
                 origin = msg.header.origin_ns;
-                Tactile::Fresh(tactile_from_msg(msg))
+                Tactile::Fresh(tactile_from_msg(msg, &self.law.config().pst))
             }
         };
         let hand = match &self.state {
@@ -235,8 +238,9 @@ impl FeedbackEngine {
     }
 }
 
-/// The law's tactile input: normal force and validity per fingertip.
-pub fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
+/// The law's tactile input: normal force and validity per fingertip (a PST fingertip's raw
+/// pressure converted by `pst`).
+pub fn tactile_from_msg(msg: &TactileMsg, pst: &PstConfig) -> TactileInput {
     let mut input = TactileInput::default();
     for (i, tip) in msg
         .active_fingertips()
@@ -244,7 +248,11 @@ pub fn tactile_from_msg(msg: &TactileMsg) -> TactileInput {
         .enumerate()
         .take(input.valid.len())
     {
-        input.normal_n[i] = tip.normal_n;
+        input.normal_n[i] = if tip.sensor_kind == fingertip_sensor::PST_PRESSURE {
+            pst.force_n(tip.pressure)
+        } else {
+            tip.normal_n
+        };
         input.valid[i] = tip.is_valid();
     }
     input
@@ -318,9 +326,29 @@ mod tests {
         };
         msg.fingertips[0].normal_n = 2.0;
         msg.fingertips[1].status = teleop_msgs::touch_status::INVALID;
-        let t = tactile_from_msg(&msg);
+        let t = tactile_from_msg(&msg, &PstConfig::default());
         assert_eq!(t.valid, [true, false, true, true, false]);
         assert_eq!(t.normal_n[0], 2.0);
+    }
+
+    #[test]
+    fn pst_pressure_becomes_a_normal_force() {
+        let mut msg = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        for (tip, pressure) in msg.fingertips.iter_mut().zip([10, 310, 0, 510, 9]) {
+            tip.sensor_kind = fingertip_sensor::PST_PRESSURE;
+            tip.normal_n = f32::NAN;
+            tip.pressure = pressure;
+        }
+        let pst = PstConfig {
+            zero: 10.0,
+            counts_per_n: 100.0,
+        };
+        let t = tactile_from_msg(&msg, &pst);
+        assert_eq!(t.normal_n, [0.0, 3.0, 0.0, 5.0, 0.0]);
+        assert_eq!(t.valid, [true; 5]);
     }
 
     #[test]

@@ -44,6 +44,36 @@ pub struct FeedbackConfig {
     /// Per glove finger scale (operator preference), glove order
     /// `[little, ring, middle, index, thumb]`, each in `[0, 2]`. Default 1.
     pub finger_gain: [f32; GLOVE_FINGERS],
+    /// How a PST fingertip's raw pressure becomes a normal force (Shadow Hand).
+    pub pst: PstConfig,
+}
+
+/// A PST fingertip's raw pressure as a normal force: `(pressure - zero) / counts_per_n`, never
+/// below 0. The palm reports the pressure uncalibrated: each lab measures its own sensors (the
+/// defaults are the emulated hand's).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PstConfig {
+    /// The pressure reading without contact. Default 10.
+    pub zero: f32,
+    /// Pressure counts per newton on the fingertip. Default 100; must be > 0.
+    pub counts_per_n: f32,
+}
+
+impl Default for PstConfig {
+    fn default() -> Self {
+        Self {
+            zero: 10.0,
+            counts_per_n: 100.0,
+        }
+    }
+}
+
+impl PstConfig {
+    /// The normal force (N) of a raw pressure reading.
+    pub fn force_n(&self, pressure: i32) -> f32 {
+        ((pressure as f32 - self.zero) / self.counts_per_n).max(0.0)
+    }
 }
 
 impl Default for FeedbackConfig {
@@ -57,6 +87,7 @@ impl Default for FeedbackConfig {
             stale_ramp_s: 0.1,
             estimate: EstimateConfig::default(),
             finger_gain: [1.0; GLOVE_FINGERS],
+            pst: PstConfig::default(),
         }
     }
 }
@@ -247,6 +278,10 @@ impl FeedbackConfig {
             "estimate.effort_stall_speed_rad_s",
             e.effort_stall_speed_rad_s,
         )?;
+        check_positive("pst.counts_per_n", self.pst.counts_per_n)?;
+        if !self.pst.zero.is_finite() {
+            return Err(invalid("pst.zero", self.pst.zero, "must be finite"));
+        }
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
                 return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));

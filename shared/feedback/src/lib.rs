@@ -79,7 +79,9 @@ mod config;
 #[cfg(test)]
 mod tests;
 
-pub use config::{ConfigError, EstimateConfig, FeedbackConfig, GLOVE_FULL_SCALE, IN_MEMORY_ORIGIN};
+pub use config::{
+    ConfigError, EstimateConfig, FeedbackConfig, PstConfig, GLOVE_FULL_SCALE, IN_MEMORY_ORIGIN,
+};
 pub use teleop_hand_profile::{FeedbackSource, HandProfile, MAX_FINGERTIPS, MAX_JOINTS};
 
 /// Number of glove fingers (`[little, ring, middle, index, thumb]`).

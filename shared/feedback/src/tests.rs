@@ -115,6 +115,12 @@ fn defaults_validate_and_match_documented_values() {
     assert_eq!(partial.max_force, 500);
     assert!(!partial.estimate.use_current);
     assert_eq!(partial.gain_per_n, 250.0);
+    // PST: 10 counts at rest, 100 per newton; a reading below rest is no force.
+    assert_eq!(c.pst.force_n(310), 3.0);
+    assert_eq!(c.pst.force_n(0), 0.0);
+    let err = FeedbackConfig::from_toml_str("[pst]\ncounts_per_n = 0.0\n", "s.toml")
+        .expect_err("zero counts per newton");
+    assert!(err.to_string().contains("pst.counts_per_n"), "{err}");
 }
 
 #[test]
@@ -711,6 +717,7 @@ fn any_config() -> BoxedStrategy<FeedbackConfig> {
                 stale_ramp_s: ramp,
                 estimate,
                 finger_gain: fg,
+                pst: PstConfig::default(),
             },
         )
         .boxed()
