@@ -345,17 +345,30 @@ impl NodeRuntime {
         iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>,
         RuntimeError,
     > {
-        self.node
-            .service_builder(service)
-            .publish_subscribe::<M>()
-            .history_size(1)
-            .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
-            .enable_safe_overflow(true)
-            .max_publishers(MAX_PUBLISHERS)
-            .max_subscribers(MAX_SUBSCRIBERS)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| pubsub_error::<M>(&self.node, service, topic, e))
+        use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as Create;
+        use PublishSubscribeOpenOrCreateError as E;
+        retry_interrupted(
+            || {
+                self.node
+                    .service_builder(service)
+                    .publish_subscribe::<M>()
+                    .history_size(1)
+                    .subscriber_max_buffer_size(SUBSCRIBER_BUFFER)
+                    .enable_safe_overflow(true)
+                    .max_publishers(MAX_PUBLISHERS)
+                    .max_subscribers(MAX_SUBSCRIBERS)
+                    .max_nodes(MAX_NODES)
+                    .open_or_create()
+            },
+            |e| {
+                matches!(
+                    e,
+                    E::PublishSubscribeOpenError(PublishSubscribeOpenError::Interrupt)
+                        | E::PublishSubscribeCreateError(Create::Interrupt)
+                )
+            },
+        )
+        .map_err(|e| pubsub_error::<M>(&self.node, service, topic, e))
     }
 
     fn event(
@@ -363,14 +376,45 @@ impl NodeRuntime {
         service: &ServiceName,
         topic: &str,
     ) -> Result<iceoryx2::service::port_factory::event::PortFactory<Service>, RuntimeError> {
-        self.node
-            .service_builder(service)
-            .event()
-            .max_notifiers(MAX_PUBLISHERS)
-            .max_listeners(MAX_SUBSCRIBERS)
-            .max_nodes(MAX_NODES)
-            .open_or_create()
-            .map_err(|e| RuntimeError::ipc("opening event service", topic, e))
+        use iceoryx2::service::builder::event::{
+            EventCreateError, EventOpenError, EventOpenOrCreateError as E,
+        };
+        retry_interrupted(
+            || {
+                self.node
+                    .service_builder(service)
+                    .event()
+                    .max_notifiers(MAX_PUBLISHERS)
+                    .max_listeners(MAX_SUBSCRIBERS)
+                    .max_nodes(MAX_NODES)
+                    .open_or_create()
+            },
+            |e| {
+                matches!(
+                    e,
+                    E::EventOpenError(EventOpenError::Interrupt)
+                        | E::EventCreateError(EventCreateError::Interrupt)
+                )
+            },
+        )
+        .map_err(|e| RuntimeError::ipc("opening event service", topic, e))
+    }
+}
+
+/// Tries `open` again when a signal interrupted it (`interrupted`): a SIGINT while a node creates
+/// its ports is recorded and stops the node's loop at its first wake, so the node finishes
+/// starting and then stops cleanly (a recorder closes its file) instead of failing. At most 100
+/// tries.
+fn retry_interrupted<T, E>(
+    mut open: impl FnMut() -> Result<T, E>,
+    interrupted: impl Fn(&E) -> bool,
+) -> Result<T, E> {
+    let mut tries = 0;
+    loop {
+        match open() {
+            Err(e) if interrupted(&e) && tries < 100 => tries += 1,
+            other => return other,
+        }
     }
 }
 
@@ -467,6 +511,34 @@ fn pubsub_error<M: Message>(
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn interrupted_opens_are_tried_again_up_to_a_bound() {
+        let mut calls = 0;
+        let r: Result<u8, &str> = retry_interrupted(
+            || {
+                calls += 1;
+                if calls < 3 {
+                    Err("interrupted")
+                } else {
+                    Ok(7)
+                }
+            },
+            |e| *e == "interrupted",
+        );
+        assert_eq!((r, calls), (Ok(7), 3));
+        let mut calls = 0;
+        let r: Result<u8, &str> = retry_interrupted(
+            || {
+                calls += 1;
+                Err("interrupted")
+            },
+            |e| *e == "interrupted",
+        );
+        assert_eq!((r, calls), (Err("interrupted"), 101));
+        let r: Result<u8, &str> = retry_interrupted(|| Err("refused"), |e| *e == "interrupted");
+        assert_eq!(r, Err("refused"), "other errors at once");
+    }
     use teleop_msgs::{GloveState, NodeHealth};
 
     #[test]
