@@ -8,6 +8,8 @@
 //! Must not depend on: node internals. Tests talk to the pipeline only through its topics and
 //! its command line, as a user would.
 
+pub mod netns;
+
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

@@ -15,13 +15,14 @@
 
 mod common;
 
+use teleop_e2e::netns::{die_with_parent, pysoem_missing, run_for, skip, stop, Netns};
+use teleop_e2e::skip_unless_privileged;
+
 use common::{position_command, positions};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
-use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::process::{Child, Command, Stdio};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -35,144 +36,6 @@ const NETNS_PREFIX: &str = "teleop-revo2-veth-";
 fn serial() -> MutexGuard<'static, ()> {
     static LOCK: Mutex<()> = Mutex::new(());
     LOCK.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-/// Why these tests cannot run here, if they cannot.
-fn skip_reason() -> Option<String> {
-    // SAFETY: geteuid has no preconditions.
-    if unsafe { libc::geteuid() } != 0 {
-        return Some("not running as root (needs CAP_NET_ADMIN to make network namespaces and veth pairs, CAP_NET_RAW for raw sockets)".into());
-    }
-    match Command::new("ip").arg("-V").output() {
-        Ok(o) if o.status.success() => {}
-        _ => return Some("`ip` (iproute2) is not available".into()),
-    }
-    // unshare(CLONE_NEWNET) in a thread of its own: namespaces are per thread, and this one ends.
-    let unshared = std::thread::spawn(|| {
-        // SAFETY: moves only this short-lived thread into a new network namespace.
-        if unsafe { libc::unshare(libc::CLONE_NEWNET) } == 0 {
-            Ok(())
-        } else {
-            Err(std::io::Error::last_os_error())
-        }
-    })
-    .join()
-    .unwrap();
-    if let Err(e) = unshared {
-        return Some(format!("unshare(CLONE_NEWNET) fails here: {e}"));
-    }
-    None
-}
-
-/// Prints why a test cannot run and lets it return; under `TELEOP_REQUIRE_CHECKS` (set by
-/// `.ci/run` as root, where these independent checks must run) fails instead.
-fn skip(reason: &str) {
-    assert!(
-        std::env::var_os("TELEOP_REQUIRE_CHECKS").is_none(),
-        "required: {reason}"
-    );
-    eprintln!("skipped: {reason}");
-}
-
-macro_rules! skip_unless_privileged {
-    () => {
-        if let Some(reason) = skip_reason() {
-            skip(&reason);
-            return;
-        }
-    };
-}
-
-fn run(cmd: &mut Command) -> Output {
-    let out = cmd
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {cmd:?}: {e}"));
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed ({}): {}{}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
-/// Kills the child with SIGKILL if this test process dies first (it is a `ip netns exec`
-/// child that would otherwise keep running in the namespace).
-fn die_with_parent(cmd: &mut Command) -> &mut Command {
-    // SAFETY: prctl is async-signal-safe; nothing else runs between fork and exec.
-    unsafe {
-        cmd.pre_exec(|| {
-            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGKILL) != 0 {
-                return Err(std::io::Error::last_os_error());
-            }
-            Ok(())
-        })
-    }
-}
-
-/// A network namespace with a veth pair `ecm0` (master side) / `ecs0` (SubDevice side), both
-/// up; deleted on drop.
-struct Netns {
-    name: String,
-}
-
-impl Netns {
-    fn new() -> Self {
-        remove_stale_namespaces();
-        static NEXT: AtomicU32 = AtomicU32::new(0);
-        let name = format!(
-            "{NETNS_PREFIX}{}-{}",
-            std::process::id(),
-            NEXT.fetch_add(1, Ordering::Relaxed)
-        );
-        run(Command::new("ip").args(["netns", "add", &name]));
-        let ns = Self { name };
-        ns.ip(&[
-            "link", "add", "ecm0", "type", "veth", "peer", "name", "ecs0",
-        ]);
-        for dev in ["lo", "ecm0", "ecs0"] {
-            ns.ip(&["link", "set", dev, "up"]);
-        }
-        ns
-    }
-
-    /// `ip -n NS ARGS`.
-    fn ip(&self, args: &[&str]) {
-        run(Command::new("ip").args(["-n", &self.name]).args(args));
-    }
-
-    /// `program` to be run inside the namespace.
-    fn command(&self, program: impl AsRef<std::ffi::OsStr>) -> Command {
-        let mut cmd = Command::new("ip");
-        cmd.args(["netns", "exec", &self.name]).arg(program);
-        cmd
-    }
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        let _ = Command::new("ip")
-            .args(["netns", "del", &self.name])
-            .status();
-    }
-}
-
-/// Deletes namespaces left by an earlier run of these tests that was killed before its drops ran.
-fn remove_stale_namespaces() {
-    let Ok(out) = Command::new("ip").args(["netns", "list"]).output() else {
-        return;
-    };
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let name = line.split_whitespace().next().unwrap_or("");
-        let Some(rest) = name.strip_prefix(NETNS_PREFIX) else {
-            continue;
-        };
-        let pid = rest.split('-').next().unwrap_or("");
-        if !pid.is_empty() && !Path::new("/proc").join(pid).exists() {
-            let _ = Command::new("ip").args(["netns", "del", name]).status();
-        }
-    }
 }
 
 /// `teleop-sim-revo2`, next to this test's target directory.
@@ -191,22 +54,6 @@ fn sim_binary() -> PathBuf {
         path.display()
     );
     path
-}
-
-fn stop(child: &mut Child) {
-    // SAFETY: kill(2) of our own child.
-    unsafe {
-        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
-    }
-    let deadline = Instant::now() + Duration::from_secs(5);
-    while Instant::now() < deadline {
-        if let Ok(Some(_)) = child.try_wait() {
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    let _ = child.wait();
 }
 
 /// The emulator serving on `ecs0` in `ns`, its output in `dir/sim.log`.
@@ -251,7 +98,7 @@ struct Rig {
 impl Rig {
     fn new(transport: &str) -> Self {
         teleop_runtime::init_logging();
-        let ns = Netns::new();
+        let ns = Netns::new(NETNS_PREFIX);
         let dir = tempfile::tempdir().unwrap();
         let ipc = IpcSettings::isolated(&dir.path().join("iox"));
         let sim = start_sim(&ns, dir.path());
@@ -478,23 +325,6 @@ fn pump_on_interface_reaches_op_follows_commands_and_survives_an_interface_reset
 }
 
 /// Why the SOEM test cannot run, if it cannot.
-fn pysoem_missing() -> Option<String> {
-    match Command::new("python3")
-        .args(["-c", "import pysoem; print(pysoem.__version__)"])
-        .output()
-    {
-        Ok(o) if o.status.success() => None,
-        Ok(o) => Some(format!(
-            "pysoem is not importable by python3 ({}); pip install -r .ci/requirements.txt",
-            String::from_utf8_lossy(&o.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-        )),
-        Err(e) => Some(format!("no python3: {e}")),
-    }
-}
-
 #[test]
 fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
     skip_unless_privileged!();
@@ -503,7 +333,7 @@ fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
         return;
     }
     let _serial = serial();
-    let ns = Netns::new();
+    let ns = Netns::new(NETNS_PREFIX);
     let dir = tempfile::tempdir().unwrap();
     let mut sim = start_sim(&ns, dir.path());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/soem_op.py");
@@ -511,30 +341,7 @@ fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
     cmd.args([script, "ecm0", "300"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
-    let mut soem = die_with_parent(&mut cmd).spawn().unwrap();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let status = loop {
-        if let Some(status) = soem.try_wait().unwrap() {
-            break Some(status);
-        }
-        if Instant::now() > deadline {
-            let _ = soem.kill();
-            let _ = soem.wait();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let (mut out, mut err) = (String::new(), String::new());
-    soem.stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut out)
-        .unwrap();
-    soem.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut err)
-        .unwrap();
+    let (status, out, err) = run_for(die_with_parent(&mut cmd), Duration::from_secs(60));
     stop(&mut sim);
     let sim_log = std::fs::read_to_string(dir.path().join("sim.log")).unwrap_or_default();
     let report = format!("soem_op.py: {status:?}\n{out}{err}\n---- emulator log ----\n{sim_log}");
