@@ -4,14 +4,14 @@
 //! out for every valid exchange, the link state while the hand is away, health and device info
 //! periodically.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
 use teleop_msgs::{
-    bus_state, device_kind, fixed_text, link_kind, DeviceInfo, HandCommand, HandState, Tactile,
+    bus_state, device_kind, fixed_text, link_kind, DeviceInfo, HandCommand, HandState,
 };
 use teleop_revo2_protocol::Inputs;
-use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{HandPorts, NodeRuntime};
 
 use crate::bus::DeviceInfo as FoundDevice;
 use crate::config::Revo2Config;
@@ -19,36 +19,16 @@ use crate::convert::{hand_state, tactile};
 use crate::driver::Revo2;
 
 /// The node's ports, the master's host.
-struct Ports {
-    device: Publisher<DeviceInfo>,
-    /// The connected device, published with every health report.
-    connected: Option<DeviceInfo>,
-    commands: Subscriber<HandCommand>,
-    /// The latched e-stop: while engaged, no command is followed (the master holds).
-    estop: EStopInput,
-    state: Publisher<HandState>,
-    tactile: Publisher<Tactile>,
-    health: Health,
-    stale_after: Duration,
-    health_period: Duration,
-    last_health: Instant,
-}
+struct Ports(HandPorts);
 
 /// Runs until SIGINT/SIGTERM.
 pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
-    let mut ports = Ports {
-        device: runtime.publisher()?,
-        connected: None,
-        commands: runtime.subscriber()?,
-        estop: EStopInput::new(runtime)?,
-        state: runtime.publisher()?,
-        tactile: runtime.publisher()?,
-        health: Health::new(runtime)?,
-        stale_after: Duration::from_millis(config.stale_command_ms),
-        health_period: Duration::from_millis(config.health_period_ms),
-        last_health: Instant::now(),
-    };
+    let mut ports = Ports(HandPorts::new(
+        runtime,
+        Duration::from_millis(config.stale_command_ms),
+        Duration::from_millis(config.health_period_ms),
+    )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
         link_timeout: Duration::from_millis(config.link_timeout_ms),
@@ -78,20 +58,7 @@ impl Host<Revo2> for Ports {
     }
 
     fn command(&mut self) -> Option<HandCommand> {
-        match self.estop.update() {
-            Ok(Some(true)) => tracing::warn!("e-stop engaged: the hand holds its last target"),
-            Ok(Some(false)) => tracing::info!("e-stop released: following hand commands"),
-            Ok(None) => {}
-            Err(e) => {
-                self.health.count_error();
-                tracing::warn!("e-stop acknowledgement: {e}");
-            }
-        }
-        // Freshness counts from the command's stamp: one from the topic's history, sent
-        // before this node (re)started, is stale.
-        let cmd = self.commands.poll_latest();
-        let fresh = self.commands.is_fresh(Instant::now(), self.stale_after);
-        cmd.filter(|_| fresh && !self.estop.engaged())
+        self.0.command()
     }
 
     fn connected(&mut self, driver: &Revo2) {
@@ -99,7 +66,7 @@ impl Host<Revo2> for Ports {
             tactile_in_pdo = driver.info().tactile_in_pdo(),
             "Revo2 tactile source"
         );
-        self.connected = Some(device_info(driver.info()));
+        self.0.connected(device_info(driver.info()));
     }
 
     fn exchanged(
@@ -120,28 +87,19 @@ impl Host<Revo2> for Ports {
         state.link_errors = exchange.counters.wkc_errors;
         state.lost_frames = exchange.counters.lost_frames;
         state.header.origin_ns = exchange.origin_ns;
-        self.state.publish(&state)?;
-        if let Some(mut t) = tactile(inputs) {
+        let tactile = tactile(inputs).map(|mut t| {
             t.header.origin_ns = exchange.origin_ns;
-            self.tactile.publish(&t)?;
-        }
-        self.health.count_loop();
-        if self.last_health.elapsed() >= self.health_period {
-            self.last_health = Instant::now();
-            self.health.set_dropped(self.commands.dropped());
-            self.health.publish(&[self.commands.age(Instant::now())])?;
-            if let Some(d) = &self.connected {
-                self.device.publish(d)?;
-            }
-        }
+            t
+        });
+        self.0.publish(&state, tactile.as_ref())?;
         Ok(())
     }
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Stale => self.health.count_timeout(),
-            Event::Clamped(n) => self.health.count_clamps(u64::from(n)),
-            Event::Recovered | Event::Lost => self.health.count_error(),
+            Event::Stale => self.0.health().count_timeout(),
+            Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
+            Event::Recovered | Event::Lost => self.0.health().count_error(),
         }
     }
 
@@ -155,7 +113,7 @@ impl Host<Revo2> for Ports {
             lost_frames: counters.lost_frames,
             ..Default::default()
         };
-        self.state.publish(&state)?;
+        self.0.publish_down(&state)?;
         Ok(())
     }
 }

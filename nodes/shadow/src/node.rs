@@ -5,31 +5,20 @@
 //! status) and `hand/tactile` (PST pressure) out for every valid exchange, the link state while
 //! the hand is away, health and device info periodically.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
 use teleop_msgs::{
     bus_state, device_kind, fingertip_sensor, fixed_text, hand_model, link_kind, units, DeviceInfo,
     HandCommand, HandState, Tactile,
 };
-use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{HandPorts, NodeRuntime};
 
 use crate::config::{Checked, ShadowConfig};
 use crate::driver::{Inputs, Shadow};
 
 /// The node's ports, the master's host.
-struct Ports {
-    device: Publisher<DeviceInfo>,
-    connected: Option<DeviceInfo>,
-    commands: Subscriber<HandCommand>,
-    estop: EStopInput,
-    state: Publisher<HandState>,
-    tactile: Publisher<Tactile>,
-    health: Health,
-    stale_after: Duration,
-    health_period: Duration,
-    last_health: Instant,
-}
+struct Ports(HandPorts);
 
 /// Runs until SIGINT/SIGTERM.
 pub fn run(
@@ -39,18 +28,11 @@ pub fn run(
     connect: Connect,
 ) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
-    let mut ports = Ports {
-        device: runtime.publisher()?,
-        connected: None,
-        commands: runtime.subscriber()?,
-        estop: EStopInput::new(runtime)?,
-        state: runtime.publisher()?,
-        tactile: runtime.publisher()?,
-        health: Health::new(runtime)?,
-        stale_after: Duration::from_millis(config.stale_command_ms),
-        health_period: Duration::from_millis(config.health_period_ms),
-        last_health: Instant::now(),
-    };
+    let mut ports = Ports(HandPorts::new(
+        runtime,
+        Duration::from_millis(config.stale_command_ms),
+        Duration::from_millis(config.health_period_ms),
+    )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
         link_timeout: Duration::from_millis(config.link_timeout_ms),
@@ -106,23 +88,12 @@ impl Host<Shadow> for Ports {
     }
 
     fn command(&mut self) -> Option<HandCommand> {
-        match self.estop.update() {
-            Ok(Some(true)) => tracing::warn!("e-stop engaged: the hand holds its last target"),
-            Ok(Some(false)) => tracing::info!("e-stop released: following hand commands"),
-            Ok(None) => {}
-            Err(e) => {
-                self.health.count_error();
-                tracing::warn!("e-stop acknowledgement: {e}");
-            }
-        }
-        let cmd = self.commands.poll_latest();
-        let fresh = self.commands.is_fresh(Instant::now(), self.stale_after);
-        cmd.filter(|_| fresh && !self.estop.engaged())
+        self.0.command()
     }
 
     fn connected(&mut self, driver: &Shadow) {
         let palm = driver.palm();
-        self.connected = Some(DeviceInfo {
+        self.0.connected(DeviceInfo {
             kind: device_kind::SHADOW,
             id: palm.serial,
             model: fixed_text("Shadow Hand E (SR06 palm, 0220)"),
@@ -143,28 +114,19 @@ impl Host<Shadow> for Ports {
         state.link_errors = exchange.counters.wkc_errors;
         state.lost_frames = exchange.counters.lost_frames;
         state.header.origin_ns = exchange.origin_ns;
-        self.state.publish(&state)?;
-        if let Some(mut t) = tactile(inputs) {
+        let tactile = tactile(inputs).map(|mut t| {
             t.header.origin_ns = exchange.origin_ns;
-            self.tactile.publish(&t)?;
-        }
-        self.health.count_loop();
-        if self.last_health.elapsed() >= self.health_period {
-            self.last_health = Instant::now();
-            self.health.set_dropped(self.commands.dropped());
-            self.health.publish(&[self.commands.age(Instant::now())])?;
-            if let Some(d) = &self.connected {
-                self.device.publish(d)?;
-            }
-        }
+            t
+        });
+        self.0.publish(&state, tactile.as_ref())?;
         Ok(())
     }
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Stale => self.health.count_timeout(),
-            Event::Clamped(n) => self.health.count_clamps(u64::from(n)),
-            Event::Recovered | Event::Lost => self.health.count_error(),
+            Event::Stale => self.0.health().count_timeout(),
+            Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
+            Event::Recovered | Event::Lost => self.0.health().count_error(),
         }
     }
 
@@ -179,7 +141,7 @@ impl Host<Shadow> for Ports {
             lost_frames: counters.lost_frames,
             ..Default::default()
         };
-        self.state.publish(&state)?;
+        self.0.publish_down(&state)?;
         Ok(())
     }
 }

@@ -79,10 +79,19 @@ def main():
               f"code {palm.al_status:#06x}", flush=True)
         if palm.al_status != 0x0017:
             fail(f"the palm did not refuse SAFE-OP with 0x0017: {palm.al_status:#06x}")
-        # Acknowledge the error, back in PRE-OP.
+        # Acknowledge the error, back in PRE-OP. The firmware reads AL control once per loop:
+        # wait until it has taken the acknowledge before asking for anything else.
         palm.state = pysoem.PREOP_STATE | 0x10
         palm.write_state()
-        palm.state_check(pysoem.PREOP_STATE, TIMEOUT_US)
+        deadline = time.monotonic() + TIMEOUT_US / 1e6
+        while True:
+            master.read_state()
+            if palm.state == pysoem.PREOP_STATE:
+                break
+            if time.monotonic() > deadline:
+                fail(f"the error was not acknowledged: state {palm.state:#x} "
+                     f"code {palm.al_status:#06x}")
+            time.sleep(0.002)
 
         for n, (start, length, control) in enumerate(SMS):
             palm._fpwr(0x0806 + 8 * n, bytes([0]))  # disabled while programmed

@@ -6,7 +6,6 @@
 //! `foe-stall N|off` (the boot loader stops answering after N data packets of the next firmware
 //! transfer), `flash-time ERASE_MS PER_KIB_MS`, `power-cycle SECONDS`, `versions`, `stats`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
@@ -15,7 +14,7 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use sim_revo2::hand::VirtualObject;
 use sim_revo2::{revo2_subdevice_with_loop, Revo2};
-use teleop_ecat_link::{serve_link, serve_socket, Accept, RawSocketLink, StreamServer};
+use teleop_ecat_link::Place;
 use teleop_ecat_sim::SubDevice;
 
 #[derive(Parser)]
@@ -75,37 +74,14 @@ fn run(args: Args) -> anyhow::Result<()> {
         Duration::from_micros(args.firmware_loop_us),
     )));
     let start = Instant::now();
+    let place = Place::from_args(args.socket.clone(), args.interface.clone())
+        .ok_or_else(|| anyhow::anyhow!("give --socket PATH or --interface IF"))?;
     let control = args
         .control
         .clone()
-        .unwrap_or_else(|| match (&args.socket, &args.interface) {
-            (Some(s), _) => s.with_extension("ctl"),
-            (None, Some(i)) => PathBuf::from(format!("/tmp/teleop-revo2-{i}.ctl")),
-            (None, None) => PathBuf::from("/tmp/teleop-revo2.ctl"),
-        });
+        .unwrap_or_else(|| place.default_control("revo2"));
     spawn_control(&control, sim.clone(), start)?;
-    match (&args.socket, &args.interface) {
-        (Some(path), _) => {
-            let server = StreamServer::bind(path)?;
-            println!(
-                "revo2: socket {} (control: {})",
-                path.display(),
-                control.display()
-            );
-            std::io::stdout().flush()?;
-            serve_socket(&server, &sim, start, &stopping, &mut |_, _| {})?;
-        }
-        (None, Some(interface)) => {
-            let mut link = RawSocketLink::open(interface, Accept::FromMaster)?;
-            println!(
-                "revo2: interface {interface} (control: {})",
-                control.display()
-            );
-            std::io::stdout().flush()?;
-            serve_link(&mut link, &sim, start, &stopping, &mut |_, _| {});
-        }
-        (None, None) => anyhow::bail!("give --socket PATH or --interface IF"),
-    }
+    place.serve("revo2", &control, &*sim, start, &stopping)?;
     let _ = std::fs::remove_file(&control);
     tracing::info!("stopped");
     Ok(())

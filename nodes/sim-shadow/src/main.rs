@@ -5,7 +5,6 @@
 //! board stops answering), `overheat MOTOR`, `flash-stall MOTOR N|off` (a board stops acking
 //! after N more messages), `object ball|none`, `joints`, `stats`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
@@ -15,7 +14,7 @@ use clap::Parser;
 use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::hand::{Hand, Object, JOINTS};
 use sim_shadow::palm::{Palm, CUT_OUT_C};
-use teleop_ecat_link::{serve_link, serve_socket, Accept, RawSocketLink, StreamServer};
+use teleop_ecat_link::Place;
 use teleop_shadow_protocol::layout::MOTORS;
 use teleop_shadow_protocol::mapping::Mapping;
 
@@ -88,37 +87,14 @@ fn run(args: Args) -> anyhow::Result<()> {
         Duration::from_micros(args.firmware_loop_us),
     )));
     let start = Instant::now();
+    let place = Place::from_args(args.socket.clone(), args.interface.clone())
+        .ok_or_else(|| anyhow::anyhow!("give --socket PATH or --interface IF"))?;
     let control = args
         .control
         .clone()
-        .unwrap_or_else(|| match (&args.socket, &args.interface) {
-            (Some(s), _) => s.with_extension("ctl"),
-            (None, Some(i)) => PathBuf::from(format!("/tmp/teleop-shadow-{i}.ctl")),
-            (None, None) => PathBuf::from("/tmp/teleop-shadow.ctl"),
-        });
+        .unwrap_or_else(|| place.default_control("shadow"));
     spawn_control(&control, sim.clone(), start)?;
-    match (&args.socket, &args.interface) {
-        (Some(path), _) => {
-            let server = StreamServer::bind(path)?;
-            println!(
-                "shadow: socket {} (control: {})",
-                path.display(),
-                control.display()
-            );
-            std::io::stdout().flush()?;
-            serve_socket(&server, &*sim, start, &stopping, &mut |_, _| {})?;
-        }
-        (None, Some(interface)) => {
-            let mut link = RawSocketLink::open(interface, Accept::FromMaster)?;
-            println!(
-                "shadow: interface {interface} (control: {})",
-                control.display()
-            );
-            std::io::stdout().flush()?;
-            serve_link(&mut link, &*sim, start, &stopping, &mut |_, _| {});
-        }
-        (None, None) => anyhow::bail!("give --socket PATH or --interface IF"),
-    }
+    place.serve("shadow", &control, &*sim, start, &stopping)?;
     let _ = std::fs::remove_file(&control);
     tracing::info!("stopped");
     Ok(())

@@ -22,7 +22,7 @@ mod stream;
 use std::time::Duration;
 
 pub use raw::{Accept, RawSocketLink};
-pub use serve::{serve_link, serve_socket, Responder};
+pub use serve::{serve_link, serve_socket, Place, Responder};
 pub use stream::{ServerConnection, StreamLink, StreamServer};
 
 /// EtherType of EtherCAT frames.

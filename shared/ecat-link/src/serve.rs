@@ -82,3 +82,67 @@ pub fn serve_socket<R: Responder + ?Sized>(
     }
     Ok(())
 }
+
+/// Where an emulator serves: a local socket (the master connects with `sim:PATH`) or a network
+/// interface with a raw socket (needs CAP_NET_RAW).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Place {
+    /// A Unix stream socket at this path.
+    Socket(std::path::PathBuf),
+    /// This network interface.
+    Interface(String),
+}
+
+impl Place {
+    /// From an emulator's `--socket` / `--interface` arguments (`None`: neither given).
+    pub fn from_args(
+        socket: Option<std::path::PathBuf>,
+        interface: Option<String>,
+    ) -> Option<Self> {
+        match (socket, interface) {
+            (Some(path), _) => Some(Self::Socket(path)),
+            (None, Some(interface)) => Some(Self::Interface(interface)),
+            (None, None) => None,
+        }
+    }
+
+    /// The default control socket of emulator `name` here: the socket's path with `.ctl`, or
+    /// `/tmp/teleop-NAME-IF.ctl`.
+    pub fn default_control(&self, name: &str) -> std::path::PathBuf {
+        match self {
+            Self::Socket(path) => path.with_extension("ctl"),
+            Self::Interface(i) => std::path::PathBuf::from(format!("/tmp/teleop-{name}-{i}.ctl")),
+        }
+    }
+
+    /// Serves `devices` here until `stop()` says so; once listening, prints
+    /// `NAME: socket PATH (control: CTL)` (or `NAME: interface IF ...`) on stdout, the line
+    /// launchers and tests wait for.
+    pub fn serve<R: Responder + ?Sized>(
+        &self,
+        name: &str,
+        control: &std::path::Path,
+        devices: &Mutex<R>,
+        start: Instant,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<(), LinkError> {
+        use std::io::Write;
+        let announce = |what: String| {
+            println!("{name}: {what} (control: {})", control.display());
+            let _ = std::io::stdout().flush();
+        };
+        match self {
+            Self::Socket(path) => {
+                let server = StreamServer::bind(path)?;
+                announce(format!("socket {}", path.display()));
+                serve_socket(&server, devices, start, stop, &mut |_, _| {})
+            }
+            Self::Interface(interface) => {
+                let mut link = crate::RawSocketLink::open(interface, crate::Accept::FromMaster)?;
+                announce(format!("interface {interface}"));
+                serve_link(&mut link, devices, start, stop, &mut |_, _| {});
+                Ok(())
+            }
+        }
+    }
+}

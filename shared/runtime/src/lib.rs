@@ -12,6 +12,8 @@
 //!   does the same for loops that block on something else, such as a serial port);
 //! - [`EStopInput`]: the latched e-stop (a latch file per namespace that outlives every process,
 //!   the `estop` topic as its doorbell, `estop/ack` as the nodes' answer);
+//! - [`HandPorts`]: the ports of every hand node (fresh, e-stop-gated commands in; state,
+//!   tactile, device info and health out);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
@@ -30,6 +32,7 @@ mod config_file;
 pub mod control;
 mod estop;
 mod event_loop;
+mod hand_ports;
 mod health;
 mod ipc;
 mod logging;
@@ -41,6 +44,7 @@ pub use clock::{now_ns, sleep_until, sleep_until_ns};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use estop::{latch_path, latched_namespaces, set_latch, EStopInput};
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
+pub use hand_ports::HandPorts;
 pub use health::Health;
 pub use ipc::{
     discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT,
