@@ -8,6 +8,7 @@
 use std::time::{Duration, Instant};
 
 use teleop_e2e::{Sandbox, Session};
+use teleop_msgs::Message;
 use teleop_msgs::{
     contact_source, hand_model, link_kind, GloveDiagnostics, GloveForceCommand, GloveState,
     HandCommand, HandState, Tactile,
@@ -145,6 +146,41 @@ fn the_shadow_session_closes_the_loop_and_reprocesses() {
         info.complete && info.messages > 2_000,
         "{} messages",
         info.messages
+    );
+
+    // Replayed: the recorded PST samples come back on hand/tactile, the grasp among them.
+    let tactile: Subscriber<Tactile> = watch._node.subscriber().unwrap();
+    let mut replay = sandbox
+        .teleop()
+        .args(["replay", recording.to_str().unwrap(), "--speed", "8"])
+        .args(["--topics", Tactile::TOPIC])
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let (mut replayed, mut pressed) = (0, 0);
+    let start = Instant::now();
+    let status = loop {
+        tactile.drain(|t| {
+            replayed += 1;
+            pressed += usize::from(t.fingertips[MF_TIP].pressure > 100);
+        });
+        if let Some(status) = replay.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the replay did not end"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    };
+    tactile.drain(|t| {
+        replayed += 1;
+        pressed += usize::from(t.fingertips[MF_TIP].pressure > 100);
+    });
+    assert!(status.success());
+    assert!(
+        replayed > 1_000 && pressed > 100,
+        "replayed {replayed} tactile samples, {pressed} with the middle fingertip pressed"
     );
 
     let config = sandbox.dir.path().join("config/shadow");
