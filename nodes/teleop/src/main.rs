@@ -21,6 +21,7 @@ macro_rules! out {
 
 mod allegro;
 mod calibrate;
+mod certs;
 mod glove;
 mod inspect;
 mod launch;
@@ -137,6 +138,21 @@ enum Command {
         target: shadow::Target,
         #[command(subcommand)]
         command: shadow::ShadowCommand,
+    },
+    /// Make a session's certificate authority and station certificates for the bridge's
+    /// mutual TLS (`ca.pem`, `ca.key`, `<station>.pem`, `<station>.key`); an existing CA in the
+    /// folder signs added stations. Nothing is overwritten.
+    Certs {
+        /// Output folder.
+        #[arg(long, default_value = "certs")]
+        out: PathBuf,
+        /// A station: `NAME` or `NAME=ADDRESS[,ADDRESS...]`, the addresses its peer connects to
+        /// (repeatable).
+        #[arg(long = "station", value_name = "NAME=ADDR", required = true)]
+        stations: Vec<certs::StationSpec>,
+        /// Validity in days.
+        #[arg(long, default_value_t = 825)]
+        days: u32,
     },
     /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
     Record {
@@ -297,6 +313,11 @@ fn main() -> ExitCode {
             namespaces,
         } => inspect::estop(&ipc, !release, &namespaces),
         Command::Glove { target, command } => glove::run(&target, &command),
+        Command::Certs {
+            out,
+            stations,
+            days,
+        } => certs::run(&out, &stations, days),
         Command::Record {
             out,
             topics,
