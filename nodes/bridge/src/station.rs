@@ -1,0 +1,642 @@
+//! The running bridge: the zenoh session, the outgoing side on the calling thread (the local
+//! topics' event loop, heartbeats, link state, health), the incoming side on a thread of its own
+//! (zenoh's callbacks hand it frames through a channel; it runs the fault injector's delay line,
+//! checks each frame's station and contract, publishes samples locally and follows the peer's
+//! e-stop), and the fault-injection control socket.
+
+use std::ffi::CString;
+use std::os::unix::ffi::OsStrExt;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, AtomicU64, Ordering};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use teleop_msgs::{EStop, CONTRACT_VERSION};
+use teleop_runtime::{
+    control, now_ns, qualified, set_latch, EventLoop, Flow, Health, Input, IpcSettings, Namespace,
+    NodeRuntime, Subscriber, Wake,
+};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::Wait;
+
+use crate::config::{BridgeConfig, Direction, EStopRole, TopicConfig};
+use crate::frame::{self, EStopState, Frame, Heartbeat, Origin};
+use crate::link::{DelayLine, Faults, GapCounter, LatencyWindow, LinkState, PeerClock};
+use crate::ports::{Arrival, MakeIn, MakeOut};
+
+/// What the bridge is started with.
+pub struct Options {
+    /// The checked configuration.
+    pub config: BridgeConfig,
+    /// The iceoryx2 node name (the incoming side's node is `<name>-in`).
+    pub name: String,
+    /// A control socket for fault injection (`delay MS`, `loss PERCENT`, `clear`, `stats`).
+    pub control: Option<PathBuf>,
+}
+
+/// State both sides read and write.
+#[derive(Default)]
+struct Shared {
+    stop: AtomicBool,
+    delay_ns: AtomicU64,
+    loss_ppm: AtomicU32,
+    /// When the newest accepted heartbeat arrived (local clock; 0: none).
+    beat_recv_ns: AtomicU64,
+    /// That heartbeat's send stamp (the peer's clock), echoed in ours.
+    echo_send_ns: AtomicU64,
+    rtt_ns: AtomicU64,
+    offset_ns: AtomicI64,
+    refused: AtomicBool,
+    received: AtomicU64,
+    stale: AtomicU64,
+    gaps: AtomicU64,
+    errors: AtomicU64,
+    lost: AtomicU64,
+    latency: Mutex<Option<LatencyWindow>>,
+}
+
+impl Shared {
+    fn faults(&self) -> Faults {
+        Faults {
+            delay_ns: self.delay_ns.load(Ordering::Relaxed),
+            loss_ppm: self.loss_ppm.load(Ordering::Relaxed),
+        }
+    }
+
+    fn percentiles(&self) -> Option<(u32, u32, u32)> {
+        self.latency
+            .lock()
+            .ok()
+            .and_then(|w| w.as_ref().and_then(LatencyWindow::percentiles))
+    }
+}
+
+/// A frame from zenoh: which subscription, when, its bytes.
+struct Received {
+    slot: Slot,
+    bytes: Vec<u8>,
+}
+
+#[derive(Clone, Copy)]
+enum Slot {
+    Topic(usize),
+    Heartbeat,
+}
+
+/// The key of a topic sent by `station`: `teleop/<session>/<station>/<namespace>/<topic>`.
+fn key(config: &BridgeConfig, station: &str, namespace: Option<&Namespace>, topic: &str) -> String {
+    format!(
+        "teleop/{}/{station}/{}",
+        config.session,
+        qualified(namespace, topic)
+    )
+}
+
+const HEARTBEAT_TOPIC: &str = "_bridge/heartbeat";
+
+/// Runs the bridge until SIGINT/SIGTERM.
+pub fn run(options: Options) -> anyhow::Result<()> {
+    let config = &options.config;
+    let missing = config.missing_files();
+    if !missing.is_empty() {
+        let list: Vec<String> = missing
+            .iter()
+            .map(|(field, path)| format!("{field} = {}", path.display()))
+            .collect();
+        anyhow::bail!(
+            "certificate files not found: {}; make them with `teleop certs` (README: two \
+             machines)",
+            list.join(", ")
+        );
+    }
+    let settings = IpcSettings::from_env();
+    let runtime = NodeRuntime::new(&options.name, &settings)?;
+    if config.insecure {
+        tracing::warn!(
+            endpoints = ?config.listen.iter().chain(&config.connect).collect::<Vec<_>>(),
+            "INSECURE: plain TCP without authentication or encryption; anyone who reaches these \
+             endpoints can send hand commands (insecure = true in the bridge configuration)"
+        );
+    }
+    let zenoh_config = config.zenoh().map_err(|e| anyhow::anyhow!(e))?;
+    let session = zenoh::open(zenoh_config)
+        .wait()
+        .map_err(|e| anyhow::anyhow!("opening the zenoh session: {e}"))?;
+    tracing::info!(
+        station = %config.station,
+        peer = %config.peer,
+        listen = ?config.listen,
+        connect = ?config.connect,
+        tls = config.tls.is_some(),
+        "zenoh session open (peer to peer, no scouting)"
+    );
+
+    let namespace = runtime.namespace().cloned();
+    let shared = Arc::new(Shared::default());
+    if let Some(path) = &options.control {
+        let shared = Arc::clone(&shared);
+        control::spawn(path, move |line| answer(&shared, line))?;
+    }
+    let ins: Vec<TopicConfig> = config
+        .topic
+        .iter()
+        .filter(|t| t.direction == Direction::In)
+        .cloned()
+        .collect();
+    let (tx, rx) = mpsc::channel::<Received>();
+    let mut subscribers = Vec::new();
+    let wanted = ins
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (Slot::Topic(i), t.name.as_str()))
+        .chain([(Slot::Heartbeat, HEARTBEAT_TOPIC)]);
+    for (slot, topic) in wanted {
+        let tx = tx.clone();
+        let key = key(config, &config.peer, namespace.as_ref(), topic);
+        let subscriber = session
+            .declare_subscriber(key.clone())
+            .callback(move |sample| {
+                let _ = tx.send(Received {
+                    slot,
+                    bytes: sample.payload().to_bytes().into_owned(),
+                });
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
+        subscribers.push(subscriber);
+    }
+    drop(tx);
+
+    let incoming = {
+        let shared = Arc::clone(&shared);
+        let config = config.clone();
+        let name = format!("{}-in", options.name);
+        std::thread::Builder::new()
+            .name("bridge-in".into())
+            .spawn(move || {
+                let result = incoming(&settings, &name, &config, &ins, &rx, &shared);
+                shared.stop.store(true, Ordering::Relaxed);
+                result
+            })?
+    };
+    let result = outgoing(&runtime, config, namespace.as_ref(), &session, &shared);
+    shared.stop.store(true, Ordering::Relaxed);
+    drop(subscribers);
+    let _ = session.close().wait();
+    let incoming = incoming
+        .join()
+        .map_err(|_| anyhow::anyhow!("the incoming side panicked"))?;
+    result.and(incoming)
+}
+
+/// The control socket's answer to one command.
+fn answer(shared: &Shared, line: &str) -> String {
+    let mut words = line.split_whitespace();
+    let number = |w: Option<&str>| w.and_then(|w| w.parse::<f64>().ok()).filter(|v| *v >= 0.0);
+    match (words.next(), number(words.next())) {
+        (Some("delay"), Some(ms)) => {
+            shared.delay_ns.store((ms * 1e6) as u64, Ordering::Relaxed);
+            tracing::warn!(ms, "fault injection: every received frame delayed");
+            format!("ok delay {ms} ms")
+        }
+        (Some("loss"), Some(percent)) if percent <= 100.0 => {
+            shared
+                .loss_ppm
+                .store((percent * 1e4) as u32, Ordering::Relaxed);
+            tracing::warn!(percent, "fault injection: received frames lost at random");
+            format!("ok loss {percent} %")
+        }
+        (Some("clear"), None) => {
+            shared.delay_ns.store(0, Ordering::Relaxed);
+            shared.loss_ppm.store(0, Ordering::Relaxed);
+            tracing::info!("fault injection cleared");
+            "ok clear".into()
+        }
+        (Some("stats"), None) => {
+            let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+            let (p50, p99, max) = shared.percentiles().unwrap_or_default();
+            format!(
+                "ok received {} gaps {} stale {} errors {} lost {} rtt_us {} one_way_us {p50} {p99} {max}",
+                load(&shared.received),
+                load(&shared.gaps),
+                load(&shared.stale),
+                load(&shared.errors),
+                load(&shared.lost),
+                load(&shared.rtt_ns) / 1000,
+            )
+        }
+        _ => "error: commands are `delay MS`, `loss PERCENT`, `clear`, `stats`".into(),
+    }
+}
+
+/// The outgoing side: local samples and heartbeats to the peer, link state, health.
+fn outgoing(
+    runtime: &NodeRuntime,
+    config: &BridgeConfig,
+    namespace: Option<&Namespace>,
+    session: &zenoh::Session,
+    shared: &Shared,
+) -> anyhow::Result<()> {
+    let fingerprint = crate::schema_fingerprint();
+    let declare = |topic: &str| {
+        let key = key(config, &config.station, namespace, topic);
+        session
+            .declare_publisher(key.clone())
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::RealTime)
+            .express(true)
+            .wait()
+            .map_err(|e| anyhow::anyhow!("declaring the publisher {key}: {e}"))
+    };
+    let mut ports = Vec::new();
+    let mut publishers = Vec::new();
+    for topic in config
+        .topic
+        .iter()
+        .filter(|t| t.direction == Direction::Out)
+    {
+        let port = teleop_msgs::visit_topic(&topic.name, MakeOut(runtime))
+            .with_context(|| format!("topic {}", topic.name))??;
+        ports.push(port);
+        publishers.push(declare(&topic.name)?);
+    }
+    let heartbeat = declare(HEARTBEAT_TOPIC)?;
+    let doorbell: Option<Subscriber<EStop>> = match config.estop {
+        EStopRole::Send => Some(runtime.subscriber()?),
+        _ => None,
+    };
+    let latch = CString::new(runtime.estop_latch().as_os_str().as_bytes())?;
+    let mut health = Health::new(runtime)?;
+    let mut buf = Vec::with_capacity(1024);
+    let mut beat_seq = 0u64;
+    let mut send_errors = 0u64;
+    let mut state = LinkState::Down;
+    let mut last_health = Instant::now();
+    let mut last_report = Instant::now();
+    let mut counted = (0u64, 0u64); // errors, stale already in health
+    let timeout_ns = config.link_timeout_ms * 1_000_000;
+    let origin = |now| Origin::new(&config.station, CONTRACT_VERSION, fingerprint, now);
+    tracing::info!(
+        out = ?ports.iter().map(|p| p.topic()).collect::<Vec<_>>(),
+        "forwarding"
+    );
+
+    let mut send_beat = |buf: &mut Vec<u8>, send_errors: &mut u64| {
+        beat_seq += 1;
+        let now = now_ns();
+        let echo = shared.echo_send_ns.load(Ordering::Relaxed);
+        let received = shared.beat_recv_ns.load(Ordering::Relaxed);
+        let estop = match config.estop {
+            EStopRole::Send => {
+                // SAFETY: `latch` is NUL-terminated; lstat fills the zeroed struct.
+                let mut stat: libc::stat = unsafe { core::mem::zeroed() };
+                // SAFETY: both pointers are valid for the call.
+                let gone = unsafe { libc::lstat(latch.as_ptr(), &mut stat) } != 0
+                    && std::io::Error::last_os_error().kind() == std::io::ErrorKind::NotFound;
+                if gone {
+                    EStopState::Released
+                } else {
+                    EStopState::Engaged
+                }
+            }
+            _ => EStopState::NotSent,
+        };
+        let beat = Heartbeat {
+            seq: beat_seq,
+            echo_send_ns: echo,
+            hold_ns: if echo == 0 {
+                0
+            } else {
+                now.saturating_sub(received)
+            },
+            estop,
+        };
+        frame::encode_heartbeat(buf, &origin(now), &beat);
+        if heartbeat.put(buf.as_slice()).wait().is_err() {
+            *send_errors += 1;
+        }
+    };
+
+    let mut inputs: Vec<Input<'_>> = ports.iter().map(|p| Input::new(p.listener())).collect();
+    if let Some(doorbell) = &doorbell {
+        inputs.push(Input::new(doorbell.listener()));
+    }
+    let stop = EventLoop::new(Duration::from_millis(config.heartbeat_ms)).run(&inputs, |wake| {
+        match wake {
+            Wake::Input(i) if i < ports.len() => {
+                let publisher = &publishers[i];
+                let mut sent = |payload: &[u8]| {
+                    frame::encode_sample(&mut buf, &origin(now_ns()), payload);
+                    if publisher.put(buf.as_slice()).wait().is_err() {
+                        send_errors += 1;
+                    }
+                };
+                if ports[i].send_newest(&mut sent) {
+                    health.count_loop();
+                }
+            }
+            Wake::Input(_) => {
+                // The e-stop's doorbell: tell the peer now, not at the next heartbeat.
+                if let Some(doorbell) = &doorbell {
+                    doorbell.drain(|_| {});
+                }
+                send_beat(&mut buf, &mut send_errors);
+            }
+            Wake::Timeout(_) | Wake::Tick => send_beat(&mut buf, &mut send_errors),
+        }
+        let now = now_ns();
+        let received = shared.beat_recv_ns.load(Ordering::Relaxed);
+        let new_state = if shared.refused.load(Ordering::Relaxed) {
+            LinkState::Refused
+        } else if received != 0 && now.saturating_sub(received) <= timeout_ns {
+            LinkState::Up
+        } else {
+            LinkState::Down
+        };
+        if new_state != state {
+            match new_state {
+                LinkState::Up => tracing::info!(
+                    peer = %config.peer,
+                    rtt_us = shared.rtt_ns.load(Ordering::Relaxed) / 1000,
+                    "link up"
+                ),
+                LinkState::Down => {
+                    health.count_timeout();
+                    tracing::warn!(
+                        peer = %config.peer,
+                        timeout_ms = config.link_timeout_ms,
+                        "link down: no heartbeat from the peer (its commands and states go \
+                         stale: the hand holds, glove forces ramp to zero)"
+                    );
+                }
+                LinkState::Refused => {
+                    tracing::error!(peer = %config.peer, "link refused: the peer speaks another contract")
+                }
+            }
+            state = new_state;
+        }
+        if last_health.elapsed() >= Duration::from_secs(1) {
+            last_health = Instant::now();
+            let errors = shared.errors.load(Ordering::Relaxed) + send_errors;
+            let stale = shared.stale.load(Ordering::Relaxed);
+            health.count_errors(errors - counted.0);
+            for _ in counted.1..stale {
+                health.count_timeout();
+            }
+            counted = (errors, stale);
+            health.set_dropped(shared.gaps.load(Ordering::Relaxed));
+            let tens = |ns: u64| u16::try_from(ns / 10_000).unwrap_or(u16::MAX).to_le_bytes();
+            let rtt = tens(shared.rtt_ns.load(Ordering::Relaxed));
+            let p99 = tens(shared.percentiles().map_or(0, |(_, p99, _)| u64::from(p99) * 1000));
+            health.set_detail([state as u8, rtt[0], rtt[1], p99[0], p99[1], 0, 0]);
+            let since_beat = (received != 0).then(|| Duration::from_nanos(now.saturating_sub(received)));
+            if let Err(e) = health.publish(&[since_beat]) {
+                tracing::warn!("health: {e}");
+            }
+        }
+        if last_report.elapsed() >= Duration::from_secs(config.report_s.max(1)) {
+            last_report = Instant::now();
+            let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+            let (p50, p99, max) = shared.percentiles().unwrap_or_default();
+            tracing::info!(
+                link = state.name(),
+                peer = %config.peer,
+                rtt_us = load(&shared.rtt_ns) / 1000,
+                offset_us = shared.offset_ns.load(Ordering::Relaxed) / 1000,
+                one_way_us = format!("p50 {p50} p99 {p99} max {max}"),
+                received = load(&shared.received),
+                gaps = load(&shared.gaps),
+                stale = load(&shared.stale),
+                errors = load(&shared.errors) + send_errors,
+                injected_loss = load(&shared.lost),
+                insecure = config.insecure,
+                "link report"
+            );
+        }
+        if shared.stop.load(Ordering::Relaxed) {
+            Flow::Break(())
+        } else {
+            Flow::Continue(())
+        }
+    })?;
+    tracing::info!(?stop, "stopped");
+    Ok(())
+}
+
+/// Logs the first of a kind of refusal; the rest are counted and reported.
+struct Once(bool);
+
+impl Once {
+    fn first(&mut self) -> bool {
+        !core::mem::replace(&mut self.0, true)
+    }
+}
+
+/// The incoming side: frames from the peer to local topics, heartbeats, the peer's e-stop.
+fn incoming(
+    settings: &IpcSettings,
+    name: &str,
+    config: &BridgeConfig,
+    ins: &[TopicConfig],
+    rx: &mpsc::Receiver<Received>,
+    shared: &Shared,
+) -> anyhow::Result<()> {
+    let runtime = NodeRuntime::new(name, settings)?;
+    let fingerprint = crate::schema_fingerprint();
+    let mut ports = Vec::new();
+    for topic in ins {
+        ports.push(
+            teleop_msgs::visit_topic(&topic.name, MakeIn(&runtime))
+                .with_context(|| format!("topic {}", topic.name))??,
+        );
+    }
+    let max_age: Vec<Option<u64>> = ins
+        .iter()
+        .map(|t| t.max_age_ms.map(|ms| ms * 1_000_000))
+        .collect();
+    let mut doorbell = match config.estop {
+        EStopRole::Receive => Some(runtime.publisher::<EStop>()?),
+        _ => None,
+    };
+    let latch = runtime.estop_latch().to_path_buf();
+    let mut engaged_here = false;
+    let mut clock = PeerClock::new(config.clock);
+    let mut gaps = vec![GapCounter::default(); ports.len()];
+    let mut line = DelayLine::new(now_ns());
+    let mut stale_logged = vec![false; ports.len()];
+    let (mut bad_frame, mut wrong_station, mut bad_payload) =
+        (Once(false), Once(false), Once(false));
+    let mut refused_by: Option<(u32, u64)> = None;
+    *shared
+        .latency
+        .lock()
+        .map_err(|_| anyhow::anyhow!("latency lock"))? = Some(LatencyWindow::new(4096));
+    tracing::info!(
+        r#in = ?ports.iter().map(|p| p.topic()).collect::<Vec<_>>(),
+        "receiving"
+    );
+    while !shared.stop.load(Ordering::Relaxed) {
+        let now = now_ns();
+        let wait = line
+            .next_due()
+            .map_or(50_000_000, |due| due.saturating_sub(now))
+            .min(50_000_000);
+        match rx.recv_timeout(Duration::from_nanos(wait)) {
+            Ok(r) => line.push(shared.faults(), now_ns(), r),
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        }
+        while let Ok(r) = rx.try_recv() {
+            line.push(shared.faults(), now_ns(), r);
+        }
+        shared.lost.store(line.lost, Ordering::Relaxed);
+        let now = now_ns();
+        while let Some(r) = line.pop_due(now) {
+            let frame = match frame::decode(&r.bytes) {
+                Ok(frame) => frame,
+                Err(e) => {
+                    shared.errors.fetch_add(1, Ordering::Relaxed);
+                    if bad_frame.first() {
+                        tracing::warn!(
+                            "refused a frame from the peer's keys: {e} (further ones are counted)"
+                        );
+                    }
+                    continue;
+                }
+            };
+            let (Frame::Sample(origin, _) | Frame::Heartbeat(origin, _)) = frame;
+            if origin.station() != config.peer {
+                shared.errors.fetch_add(1, Ordering::Relaxed);
+                if wrong_station.first() {
+                    tracing::warn!(
+                        from = origin.station(),
+                        expected = %config.peer,
+                        "refused a frame from another station (further ones are counted)"
+                    );
+                }
+                continue;
+            }
+            if origin.contract != CONTRACT_VERSION || origin.fingerprint != fingerprint {
+                shared.errors.fetch_add(1, Ordering::Relaxed);
+                shared.refused.store(true, Ordering::Relaxed);
+                if refused_by != Some((origin.contract, origin.fingerprint)) {
+                    refused_by = Some((origin.contract, origin.fingerprint));
+                    tracing::error!(
+                        "refusing station {}: it speaks contract v{} (schema {:016x}), this \
+                         station v{CONTRACT_VERSION} ({fingerprint:016x}); build both stations \
+                         from the same contract",
+                        origin.station(),
+                        origin.contract,
+                        origin.fingerprint
+                    );
+                }
+                continue;
+            }
+            if refused_by.take().is_some() {
+                tracing::info!(peer = %config.peer, "the peer speaks this contract again");
+            }
+            shared.refused.store(false, Ordering::Relaxed);
+            match (frame, r.slot) {
+                (Frame::Heartbeat(origin, beat), Slot::Heartbeat) => {
+                    if beat.echo_send_ns != 0 {
+                        clock.exchange(beat.echo_send_ns, beat.hold_ns, origin.send_ns, now);
+                    }
+                    shared
+                        .rtt_ns
+                        .store(clock.rtt_ns().unwrap_or(0), Ordering::Relaxed);
+                    shared.offset_ns.store(clock.offset_ns(), Ordering::Relaxed);
+                    shared.echo_send_ns.store(origin.send_ns, Ordering::Relaxed);
+                    shared.beat_recv_ns.store(now, Ordering::Relaxed);
+                    if let Some(doorbell) = &mut doorbell {
+                        follow_estop(
+                            beat.estop,
+                            &latch,
+                            &mut engaged_here,
+                            doorbell,
+                            &config.peer,
+                        )?;
+                    }
+                }
+                (Frame::Sample(origin, payload), Slot::Topic(i)) => {
+                    match ports[i].publish(payload, &clock, now, max_age[i]) {
+                        Ok(Arrival::Published(header)) => {
+                            stale_logged[i] = false;
+                            shared.received.fetch_add(1, Ordering::Relaxed);
+                            let gap = gaps[i].count(header.source_id, header.seq);
+                            shared.gaps.fetch_add(gap, Ordering::Relaxed);
+                            let one_way = now.saturating_sub(clock.to_local(origin.send_ns));
+                            if let Ok(mut window) = shared.latency.lock() {
+                                if let Some(window) = window.as_mut() {
+                                    window.push(u32::try_from(one_way / 1000).unwrap_or(u32::MAX));
+                                }
+                            }
+                        }
+                        Ok(Arrival::Stale(_, age)) => {
+                            shared.stale.fetch_add(1, Ordering::Relaxed);
+                            if !core::mem::replace(&mut stale_logged[i], true) {
+                                tracing::warn!(
+                                    topic = ports[i].topic(),
+                                    age_ms = age / 1_000_000,
+                                    max_age_ms = max_age[i].unwrap_or(0) / 1_000_000,
+                                    "samples arrive too old: not published (counted)"
+                                );
+                            }
+                        }
+                        Err(e) => {
+                            shared.errors.fetch_add(1, Ordering::Relaxed);
+                            if bad_payload.first() {
+                                tracing::warn!("refused a sample: {e} (further ones are counted)");
+                            }
+                        }
+                    }
+                }
+                _ => {
+                    shared.errors.fetch_add(1, Ordering::Relaxed);
+                    if bad_frame.first() {
+                        tracing::warn!(
+                            "a frame of the wrong kind on a key (further ones are counted)"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The robot side of the e-stop: the operator's latch engaged engages this station's latch and
+/// rings its doorbell; released releases only a latch this bridge engaged.
+fn follow_estop(
+    peer: EStopState,
+    latch: &std::path::Path,
+    engaged_here: &mut bool,
+    doorbell: &mut teleop_runtime::Publisher<EStop>,
+    peer_name: &str,
+) -> anyhow::Result<()> {
+    let ring = |doorbell: &mut teleop_runtime::Publisher<EStop>, engaged: bool| {
+        doorbell.publish(&EStop {
+            engaged: u8::from(engaged),
+            ..Default::default()
+        })
+    };
+    match peer {
+        EStopState::Engaged if !*engaged_here => {
+            set_latch(latch, true)
+                .with_context(|| format!("engaging the e-stop latch {}", latch.display()))?;
+            *engaged_here = true;
+            ring(doorbell, true)?;
+            tracing::warn!(station = peer_name, "e-stop engaged by the peer station");
+        }
+        EStopState::Released if *engaged_here => {
+            set_latch(latch, false)
+                .with_context(|| format!("releasing the e-stop latch {}", latch.display()))?;
+            *engaged_here = false;
+            ring(doorbell, false)?;
+            tracing::info!(station = peer_name, "e-stop released by the peer station");
+        }
+        _ => {}
+    }
+    Ok(())
+}
