@@ -9,6 +9,7 @@
 //! its command line, as a user would.
 
 pub mod netns;
+pub mod stations;
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -185,10 +186,22 @@ impl Sandbox {
     /// Starts `teleop launch FILE` in the background; its output goes to `launch.log` in the
     /// sandbox (printed when the session is dropped during a failing test).
     pub fn launch(&self, file: &Path) -> Session {
+        self.launch_with(file, self.teleop())
+    }
+
+    /// Starts `teleop launch FILE` inside the network namespace `ns` (a station on its own
+    /// "machine"), as [`launch`](Self::launch) does.
+    pub fn launch_in(&self, ns: &netns::Netns, file: &Path) -> Session {
+        let mut cmd = ns.command(bin("teleop"));
+        cmd.envs(self.ipc.to_env()).current_dir(self.dir.path());
+        netns::die_with_parent(&mut cmd);
+        self.launch_with(file, cmd)
+    }
+
+    fn launch_with(&self, file: &Path, mut teleop: Command) -> Session {
         let log_path = self.dir.path().join("launch.log");
         let log = File::create(&log_path).expect("log file");
-        let child = self
-            .teleop()
+        let child = teleop
             .arg("launch")
             .arg(file)
             .env("TELEOP_LOG", "info")
@@ -225,7 +238,8 @@ pub struct Session {
 impl Session {
     /// The session's combined output so far.
     pub fn log(&self) -> String {
-        std::fs::read_to_string(&self.log_path).unwrap_or_default()
+        // Lossy: a process may print bytes that are not UTF-8.
+        String::from_utf8_lossy(&std::fs::read(&self.log_path).unwrap_or_default()).into_owned()
     }
 
     /// Kills the launcher with SIGKILL (no chance to stop its processes) and reaps it.

@@ -1,6 +1,7 @@
 //! Network namespaces with a veth pair for the tests that run EtherCAT over a real link (the
-//! emulator on a raw socket at one end, a master at the other), and how such a privileged test
-//! skips, or fails under `TELEOP_REQUIRE_CHECKS`, where it cannot run.
+//! emulator on a raw socket at one end, a master at the other) or two stations as two machines,
+//! and how such a privileged test skips, or fails under `TELEOP_REQUIRE_CHECKS`, where it cannot
+//! run.
 
 use std::os::unix::process::CommandExt;
 use std::path::Path;
@@ -93,8 +94,8 @@ pub struct Netns {
 
 impl Netns {
     /// A namespace named `<prefix><pid>-<n>` (namespaces of `prefix` left by a killed run are
-    /// deleted first).
-    pub fn new(prefix: &str) -> Self {
+    /// deleted first) with only its loopback, up.
+    pub fn empty(prefix: &str) -> Self {
         remove_stale_namespaces(prefix);
         static NEXT: AtomicU32 = AtomicU32::new(0);
         let name = format!(
@@ -104,10 +105,34 @@ impl Netns {
         );
         run(Command::new("ip").args(["netns", "add", &name]));
         let ns = Self { name };
+        ns.ip(&["link", "set", "lo", "up"]);
+        ns
+    }
+
+    /// Two namespaces, as two machines, joined by a veth pair: `st0` in the first with
+    /// `addresses.0`, `st1` in the second with `addresses.1` (CIDR, e.g. `192.0.2.1/24`), both
+    /// up, no other route.
+    pub fn pair(prefix: &str, addresses: (&str, &str)) -> (Self, Self) {
+        let a = Self::empty(prefix);
+        let b = Self::empty(prefix);
+        a.ip(&[
+            "link", "add", "st0", "type", "veth", "peer", "name", "st1", "netns", &b.name,
+        ]);
+        a.ip(&["addr", "add", addresses.0, "dev", "st0"]);
+        b.ip(&["addr", "add", addresses.1, "dev", "st1"]);
+        a.ip(&["link", "set", "st0", "up"]);
+        b.ip(&["link", "set", "st1", "up"]);
+        (a, b)
+    }
+
+    /// A namespace named `<prefix><pid>-<n>` (namespaces of `prefix` left by a killed run are
+    /// deleted first) with a veth pair `ecm0`/`ecs0` inside it.
+    pub fn new(prefix: &str) -> Self {
+        let ns = Self::empty(prefix);
         ns.ip(&[
             "link", "add", "ecm0", "type", "veth", "peer", "name", "ecs0",
         ]);
-        for dev in ["lo", "ecm0", "ecs0"] {
+        for dev in ["ecm0", "ecs0"] {
             ns.ip(&["link", "set", dev, "up"]);
         }
         ns

@@ -1,0 +1,341 @@
+//! Two stations as two machines: the operator station (`launch/operator.toml`) and the robot
+//! station (`launch/robot.toml`) in two network namespaces joined by a veth pair (192.0.2.0/24,
+//! RFC 5737, on the veth only), each with its own iceoryx2 root and prefix, joined only by their
+//! `teleop-bridge`s over zenoh with mutual TLS. The simulated Revo2 session closes its loop
+//! across them; then the faults: injected delay and loss, the link cut and restored, the robot's
+//! bridge killed and restarted by its launcher, a station with a certificate from another CA,
+//! and, last, both bridges stopped: nothing flows.
+//!
+//! Root only (network namespaces): skipped with the reason elsewhere, required under
+//! `TELEOP_REQUIRE_CHECKS` (CI).
+#![allow(clippy::unwrap_used)]
+
+use std::time::{Duration, Instant};
+
+use teleop_e2e::netns::Netns;
+use teleop_e2e::stations::{collect, Station, OPERATOR_IP};
+use teleop_e2e::{bin, skip_unless_privileged, Sandbox};
+use teleop_msgs::{source_id, GloveForceCommand, HandCommand, HandState};
+use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+
+/// Waits up to `timeout` for `ok`, polled every 10 ms; panics with `what` and both logs.
+fn until(
+    stations: (&Station, &Station),
+    timeout: Duration,
+    what: &str,
+    mut ok: impl FnMut() -> bool,
+) {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        if ok() {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!(
+        "{what}: not within {timeout:?}\n--- operator ---\n{}\n--- robot ---\n{}",
+        stations.0.logs(),
+        stations.1.logs()
+    );
+}
+
+fn max_force(f: &GloveForceCommand) -> i16 {
+    f.force.iter().copied().max().unwrap_or(0)
+}
+
+#[test]
+fn two_stations_across_a_veth_pair() {
+    skip_unless_privileged!();
+    // The operator's clock is the robot's (one machine): stamps cross unchanged there; the robot
+    // estimates the offset from heartbeats, as between two machines.
+    let (op_ns, _robot_ns, operator, robot) = teleop_e2e::stations::start("tlst", |op, t| {
+        if op {
+            t.replace("clock = \"estimate\"", "clock = \"shared\"")
+        } else {
+            t
+        }
+    });
+    let both = (&operator, &robot);
+
+    // The loop closes across the stations: the operator's retargeting commands the robot's hand,
+    // the hand's state and touch come back and the glove feels the ball.
+    let commands = robot.node.subscriber::<HandCommand>().unwrap();
+    let states = operator.node.subscriber::<HandState>().unwrap();
+    let forces = operator.node.subscriber::<GloveForceCommand>().unwrap();
+    let local_commands = operator.node.subscriber::<HandCommand>().unwrap();
+    let retarget = source_id("retarget");
+    let revo2 = source_id("revo2");
+    let (mut crossed, mut came_back, mut felt) = (0, 0, 0i16);
+    until(
+        both,
+        Duration::from_secs(60),
+        "the loop closes across the stations",
+        || {
+            commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+            states.drain(|s| came_back += u32::from(s.header.source_id == revo2));
+            forces.drain(|f| felt = felt.max(max_force(f)));
+            crossed > 100 && came_back > 100 && felt > 100
+        },
+    );
+    // Nothing else joins the stations: the robot's iceoryx2 has no glove, the operator's no hand
+    // node; what crossed was published by the bridges' incoming nodes.
+    assert!(robot
+        .node
+        .topic_ports::<teleop_msgs::GloveState>()
+        .is_none_or(|(publishers, _)| publishers == 0));
+    assert_eq!(
+        operator.node.topic_ports::<HandState>().map(|(p, _)| p),
+        Some(1),
+        "only the operator bridge publishes hand/state at the operator station"
+    );
+
+    // Hop latency over the veth, and the same with 20 ms injected on each direction.
+    let age = |c: &HandCommand| Some(now_ns().saturating_sub(c.header.stamp_ns));
+    let p50 = |mut v: Vec<u64>| {
+        v.sort_unstable();
+        v.get(v.len() / 2).copied().unwrap_or(u64::MAX)
+    };
+    commands.drain(|_| {});
+    let plain = p50(collect(&commands, Duration::from_secs(1), age));
+    let mut revo2_timeouts = 0;
+    robot.health_of("revo2", |h| revo2_timeouts = h.timeouts);
+    assert_eq!(robot.control("delay 20"), "ok delay 20 ms\n");
+    assert_eq!(operator.control("delay 20"), "ok delay 20 ms\n");
+    commands.drain(|_| {});
+    std::thread::sleep(Duration::from_millis(200));
+    commands.drain(|_| {});
+    let delayed = p50(collect(&commands, Duration::from_secs(2), age));
+    assert!(
+        plain < 10_000_000 && delayed > 20_000_000 && delayed < 40_000_000,
+        "hand/command age at the robot: p50 {plain} ns plain, {delayed} ns with 20 ms injected"
+    );
+    forces.drain(|_| {});
+    // One whole grasp of the scripted operator (6 s).
+    let felt_delayed = collect(&forces, Duration::from_secs(7), |f| Some(max_force(f)));
+    assert!(
+        felt_delayed.iter().any(|f| *f > 100),
+        "the glove still feels the ball at 20 ms\n{}\n{}",
+        operator.logs(),
+        robot.logs()
+    );
+    let mut timeouts_after = revo2_timeouts;
+    robot.health_of("revo2", |h| timeouts_after = h.timeouts);
+    assert_eq!(
+        timeouts_after,
+        revo2_timeouts,
+        "the hand's command timeout stays quiet at 20 ms one way\n{}",
+        robot.logs()
+    );
+    // 10 % loss on the robot's side: commands still arrive, the gaps are counted where they land.
+    assert_eq!(robot.control("clear"), "ok clear\n");
+    assert_eq!(operator.control("clear"), "ok clear\n");
+    assert_eq!(robot.control("loss 10"), "ok loss 10 %\n");
+    let before = commands.dropped();
+    let got = collect(&commands, Duration::from_secs(2), |_| Some(()));
+    let lost = commands.dropped() - before;
+    assert!(
+        got.len() > 100 && lost > 5,
+        "with 10 % loss: {} commands arrived, {lost} counted lost",
+        got.len()
+    );
+    let stats = robot.control("stats");
+    assert!(stats.starts_with("ok received"), "{stats}");
+    assert_eq!(robot.control("clear"), "ok clear\n");
+
+    // The link cut: the robot's hand holds (its command goes stale), the glove's forces ramp to
+    // zero, both bridges say the link is down; restored, everything resumes in the same processes.
+    let pids = (operator.bridge_pid(), robot.bridge_pid());
+    assert!(pids.0.is_some() && pids.1.is_some(), "{pids:?}");
+    op_ns.ip(&["link", "set", "st0", "down"]);
+    let cut = Instant::now();
+    until(
+        both,
+        Duration::from_secs(3),
+        "glove forces at zero after the cut",
+        || {
+            let mut zero = false;
+            forces.drain(|f| zero = max_force(f) == 0);
+            zero
+        },
+    );
+    until(
+        both,
+        Duration::from_secs(3),
+        "the robot's hand holds (stale command counted)",
+        || {
+            let mut t = revo2_timeouts;
+            robot.health_of("revo2", |h| t = h.timeouts);
+            t > revo2_timeouts
+        },
+    );
+    for (station, name) in [(&operator, "operator"), (&robot, "robot")] {
+        until(
+            both,
+            Duration::from_secs(3),
+            &format!("{name} bridge reports the link down"),
+            || {
+                let mut down = false;
+                station.health_of("bridge", |h| down = h.detail[0] == 0);
+                down
+            },
+        );
+    }
+    commands.drain(|_| {});
+    let during = collect(&commands, Duration::from_millis(500), |_| Some(()));
+    assert!(during.is_empty(), "no command crosses a cut link");
+    let positions = |s: &HandState| Some(s.joints[0].position);
+    let robot_states = robot.node.subscriber::<HandState>().unwrap();
+    let held = collect(&robot_states, Duration::from_millis(500), positions);
+    let spread = held.iter().fold(0.0f32, |m, p| m.max((p - held[0]).abs()));
+    assert!(
+        spread < 0.02,
+        "the hand holds still: joint 0 moved {spread}"
+    );
+    eprintln!("link cut for {:?}", cut.elapsed());
+    op_ns.ip(&["link", "set", "st0", "up"]);
+    let (mut crossed, mut felt) = (0, 0i16);
+    until(
+        both,
+        Duration::from_secs(20),
+        "commands and force resume after the link returns",
+        || {
+            commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+            forces.drain(|f| felt = felt.max(max_force(f)));
+            crossed > 50 && felt > 100
+        },
+    );
+    assert_eq!(
+        (operator.bridge_pid(), robot.bridge_pid()),
+        pids,
+        "the link returned without restarting a bridge"
+    );
+
+    // The robot's bridge killed: its launcher restarts it and the loop closes again.
+    let old = pids.1.unwrap();
+    // SAFETY: kill(2) of a pid the test's own station runs.
+    unsafe {
+        libc::kill(old as libc::pid_t, libc::SIGKILL);
+    }
+    until(
+        both,
+        Duration::from_secs(15),
+        "the launcher restarts the robot's bridge",
+        || robot.bridge_pid().is_some_and(|p| p != old),
+    );
+    let mut crossed = 0;
+    until(
+        both,
+        Duration::from_secs(20),
+        "commands cross through the restarted bridge",
+        || {
+            commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+            crossed > 50
+        },
+    );
+
+    // A station with a certificate from another CA: refused at the TLS handshake; nothing it
+    // sends reaches the hand.
+    rogue_is_refused(&op_ns, &operator, &robot, &commands);
+
+    // Both bridges stopped (SIGINT: a clean exit the launchers leave stopped): nothing flows,
+    // though the operator's retargeting goes on commanding.
+    for pid in [operator.bridge_pid(), robot.bridge_pid()] {
+        // SAFETY: kill(2) of a pid the test's own station runs.
+        unsafe {
+            libc::kill(pid.unwrap() as libc::pid_t, libc::SIGINT);
+        }
+    }
+    until(
+        both,
+        Duration::from_secs(10),
+        "both bridges stopped",
+        || operator.bridge_pid().is_none() && robot.bridge_pid().is_none(),
+    );
+    commands.drain(|_| {});
+    states.drain(|_| {});
+    local_commands.drain(|_| {});
+    let window = Duration::from_secs(2);
+    let at_robot = collect(&commands, window, |_| Some(()));
+    let at_operator = collect(&states, Duration::from_millis(10), |_| Some(()));
+    let still_local = collect(&local_commands, Duration::from_millis(200), |_| Some(()));
+    assert!(
+        at_robot.is_empty() && at_operator.is_empty() && !still_local.is_empty(),
+        "bridges stopped: {} commands reached the robot, {} states the operator; {} commands \
+         published at the operator station",
+        at_robot.len(),
+        at_operator.len(),
+        still_local.len()
+    );
+    let (mut operator, mut robot) = (operator, robot);
+    assert!(operator.session.stop().success(), "{}", operator.logs());
+    assert!(robot.session.stop().success(), "{}", robot.logs());
+}
+
+/// A third station in the operator's namespace whose certificate comes from another CA tries the
+/// robot's endpoint; the test publishes hand commands into it.
+fn rogue_is_refused(
+    ns: &Netns,
+    operator: &Station,
+    robot: &Station,
+    commands: &Subscriber<HandCommand>,
+) {
+    let rogue = Sandbox::new();
+    let out = rogue.run_teleop(&[
+        "certs",
+        "--out",
+        "certs",
+        "--station",
+        &format!("operator={OPERATOR_IP}"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let config = std::fs::read_to_string(Sandbox::repo().join("config/bridge/operator.toml"))
+        .unwrap()
+        .replace("../../certs/", "certs/");
+    let config = rogue.write("bridge.toml", &config);
+    let log = std::fs::File::create(rogue.dir.path().join("bridge.log")).unwrap();
+    let mut cmd = ns.command(bin("teleop-bridge"));
+    cmd.arg("--config")
+        .arg(&config)
+        .envs(rogue.ipc.to_env())
+        .env("TELEOP_LOG", "info")
+        .current_dir(rogue.dir.path())
+        .stdout(log.try_clone().unwrap())
+        .stderr(log);
+    teleop_e2e::netns::die_with_parent(&mut cmd);
+    let mut child = cmd.spawn().unwrap();
+    let node = NodeRuntime::new("rogue-cmd", &rogue.ipc).unwrap();
+    let mut publisher: Publisher<HandCommand> = node.publisher().unwrap();
+    let rogue_id = source_id("rogue-cmd");
+    let mut reached = 0;
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(4) {
+        publisher.publish(&HandCommand::default()).unwrap();
+        commands.drain(|c| reached += u32::from(c.header.source_id == rogue_id));
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    teleop_e2e::netns::stop(&mut child);
+    let log = std::fs::read_to_string(rogue.dir.path().join("bridge.log")).unwrap();
+    assert_eq!(reached, 0, "a rogue command reached the robot\n{log}");
+    assert!(
+        !log.contains("link up"),
+        "the rogue station's link came up\n{log}"
+    );
+    assert!(log.contains("zenoh session open"), "{log}");
+    // The real stations were not disturbed.
+    for (station, name) in [(operator, "operator"), (robot, "robot")] {
+        until(
+            (operator, robot),
+            Duration::from_secs(3),
+            &format!("{name} bridge reports the link up"),
+            || {
+                let mut up = false;
+                station.health_of("bridge", |h| up = h.detail[0] == 1);
+                up
+            },
+        );
+    }
+}
