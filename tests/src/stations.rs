@@ -71,7 +71,7 @@ pub fn start(
     let robot = prepare("launch/robot.toml", "config/bridge/robot.toml", |t| {
         patch(
             false,
-            t.replace("tls/0.0.0.0:7447", &format!("tls/{ROBOT_IP}:7447")),
+            t.replace("quic/0.0.0.0:7447", &format!("quic/{ROBOT_IP}:7447")),
         )
     });
     certificates(&op.0, &robot.0);

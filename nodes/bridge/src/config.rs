@@ -74,10 +74,10 @@ pub struct BridgeConfig {
     pub peer: String,
     /// The session's name: both stations must use the same; it starts every zenoh key.
     pub session: String,
-    /// zenoh endpoints to listen on, e.g. `tls/192.0.2.2:7447`.
+    /// zenoh endpoints to listen on, e.g. `quic/192.0.2.2:7447` (UDP).
     #[serde(default)]
     pub listen: Vec<String>,
-    /// zenoh endpoints of the peer, e.g. `tls/192.0.2.2:7447`.
+    /// zenoh endpoints of the peer, e.g. `quic/192.0.2.2:7447`.
     #[serde(default)]
     pub connect: Vec<String>,
     /// Heartbeat period.
@@ -98,7 +98,7 @@ pub struct BridgeConfig {
     /// Seconds between link reports in the log.
     #[serde(default = "default_report_s")]
     pub report_s: u64,
-    /// Mutual TLS (required unless `insecure`).
+    /// Mutual TLS over QUIC (required unless `insecure`).
     pub tls: Option<TlsConfig>,
     /// Plain TCP without authentication: anyone who reaches the port can command the hand.
     #[serde(default)]
@@ -215,7 +215,7 @@ impl BridgeConfig {
             }
             _ => {}
         }
-        let scheme = if self.insecure { "tcp/" } else { "tls/" };
+        let scheme = if self.insecure { "tcp/" } else { "quic/" };
         for endpoint in self.listen.iter().chain(&self.connect) {
             if !endpoint.starts_with(scheme) {
                 return Err(invalid(
@@ -224,8 +224,9 @@ impl BridgeConfig {
                         format!("{endpoint:?}: with insecure = true only tcp/ endpoints")
                     } else {
                         format!(
-                            "{endpoint:?}: only tls/ endpoints (mutual TLS); plain tcp/ needs \
-                             insecure = true"
+                            "{endpoint:?}: only quic/ endpoints (TLS 1.3 with mutual \
+                             certificates; zenoh's tls/ transport is unsound under two-way \
+                             traffic, eclipse-zenoh/zenoh#2557); plain tcp/ needs insecure = true"
                         )
                     },
                 ));
@@ -269,7 +270,8 @@ impl BridgeConfig {
     }
 
     /// The zenoh configuration: peer mode, no scouting, the explicit endpoints, the lease, and
-    /// mutual TLS (or plain TCP when `insecure`).
+    /// QUIC with mutual TLS (zenoh's `transport/link/tls` settings apply to QUIC), or plain TCP
+    /// when `insecure`.
     pub fn zenoh(&self) -> Result<zenoh::Config, String> {
         let mut config = zenoh::Config::default();
         let mut set = |key: &str, value: serde_json::Value| {
@@ -291,7 +293,7 @@ impl BridgeConfig {
         set("transport/link/tx/keep_alive", json!(4))?;
         set(
             "transport/link/protocols",
-            json!([if self.insecure { "tcp" } else { "tls" }]),
+            json!([if self.insecure { "tcp" } else { "quic" }]),
         )?;
         if let Some(tls) = &self.tls {
             let path = |p: &Path| json!(p.display().to_string());
@@ -341,7 +343,7 @@ mod tests {
 station = "operator"
 peer = "robot"
 session = "lab"
-connect = ["tls/192.0.2.2:7447"]
+connect = ["quic/192.0.2.2:7447"]
 [tls]
 ca = "certs/ca.pem"
 certificate = "certs/operator.pem"
@@ -374,7 +376,7 @@ max_age_ms = 100
     fn refusals_name_file_and_field() {
         let e = refusal(|t| t.replace("\"robot\"", "\"Robot!\""));
         assert!(e.starts_with("bridge.toml: peer: \"Robot!\""), "{e}");
-        let e = refusal(|t| t.replace("tls/192", "tcp/192"));
+        let e = refusal(|t| t.replace("quic/192", "tcp/192"));
         assert!(
             e.contains("listen/connect") && e.contains("insecure = true"),
             "{e}"
@@ -392,14 +394,14 @@ max_age_ms = 100
         assert!(e.contains("listed twice"), "{e}");
         let e = refusal(|t| format!("{t}\nspeed = 3\n"));
         assert!(e.contains("unknown field `speed`"), "{e}");
-        let e = refusal(|t| t.replace("connect = [\"tls/192.0.2.2:7447\"]", ""));
+        let e = refusal(|t| t.replace("connect = [\"quic/192.0.2.2:7447\"]", ""));
         assert!(e.contains("neither is set"), "{e}");
     }
 
     #[test]
     fn insecure_is_plain_tcp_only() {
         let text = GOOD
-            .replace("tls/192", "tcp/192")
+            .replace("quic/192", "tcp/192")
             .split("[tls]")
             .next()
             .unwrap()

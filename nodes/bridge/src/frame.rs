@@ -137,6 +137,57 @@ pub enum FrameError {
     EStop(u8),
 }
 
+/// Why a well-formed frame from the peer's keys is not accepted.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refusal {
+    /// Sent by another station than the configured peer.
+    #[error("a frame from station {from:?}, expected {expected:?}")]
+    Station {
+        /// The sender's name.
+        from: String,
+        /// The configured peer.
+        expected: String,
+    },
+    /// The sender speaks another contract.
+    #[error(
+        "station {station:?} speaks contract v{contract} (schema {fingerprint:016x}), this \
+         station v{our_contract} ({our_fingerprint:016x}); build both stations from the same \
+         contract"
+    )]
+    Contract {
+        /// The sender's name.
+        station: String,
+        /// Its contract version.
+        contract: u32,
+        /// Its schema fingerprint.
+        fingerprint: u64,
+        /// Ours.
+        our_contract: u32,
+        /// Ours.
+        our_fingerprint: u64,
+    },
+}
+
+/// Accepts a frame's origin only from `peer` speaking this contract (`contract`, `fingerprint`).
+pub fn accept(origin: &Origin, peer: &str, contract: u32, fingerprint: u64) -> Result<(), Refusal> {
+    if origin.station() != peer {
+        return Err(Refusal::Station {
+            from: origin.station().to_string(),
+            expected: peer.to_string(),
+        });
+    }
+    if origin.contract != contract || origin.fingerprint != fingerprint {
+        return Err(Refusal::Contract {
+            station: origin.station().to_string(),
+            contract: origin.contract,
+            fingerprint: origin.fingerprint,
+            our_contract: contract,
+            our_fingerprint: fingerprint,
+        });
+    }
+    Ok(())
+}
+
 fn u32_at(b: &[u8], at: usize) -> u32 {
     let mut v = [0u8; 4];
     v.copy_from_slice(&b[at..at + 4]);
@@ -332,6 +383,26 @@ mod tests {
                 actual: 2
             })
         );
+    }
+
+    #[test]
+    fn only_the_peer_speaking_this_contract_is_accepted() {
+        let o = origin();
+        assert_eq!(accept(&o, "operator", 2, o.fingerprint), Ok(()));
+        let e = accept(&o, "robot", 2, o.fingerprint).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "a frame from station \"operator\", expected \"robot\""
+        );
+        let e = accept(&o, "operator", 3, o.fingerprint).unwrap_err();
+        assert!(
+            e.to_string().starts_with("station \"operator\" speaks contract v2 (schema 1122334455667788), this station v3"),
+            "{e}"
+        );
+        assert!(matches!(
+            accept(&o, "operator", 2, 1),
+            Err(Refusal::Contract { .. })
+        ));
     }
 
     proptest! {

@@ -507,32 +507,24 @@ fn incoming(
                 }
             };
             let (Frame::Sample(origin, _) | Frame::Heartbeat(origin, _)) = frame;
-            if origin.station() != config.peer {
-                shared.errors.fetch_add(1, Ordering::Relaxed);
-                if wrong_station.first() {
-                    tracing::warn!(
-                        from = origin.station(),
-                        expected = %config.peer,
-                        "refused a frame from another station (further ones are counted)"
-                    );
+            match frame::accept(&origin, &config.peer, CONTRACT_VERSION, fingerprint) {
+                Ok(()) => {}
+                Err(refusal @ frame::Refusal::Station { .. }) => {
+                    shared.errors.fetch_add(1, Ordering::Relaxed);
+                    if wrong_station.first() {
+                        tracing::warn!("refused {refusal} (further ones are counted)");
+                    }
+                    continue;
                 }
-                continue;
-            }
-            if origin.contract != CONTRACT_VERSION || origin.fingerprint != fingerprint {
-                shared.errors.fetch_add(1, Ordering::Relaxed);
-                shared.refused.store(true, Ordering::Relaxed);
-                if refused_by != Some((origin.contract, origin.fingerprint)) {
-                    refused_by = Some((origin.contract, origin.fingerprint));
-                    tracing::error!(
-                        "refusing station {}: it speaks contract v{} (schema {:016x}), this \
-                         station v{CONTRACT_VERSION} ({fingerprint:016x}); build both stations \
-                         from the same contract",
-                        origin.station(),
-                        origin.contract,
-                        origin.fingerprint
-                    );
+                Err(refusal @ frame::Refusal::Contract { .. }) => {
+                    shared.errors.fetch_add(1, Ordering::Relaxed);
+                    shared.refused.store(true, Ordering::Relaxed);
+                    if refused_by != Some((origin.contract, origin.fingerprint)) {
+                        refused_by = Some((origin.contract, origin.fingerprint));
+                        tracing::error!("refusing the peer: {refusal}");
+                    }
+                    continue;
                 }
-                continue;
             }
             if refused_by.take().is_some() {
                 tracing::info!(peer = %config.peer, "the peer speaks this contract again");
