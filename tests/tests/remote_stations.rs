@@ -2,8 +2,9 @@
 //! station (`launch/robot.toml`) in two network namespaces joined by a veth pair (192.0.2.0/24,
 //! RFC 5737, on the veth only), each with its own iceoryx2 root and prefix, joined only by their
 //! `teleop-bridge`s over zenoh with mutual TLS. The simulated Revo2 session closes its loop
-//! across them; then the faults: injected delay and loss, the link cut and restored, the robot's
-//! bridge killed and restarted by its launcher, a station with a certificate from another CA,
+//! across them; then the faults: injected delay and loss, the link cut and restored, the
+//! operator's e-stop engaging and releasing the robot, the robot's bridge killed and restarted by
+//! its launcher, a station with a certificate from another CA,
 //! and, last, both bridges stopped: nothing flows.
 //!
 //! Root only (network namespaces): skipped with the reason elsewhere, required under
@@ -15,8 +16,8 @@ use std::time::{Duration, Instant};
 use teleop_e2e::netns::Netns;
 use teleop_e2e::stations::{collect, Station, OPERATOR_IP};
 use teleop_e2e::{bin, skip_unless_privileged, Sandbox};
-use teleop_msgs::{source_id, GloveForceCommand, HandCommand, HandState};
-use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_msgs::{fixed_text, source_id, EStopAck, GloveForceCommand, HandCommand, HandState};
+use teleop_runtime::{latch_path, now_ns, NodeRuntime, Publisher, Subscriber};
 
 /// Waits up to `timeout` for `ok`, polled every 10 ms; panics with `what` and both logs.
 fn until(
@@ -97,33 +98,40 @@ fn two_stations_across_a_veth_pair() {
     };
     commands.drain(|_| {});
     let plain = p50(collect(&commands, Duration::from_secs(1), age));
-    let mut revo2_timeouts = 0;
-    robot.health_of("revo2", |h| revo2_timeouts = h.timeouts);
     assert_eq!(robot.control("delay 20"), "ok delay 20 ms\n");
     assert_eq!(operator.control("delay 20"), "ok delay 20 ms\n");
     commands.drain(|_| {});
     std::thread::sleep(Duration::from_millis(200));
     commands.drain(|_| {});
     let delayed = p50(collect(&commands, Duration::from_secs(2), age));
+    // Delayed, not queued: last value wins, so the age grows by the delay and no more.
     assert!(
-        plain < 10_000_000 && delayed > 20_000_000 && delayed < 40_000_000,
+        delayed > 20_000_000 && delayed < plain + 40_000_000,
         "hand/command age at the robot: p50 {plain} ns plain, {delayed} ns with 20 ms injected"
     );
+    // One whole grasp of the scripted operator (6 s): the hand follows (its states mostly not
+    // holding) and the glove feels the ball. (Whether the hand's 100 ms command timeout ever
+    // trips at 20 ms is measured by `bench_remote`, in release builds.)
+    let robot_states = robot.node.subscriber::<HandState>().unwrap();
     forces.drain(|_| {});
-    // One whole grasp of the scripted operator (6 s).
-    let felt_delayed = collect(&forces, Duration::from_secs(7), |f| Some(max_force(f)));
+    let (mut felt, mut holding, mut following) = (0i16, 0u32, 0u32);
+    let end = Instant::now() + Duration::from_secs(7);
+    while Instant::now() < end {
+        forces.drain(|f| felt = felt.max(max_force(f)));
+        robot_states.drain(|s| {
+            if s.holding == 0 {
+                following += 1;
+            } else {
+                holding += 1;
+            }
+        });
+        std::thread::sleep(Duration::from_millis(2));
+    }
     assert!(
-        felt_delayed.iter().any(|f| *f > 100),
-        "the glove still feels the ball at 20 ms\n{}\n{}",
+        felt > 100 && following > 10 * holding,
+        "at 20 ms each way: glove force up to {felt}; hand states following {following}, \
+         holding {holding}\n{}\n{}",
         operator.logs(),
-        robot.logs()
-    );
-    let mut timeouts_after = revo2_timeouts;
-    robot.health_of("revo2", |h| timeouts_after = h.timeouts);
-    assert_eq!(
-        timeouts_after,
-        revo2_timeouts,
-        "the hand's command timeout stays quiet at 20 ms one way\n{}",
         robot.logs()
     );
     // 10 % loss on the robot's side: commands still arrive, the gaps are counted where they land.
@@ -161,11 +169,11 @@ fn two_stations_across_a_veth_pair() {
     until(
         both,
         Duration::from_secs(3),
-        "the robot's hand holds (stale command counted)",
+        "the robot's hand holds (its command stale)",
         || {
-            let mut t = revo2_timeouts;
-            robot.health_of("revo2", |h| t = h.timeouts);
-            t > revo2_timeouts
+            let mut held = false;
+            robot_states.drain(|s| held = s.holding != 0);
+            held
         },
     );
     for (station, name) in [(&operator, "operator"), (&robot, "robot")] {
@@ -184,7 +192,6 @@ fn two_stations_across_a_veth_pair() {
     let during = collect(&commands, Duration::from_millis(500), |_| Some(()));
     assert!(during.is_empty(), "no command crosses a cut link");
     let positions = |s: &HandState| Some(s.joints[0].position);
-    let robot_states = robot.node.subscriber::<HandState>().unwrap();
     let held = collect(&robot_states, Duration::from_millis(500), positions);
     let spread = held.iter().fold(0.0f32, |m, p| m.max((p - held[0]).abs()));
     assert!(
@@ -208,6 +215,54 @@ fn two_stations_across_a_veth_pair() {
         (operator.bridge_pid(), robot.bridge_pid()),
         pids,
         "the link returned without restarting a bridge"
+    );
+
+    // The operator's e-stop crosses: the robot's latch engages and its hand node acknowledges;
+    // released at the operator, it is released at the robot and the loop resumes.
+    let acks = robot.node.subscriber::<EStopAck>().unwrap();
+    let robot_latch = latch_path(&robot.sandbox.ipc, None);
+    let revo2_name = fixed_text("revo2");
+    let out = operator.sandbox.run_teleop(&["estop"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    until(
+        both,
+        Duration::from_secs(3),
+        "the robot's hand node holds the operator's e-stop",
+        || {
+            let mut held = false;
+            acks.drain(|a| held |= a.node_name == revo2_name && a.engaged == 1);
+            held && robot_latch.exists()
+        },
+    );
+    until(
+        both,
+        Duration::from_secs(3),
+        "glove forces at zero under the e-stop",
+        || {
+            let mut zero = false;
+            forces.drain(|f| zero = max_force(f) == 0);
+            zero
+        },
+    );
+    let out = operator.sandbox.run_teleop(&["estop", "--release"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    until(
+        both,
+        Duration::from_secs(3),
+        "the e-stop released at the robot",
+        || {
+            let mut released = false;
+            acks.drain(|a| released |= a.node_name == revo2_name && a.engaged == 0);
+            released && !robot_latch.exists()
+        },
     );
 
     // The robot's bridge killed: its launcher restarts it and the loop closes again.
