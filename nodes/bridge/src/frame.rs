@@ -9,7 +9,8 @@
 //!  0      4   magic "TLBR"
 //!  4      1   format (1)
 //!  5      1   kind: 0 sample, 1 heartbeat
-//!  6      2   zero
+//!  6      2   superseded: samples the sender skipped since its previous frame on this key
+//!             (last value wins), so the receiver tells them from losses (0 for heartbeats)
 //!  8      4   contract version (teleop_msgs::CONTRACT_VERSION)
 //! 12      8   schema fingerprint (every topic's name, schema and size)
 //! 20      8   send stamp: the sending bridge's CLOCK_MONOTONIC, ns
@@ -41,6 +42,8 @@ pub struct Origin {
     pub fingerprint: u64,
     /// When the sending bridge sent it (its CLOCK_MONOTONIC, ns).
     pub send_ns: u64,
+    /// Samples the sender skipped (superseded by this one) since its previous frame on the key.
+    pub superseded: u16,
     station: [u8; MAX_STATION],
     station_len: u8,
 }
@@ -56,6 +59,7 @@ impl Origin {
             contract,
             fingerprint,
             send_ns,
+            superseded: 0,
             station: name,
             station_len: len as u8,
         }
@@ -225,6 +229,7 @@ pub fn decode(bytes: &[u8]) -> Result<Frame<'_>, FrameError> {
         contract: u32_at(bytes, 8),
         fingerprint: u64_at(bytes, 12),
         send_ns: u64_at(bytes, 20),
+        superseded: u16::from_le_bytes([bytes[6], bytes[7]]),
         station,
         station_len,
     };
@@ -277,7 +282,8 @@ pub fn decode(bytes: &[u8]) -> Result<Frame<'_>, FrameError> {
 fn header(out: &mut Vec<u8>, origin: &Origin, kind: u8) {
     out.clear();
     out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&[FORMAT, kind, 0, 0]);
+    out.extend_from_slice(&[FORMAT, kind]);
+    out.extend_from_slice(&origin.superseded.to_le_bytes());
     out.extend_from_slice(&origin.contract.to_le_bytes());
     out.extend_from_slice(&origin.fingerprint.to_le_bytes());
     out.extend_from_slice(&origin.send_ns.to_le_bytes());
@@ -322,6 +328,12 @@ mod tests {
         let mut out = Vec::new();
         encode_sample(&mut out, &origin(), &[0xaa, 0xbb]);
         assert_eq!(&out[..8], b"TLBR\x01\x00\x00\x00");
+        let mut skipping = origin();
+        skipping.superseded = 0x0102;
+        let mut other = Vec::new();
+        encode_sample(&mut other, &skipping, &[]);
+        assert_eq!(&other[6..8], &[0x02, 0x01]);
+        assert!(matches!(decode(&other), Ok(Frame::Sample(o, _)) if o.superseded == 0x0102));
         assert_eq!(&out[8..12], &[2, 0, 0, 0]);
         assert_eq!(
             &out[12..20],

@@ -14,9 +14,10 @@ pub trait OutPort {
     fn topic(&self) -> &'static str;
     /// The event port that wakes the bridge.
     fn listener(&self) -> &iceoryx2::port::listener::Listener<Service>;
-    /// Takes every queued sample and calls `send` with the newest one's bytes (last value wins:
-    /// superseded samples never cross). False when nothing was queued.
-    fn send_newest(&self, send: &mut dyn FnMut(&[u8])) -> bool;
+    /// Takes every queued sample and calls `send` with the newest one's bytes and how many
+    /// older ones it superseded (last value wins: superseded samples never cross). False when
+    /// nothing was queued.
+    fn send_newest(&self, send: &mut dyn FnMut(&[u8], u16)) -> bool;
 }
 
 /// What became of a sample from the peer.
@@ -67,12 +68,12 @@ impl<M: Message> OutPort for Out<M> {
     fn listener(&self) -> &iceoryx2::port::listener::Listener<Service> {
         self.0.listener()
     }
-    fn send_newest(&self, send: &mut dyn FnMut(&[u8])) -> bool {
+    fn send_newest(&self, send: &mut dyn FnMut(&[u8], u16)) -> bool {
         let mut newest = None;
-        self.0.drain(|m| newest = Some(*m));
+        let taken = self.0.drain(|m| newest = Some(*m));
         match newest {
             Some(m) => {
-                send(m.as_bytes());
+                send(m.as_bytes(), u16::try_from(taken - 1).unwrap_or(u16::MAX));
                 true
             }
             None => false,

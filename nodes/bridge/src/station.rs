@@ -51,7 +51,10 @@ struct Shared {
     refused: AtomicBool,
     received: AtomicU64,
     stale: AtomicU64,
+    /// Samples lost on the link (sequence gaps less what the sender superseded).
     gaps: AtomicU64,
+    /// Samples the peer's bridge superseded (last value wins).
+    superseded: AtomicU64,
     errors: AtomicU64,
     lost: AtomicU64,
     latency: Mutex<Option<LatencyWindow>>,
@@ -218,9 +221,10 @@ fn answer(shared: &Shared, line: &str) -> String {
             let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
             let (p50, p99, max) = shared.percentiles().unwrap_or_default();
             format!(
-                "ok received {} gaps {} stale {} errors {} lost {} rtt_us {} one_way_us {p50} {p99} {max}",
+                "ok received {} gaps {} superseded {} stale {} errors {} lost {} rtt_us {} one_way_us {p50} {p99} {max}",
                 load(&shared.received),
                 load(&shared.gaps),
+                load(&shared.superseded),
                 load(&shared.stale),
                 load(&shared.errors),
                 load(&shared.lost),
@@ -327,8 +331,10 @@ fn outgoing(
         match wake {
             Wake::Input(i) if i < ports.len() => {
                 let publisher = &publishers[i];
-                let mut sent = |payload: &[u8]| {
-                    frame::encode_sample(&mut buf, &origin(now_ns()), payload);
+                let mut sent = |payload: &[u8], superseded: u16| {
+                    let mut origin = origin(now_ns());
+                    origin.superseded = superseded;
+                    frame::encode_sample(&mut buf, &origin, payload);
                     if publisher.put(buf.as_slice()).wait().is_err() {
                         send_errors += 1;
                     }
@@ -408,6 +414,7 @@ fn outgoing(
                 one_way_us = format!("p50 {p50} p99 {p99} max {max}"),
                 received = load(&shared.received),
                 gaps = load(&shared.gaps),
+                superseded = load(&shared.superseded),
                 stale = load(&shared.stale),
                 errors = load(&shared.errors) + send_errors,
                 injected_loss = load(&shared.lost),
@@ -556,8 +563,15 @@ fn incoming(
                         Ok(Arrival::Published(header)) => {
                             stale_logged[i] = false;
                             shared.received.fetch_add(1, Ordering::Relaxed);
+                            // Samples the sender superseded are not losses of the link.
                             let gap = gaps[i].count(header.source_id, header.seq);
-                            shared.gaps.fetch_add(gap, Ordering::Relaxed);
+                            shared.gaps.fetch_add(
+                                gap.saturating_sub(u64::from(origin.superseded)),
+                                Ordering::Relaxed,
+                            );
+                            shared
+                                .superseded
+                                .fetch_add(u64::from(origin.superseded), Ordering::Relaxed);
                             let one_way = now.saturating_sub(clock.to_local(origin.send_ns));
                             if let Ok(mut window) = shared.latency.lock() {
                                 if let Some(window) = window.as_mut() {
