@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::hand::{Hand, Object};
 use sim_shadow::palm::Palm;
-use teleop_e2e::bench::{loadavg, percentiles};
+use teleop_e2e::bench::{drive_glove, loadavg, percentiles};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
@@ -140,53 +140,15 @@ fn main() {
     .collect();
 
     // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
-    let mut steps: Vec<(u64, bool)> = Vec::new(); // (publish stamp, closing)
-    let mut state_latency = Vec::new();
-    let mut force_latency = Vec::new();
-    let mut raw = [900u16; 6];
-    let mut rng = 0x2545_F491_4F6C_DD1Du64;
-    let mut next_step = Instant::now() + WARM_UP;
-    let start = Instant::now();
-    let mut period = Instant::now();
-    while start.elapsed() < WARM_UP + Duration::from_secs(SECONDS) {
-        let measuring = start.elapsed() >= WARM_UP;
-        recording.store(measuring, Ordering::SeqCst);
-        let mut stepped = None;
-        if measuring && Instant::now() >= next_step {
-            let closing = raw[MIDDLE] == 900;
-            raw[MIDDLE] = if closing { 300 } else { 900 };
-            stepped = Some(closing);
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            next_step = Instant::now() + Duration::from_millis(200 + rng % 100);
-        }
-        let header = glove
-            .publish(&GloveState {
-                raw_position: raw,
-                link_up: 1,
-                ..Default::default()
-            })
-            .unwrap();
-        if let Some(closing) = stepped {
-            steps.push((header.stamp_ns, closing));
-        }
-        states.drain(|s| {
-            if measuring && s.link_up == 1 && s.header.origin_ns != 0 {
-                state_latency.push(s.header.stamp_ns.saturating_sub(s.header.origin_ns));
-            }
-        });
-        forces.drain(|f| {
-            if measuring && f.header.origin_ns != 0 {
-                force_latency.push(now_ns().saturating_sub(f.header.origin_ns));
-            }
-        });
-        period += Duration::from_micros(3333);
-        if let Some(wait) = period.checked_duration_since(Instant::now()) {
-            std::thread::sleep(wait);
-        }
-    }
-    recording.store(false, Ordering::SeqCst);
+    let drive = drive_glove(
+        WARM_UP,
+        SECONDS,
+        MIDDLE,
+        &mut glove,
+        &states,
+        &forces,
+        |m| recording.store(m, Ordering::SeqCst),
+    );
     for child in &mut children {
         // SAFETY: kill(2) on our own, not yet reaped child.
         unsafe {
@@ -197,7 +159,12 @@ fn main() {
         let _ = child.wait();
     }
     let seen = seen.lock().unwrap().clone();
-    report(&seen, &steps, state_latency, force_latency);
+    report(
+        &seen,
+        &drive.steps,
+        drive.state_latency,
+        drive.force_latency,
+    );
 
     // Flashing motor 13 through the same emulator.
     let mut image = vec![0u8; IMAGE_BYTES];

@@ -329,6 +329,88 @@ pub fn wait_for<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<
 
 /// What the benchmark programs (`tests/examples/bench_*.rs`) share.
 pub mod bench {
+    use std::time::{Duration, Instant};
+
+    use teleop_msgs::{GloveForceCommand, GloveState, HandState};
+    use teleop_runtime::{now_ns, Publisher, Subscriber};
+
+    /// What [`drive_glove`] measured.
+    pub struct GloveDrive {
+        /// Each step of the middle channel: its publish stamp and whether it closed the finger.
+        pub steps: Vec<(u64, bool)>,
+        /// `hand/state` stamp - origin (the hand node alone), ns.
+        pub state_latency: Vec<u64>,
+        /// `glove/force_command` receive time - origin (hand sample -> glove force), ns.
+        pub force_latency: Vec<u64>,
+    }
+
+    /// Publishes `glove/state` at 300 Hz for `warm_up` + `seconds`, stepping channel `middle`
+    /// between 900 and 300 every 200-300 ms (random) once warm, and collects the hand-state and
+    /// glove-force latencies meanwhile; `measuring` is told on every sample whether the warm-up
+    /// is over.
+    pub fn drive_glove(
+        warm_up: Duration,
+        seconds: u64,
+        middle: usize,
+        glove: &mut Publisher<GloveState>,
+        states: &Subscriber<HandState>,
+        forces: &Subscriber<GloveForceCommand>,
+        mut measuring: impl FnMut(bool),
+    ) -> GloveDrive {
+        let mut out = GloveDrive {
+            steps: Vec::new(),
+            state_latency: Vec::new(),
+            force_latency: Vec::new(),
+        };
+        let mut raw = [900u16; 6];
+        let mut rng = 0x2545_F491_4F6C_DD1Du64;
+        let mut next_step = Instant::now() + warm_up;
+        let start = Instant::now();
+        let mut period = Instant::now();
+        while start.elapsed() < warm_up + Duration::from_secs(seconds) {
+            let warm = start.elapsed() >= warm_up;
+            measuring(warm);
+            let mut stepped = None;
+            if warm && Instant::now() >= next_step {
+                let closing = raw[middle] == 900;
+                raw[middle] = if closing { 300 } else { 900 };
+                stepped = Some(closing);
+                rng ^= rng << 13;
+                rng ^= rng >> 7;
+                rng ^= rng << 17;
+                next_step = Instant::now() + Duration::from_millis(200 + rng % 100);
+            }
+            let header = glove
+                .publish(&GloveState {
+                    raw_position: raw,
+                    link_up: 1,
+                    ..Default::default()
+                })
+                .expect("publish glove/state");
+            if let Some(closing) = stepped {
+                out.steps.push((header.stamp_ns, closing));
+            }
+            states.drain(|s| {
+                if warm && s.link_up == 1 && s.header.origin_ns != 0 {
+                    out.state_latency
+                        .push(s.header.stamp_ns.saturating_sub(s.header.origin_ns));
+                }
+            });
+            forces.drain(|f| {
+                if warm && f.header.origin_ns != 0 {
+                    out.force_latency
+                        .push(now_ns().saturating_sub(f.header.origin_ns));
+                }
+            });
+            period += Duration::from_micros(3333);
+            if let Some(wait) = period.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+        }
+        measuring(false);
+        out
+    }
+
     /// `p50 .. p99 .. max ..` of samples in nanoseconds, printed in microseconds (`-` for none).
     pub fn percentiles(mut v: Vec<u64>) -> String {
         if v.is_empty() {
