@@ -223,48 +223,41 @@ fn two_stations_across_a_veth_pair() {
     let acks = robot.node.subscriber::<EStopAck>().unwrap();
     let robot_latch = latch_path(&robot.sandbox.ipc, None);
     let revo2_name = fixed_text("revo2");
-    let out = operator.sandbox.run_teleop(&["estop"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    until(
-        both,
-        Duration::from_secs(3),
-        "the robot's hand node holds the operator's e-stop",
-        || {
-            let mut held = false;
-            acks.drain(|a| held |= a.node_name == revo2_name && a.engaged == 1);
-            held && robot_latch.exists()
-        },
-    );
-    until(
-        both,
-        Duration::from_secs(3),
-        "glove forces at zero under the e-stop",
-        || {
-            let mut zero = false;
-            forces.drain(|f| zero = max_force(f) == 0);
-            zero
-        },
-    );
-    let out = operator.sandbox.run_teleop(&["estop", "--release"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    until(
-        both,
-        Duration::from_secs(3),
-        "the e-stop released at the robot",
-        || {
-            let mut released = false;
-            acks.drain(|a| released |= a.node_name == revo2_name && a.engaged == 0);
-            released && !robot_latch.exists()
-        },
-    );
+    for engage in [true, false] {
+        let args: &[&str] = if engage {
+            &["estop"]
+        } else {
+            &["estop", "--release"]
+        };
+        let out = operator.sandbox.run_teleop(args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let what = if engage {
+            "the robot's hand node holds the operator's e-stop"
+        } else {
+            "the e-stop released at the robot"
+        };
+        until(both, Duration::from_secs(3), what, || {
+            let mut acked = false;
+            acks.drain(|a| acked |= a.node_name == revo2_name && a.engaged == u8::from(engage));
+            acked && robot_latch.exists() == engage
+        });
+        if engage {
+            until(
+                both,
+                Duration::from_secs(3),
+                "glove forces at zero under the e-stop",
+                || {
+                    let mut zero = false;
+                    forces.drain(|f| zero = max_force(f) == 0);
+                    zero
+                },
+            );
+        }
+    }
 
     // The robot's bridge killed: its launcher restarts it and the loop closes again.
     let old = pids.1.unwrap();
