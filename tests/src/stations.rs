@@ -55,20 +55,38 @@ impl Station {
     }
 }
 
-/// Both namespaces and both stations, started (robot first); `patch` changes a bridge
-/// configuration's text (`true` for the operator's).
+/// Both namespaces and the Revo2's stations (`launch/operator.toml`, `launch/robot.toml`),
+/// started (robot first); `patch` changes a bridge configuration's text (`true` for the
+/// operator's).
 pub fn start(
     prefix: &str,
+    patch: impl Fn(bool, String) -> String,
+) -> (Netns, Netns, Station, Station) {
+    start_hand(prefix, "", patch)
+}
+
+/// As [`start`], with the stations of `hand` (`launch/<hand>-operator.toml` and
+/// `launch/<hand>-robot.toml`; `""`: the Revo2's).
+pub fn start_hand(
+    prefix: &str,
+    hand: &str,
     patch: impl Fn(bool, String) -> String,
 ) -> (Netns, Netns, Station, Station) {
     let (op_ns, robot_ns) = Netns::pair(
         prefix,
         (&format!("{OPERATOR_IP}/24"), &format!("{ROBOT_IP}/24")),
     );
-    let op = prepare("launch/operator.toml", "config/bridge/operator.toml", |t| {
+    let launch = |side: &str| {
+        if hand.is_empty() {
+            format!("launch/{side}.toml")
+        } else {
+            format!("launch/{hand}-{side}.toml")
+        }
+    };
+    let op = prepare(&launch("operator"), "config/bridge/operator.toml", |t| {
         patch(true, t)
     });
-    let robot = prepare("launch/robot.toml", "config/bridge/robot.toml", |t| {
+    let robot = prepare(&launch("robot"), "config/bridge/robot.toml", |t| {
         patch(
             false,
             t.replace("quic/0.0.0.0:7447", &format!("quic/{ROBOT_IP}:7447")),

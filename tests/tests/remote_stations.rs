@@ -44,9 +44,13 @@ fn max_force(f: &GloveForceCommand) -> i16 {
     f.force.iter().copied().max().unwrap_or(0)
 }
 
+/// One pair of stations at a time: each is ten processes on this machine.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 #[test]
 fn two_stations_across_a_veth_pair() {
     skip_unless_privileged!();
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     // The operator's clock is the robot's (one machine): stamps cross unchanged there; the robot
     // estimates the offset from heartbeats, as between two machines.
     let (op_ns, _robot_ns, operator, robot) = teleop_e2e::stations::start("tlst", |op, t| {
@@ -386,5 +390,37 @@ fn rogue_is_refused(
                 up
             },
         );
+    }
+}
+
+/// The Allegro's and the Shadow Hand's stations close their loops across the bridges too: the
+/// operator's commands reach the hand node, its states come back, the glove feels the ball.
+#[test]
+fn every_hand_closes_its_loop_across_stations() {
+    skip_unless_privileged!();
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    for (hand, node) in [("allegro", "allegro"), ("shadow", "shadow")] {
+        let (_op_ns, _robot_ns, operator, robot) =
+            teleop_e2e::stations::start_hand("tlsh", hand, |_, t| t);
+        let both = (&operator, &robot);
+        let commands = robot.node.subscriber::<HandCommand>().unwrap();
+        let states = operator.node.subscriber::<HandState>().unwrap();
+        let forces = operator.node.subscriber::<GloveForceCommand>().unwrap();
+        let (retarget, hand_node) = (source_id("retarget"), source_id(node));
+        let (mut crossed, mut came_back, mut felt) = (0, 0, 0i16);
+        until(
+            both,
+            Duration::from_secs(60),
+            &format!("the {hand} loop closes across the stations"),
+            || {
+                commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+                states.drain(|s| came_back += u32::from(s.header.source_id == hand_node));
+                forces.drain(|f| felt = felt.max(max_force(f)));
+                crossed > 100 && came_back > 100 && felt > 100
+            },
+        );
+        let (mut operator, mut robot) = (operator, robot);
+        assert!(operator.session.stop().success(), "{}", operator.logs());
+        assert!(robot.session.stop().success(), "{}", robot.logs());
     }
 }
