@@ -213,7 +213,8 @@ impl<T> DelayLine<T> {
                 return;
             }
         }
-        self.queue.push_back((now_ns + faults.delay_ns, item));
+        self.queue
+            .push_back((now_ns.saturating_add(faults.delay_ns), item));
     }
 
     /// The next item due at `now_ns`, in arrival order.
@@ -309,5 +310,16 @@ mod tests {
             line.push(lossy, i, 'x');
         }
         assert!((800..1200).contains(&line.lost), "{}", line.lost);
+        // A delay beyond any clock never overflows.
+        let mut far = DelayLine::new(1);
+        far.push(
+            Faults {
+                delay_ns: u64::MAX,
+                loss_ppm: 0,
+            },
+            5,
+            'z',
+        );
+        assert_eq!(far.next_due(), Some(u64::MAX));
     }
 }

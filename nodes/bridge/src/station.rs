@@ -194,12 +194,15 @@ pub fn run(options: Options) -> anyhow::Result<()> {
     result.and(incoming)
 }
 
+/// The longest delay the fault injector takes.
+const MAX_INJECTED_DELAY_MS: f64 = 10_000.0;
+
 /// The control socket's answer to one command.
 fn answer(shared: &Shared, line: &str) -> String {
     let mut words = line.split_whitespace();
     let number = |w: Option<&str>| w.and_then(|w| w.parse::<f64>().ok()).filter(|v| *v >= 0.0);
     match (words.next(), number(words.next())) {
-        (Some("delay"), Some(ms)) => {
+        (Some("delay"), Some(ms)) if ms <= MAX_INJECTED_DELAY_MS => {
             shared.delay_ns.store((ms * 1e6) as u64, Ordering::Relaxed);
             tracing::warn!(ms, "fault injection: every received frame delayed");
             format!("ok delay {ms} ms")
@@ -231,7 +234,10 @@ fn answer(shared: &Shared, line: &str) -> String {
                 load(&shared.rtt_ns) / 1000,
             )
         }
-        _ => "error: commands are `delay MS`, `loss PERCENT`, `clear`, `stats`".into(),
+        _ => format!(
+            "error: commands are `delay MS` (0 to {MAX_INJECTED_DELAY_MS}), `loss PERCENT` (0 to \
+             100), `clear`, `stats`"
+        ),
     }
 }
 
@@ -645,4 +651,37 @@ fn follow_estop(
         _ => {}
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_control_socket_takes_faults_in_range_and_refuses_the_rest() {
+        let shared = Shared::default();
+        assert_eq!(answer(&shared, "delay 20"), "ok delay 20 ms");
+        assert_eq!(shared.faults().delay_ns, 20_000_000);
+        assert_eq!(answer(&shared, "loss 12.5"), "ok loss 12.5 %");
+        assert_eq!(shared.faults().loss_ppm, 125_000);
+        for bad in [
+            "delay 1e30",
+            "delay -1",
+            "delay nan",
+            "loss 101",
+            "loss",
+            "jam 3",
+            "",
+        ] {
+            assert!(answer(&shared, bad).starts_with("error: "), "{bad}");
+        }
+        assert_eq!(
+            shared.faults().delay_ns,
+            20_000_000,
+            "refusals change nothing"
+        );
+        assert_eq!(answer(&shared, "clear"), "ok clear");
+        assert_eq!(shared.faults(), Faults::default());
+        assert!(answer(&shared, "stats").starts_with("ok received 0 gaps 0 superseded 0"));
+    }
 }

@@ -43,6 +43,21 @@ impl std::str::FromStr for StationSpec {
             .filter(|a| !a.is_empty())
             .map(str::to_string)
             .collect();
+        for address in &addresses {
+            let hostname = address.len() <= 253
+                && address.split('.').all(|label| {
+                    !label.is_empty()
+                        && label.len() <= 63
+                        && label
+                            .bytes()
+                            .all(|b| b.is_ascii_alphanumeric() || b == b'-')
+                });
+            if address.parse::<std::net::IpAddr>().is_err() && !hostname {
+                return Err(format!(
+                    "station {name}: {address:?} is neither an IP address nor a host name"
+                ));
+            }
+        }
         Ok(Self {
             name: name.to_string(),
             addresses,
@@ -180,6 +195,10 @@ mod tests {
         assert!(s.addresses.is_empty());
         assert!("Robot=1.2.3.4".parse::<StationSpec>().is_err());
         assert!("=1.2.3.4".parse::<StationSpec>().is_err());
+        assert!("robot=not_an_ip!".parse::<StationSpec>().is_err());
+        assert!("robot=fe80::1,robot-1.lab.example"
+            .parse::<StationSpec>()
+            .is_ok());
     }
 
     #[test]

@@ -150,8 +150,8 @@ enum Command {
         /// (repeatable).
         #[arg(long = "station", value_name = "NAME=ADDR", required = true)]
         stations: Vec<certs::StationSpec>,
-        /// Validity in days.
-        #[arg(long, default_value_t = 825)]
+        /// Validity in days (1 to 36500).
+        #[arg(long, default_value_t = 825, value_parser = clap::value_parser!(u32).range(1..=36500))]
         days: u32,
     },
     /// Record the pipeline's topics into MCAP until Ctrl-C (nothing else is started).
