@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use teleop_msgs::{EStop, CONTRACT_VERSION};
 use teleop_runtime::{
-    control, now_ns, qualified, set_latch, EventLoop, Flow, Health, Input, IpcSettings, Namespace,
-    NodeRuntime, Subscriber, Wake,
+    control, latch_holder, now_ns, qualified, set_latch, set_latch_by, EventLoop, Flow, Health,
+    Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
 };
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
@@ -474,7 +474,6 @@ fn incoming(
         _ => None,
     };
     let latch = runtime.estop_latch().to_path_buf();
-    let mut engaged_here = false;
     let mut clock = PeerClock::new(config.clock);
     let mut gaps = vec![GapCounter::default(); ports.len()];
     let mut line = DelayLine::new(now_ns());
@@ -555,13 +554,7 @@ fn incoming(
                     shared.echo_send_ns.store(origin.send_ns, Ordering::Relaxed);
                     shared.beat_recv_ns.store(now, Ordering::Relaxed);
                     if let Some(doorbell) = &mut doorbell {
-                        follow_estop(
-                            beat.estop,
-                            &latch,
-                            &mut engaged_here,
-                            doorbell,
-                            &config.peer,
-                        )?;
+                        follow_estop(beat.estop, &latch, doorbell, &config.peer)?;
                     }
                 }
                 (Frame::Sample(origin, payload), Slot::Topic(i)) => {
@@ -618,12 +611,16 @@ fn incoming(
     Ok(())
 }
 
-/// The robot side of the e-stop: the operator's latch engaged engages this station's latch and
-/// rings its doorbell; released releases only a latch this bridge engaged.
+/// Who the robot station's bridge says engaged its latch (in the latch file).
+const LATCH_HOLDER: &str = "teleop-bridge for the peer station's e-stop";
+
+/// The robot side of the e-stop: the operator's latch engaged engages this station's latch (if
+/// it is not engaged already) and rings its doorbell; released releases this station's latch
+/// only while it is still the one a bridge engaged (the file says so: a `teleop estop` on this
+/// station since then stays, and a restarted bridge still releases what it engaged before).
 fn follow_estop(
     peer: EStopState,
     latch: &std::path::Path,
-    engaged_here: &mut bool,
     doorbell: &mut teleop_runtime::Publisher<EStop>,
     peer_name: &str,
 ) -> anyhow::Result<()> {
@@ -633,18 +630,17 @@ fn follow_estop(
             ..Default::default()
         })
     };
+    let holder = latch_holder(latch);
     match peer {
-        EStopState::Engaged if !*engaged_here => {
-            set_latch(latch, true)
+        EStopState::Engaged if holder.is_none() && !latch.exists() => {
+            set_latch_by(latch, true, LATCH_HOLDER)
                 .with_context(|| format!("engaging the e-stop latch {}", latch.display()))?;
-            *engaged_here = true;
             ring(doorbell, true)?;
             tracing::warn!(station = peer_name, "e-stop engaged by the peer station");
         }
-        EStopState::Released if *engaged_here => {
+        EStopState::Released if holder.is_some_and(|h| h.contains(LATCH_HOLDER)) => {
             set_latch(latch, false)
                 .with_context(|| format!("releasing the e-stop latch {}", latch.display()))?;
-            *engaged_here = false;
             ring(doorbell, false)?;
             tracing::info!(station = peer_name, "e-stop released by the peer station");
         }
@@ -652,7 +648,6 @@ fn follow_estop(
     }
     Ok(())
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -65,8 +65,16 @@ pub fn latched_namespaces(settings: &IpcSettings) -> Vec<Namespace> {
     found
 }
 
-/// Engages (creates and syncs the file) or releases (removes it) the latch at `path`.
+/// Engages (creates and syncs the file) or releases (removes it) the latch at `path`, as
+/// `teleop estop` does.
 pub fn set_latch(path: &Path, engaged: bool) -> io::Result<()> {
+    set_latch_by(path, engaged, "`teleop estop`")
+}
+
+/// [`set_latch`] naming who engaged it in the file (`by`), so that a process that engages the
+/// latch for someone else (the robot station's bridge, for the operator's e-stop) can later tell
+/// whether the latch is still the one it engaged ([`latch_holder`]).
+pub fn set_latch_by(path: &Path, engaged: bool, by: &str) -> io::Result<()> {
     use std::io::Write;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
@@ -75,7 +83,7 @@ pub fn set_latch(path: &Path, engaged: bool) -> io::Result<()> {
         let mut file = std::fs::File::create(path)?;
         writeln!(
             file,
-            "e-stop engaged by `teleop estop` (pid {}); release with `teleop estop --release`",
+            "e-stop engaged by {by} (pid {}); release with `teleop estop --release`",
             std::process::id()
         )?;
         file.sync_all()?;
@@ -89,6 +97,12 @@ pub fn set_latch(path: &Path, engaged: bool) -> io::Result<()> {
         std::fs::File::open(dir)?.sync_all()?;
     }
     Ok(())
+}
+
+/// The text of the engaged latch at `path` (who engaged it), `None` when it is released or
+/// cannot be read.
+pub fn latch_holder(path: &Path) -> Option<String> {
+    std::fs::read_to_string(path).ok()
 }
 
 /// True when the latch at `path` is engaged: the file exists, or whether it does cannot be told
@@ -226,8 +240,16 @@ mod tests {
         assert!(!latch_engaged(&c));
         set_latch(&path, true).unwrap();
         assert!(latch_engaged(&c));
+        assert!(latch_holder(&path)
+            .unwrap()
+            .contains("engaged by `teleop estop` (pid"));
+        set_latch_by(&path, true, "teleop-bridge for station operator").unwrap();
+        assert!(latch_holder(&path)
+            .unwrap()
+            .contains("engaged by teleop-bridge for station operator"));
         set_latch(&path, true).unwrap();
         set_latch(&path, false).unwrap();
+        assert_eq!(latch_holder(&path), None);
         assert!(!latch_engaged(&c));
         set_latch(&path, false).unwrap();
     }
