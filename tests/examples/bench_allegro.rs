@@ -28,7 +28,6 @@
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_allegro`
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
 
-use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -39,8 +38,8 @@ use sim_allegro::hand::{Ball, Hand, HandParams};
 use sim_allegro::{Sim, SimOptions};
 use teleop_allegro_protocol::{v4, Generation};
 use teleop_can_link::{timing, CanLink};
-use teleop_e2e::bench::{drive_glove, loadavg, percentiles};
-use teleop_e2e::{bin, Sandbox};
+use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
+use teleop_e2e::Sandbox;
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 
@@ -119,24 +118,21 @@ fn main() {
     let mut glove: Publisher<GloveState> = node.publisher().unwrap();
     let states: Subscriber<HandState> = node.subscriber().unwrap();
     let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
-    let mut children: Vec<Child> = [
-        ("teleop-allegro", "config/allegro.toml"),
-        ("teleop-retarget", "config/allegro/retarget-bench.toml"),
-        ("teleop-feedback", "config/allegro/feedback.toml"),
-    ]
-    .iter()
-    .map(|(program, config)| {
-        Command::new(bin(program))
-            .args(["--config", config])
-            .envs(sandbox.ipc.to_env())
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap()
-    })
-    .collect();
+    let mut children = [
+        spawn_quiet(&sandbox, "teleop-allegro", "config/allegro.toml", &[]),
+        spawn_quiet(
+            &sandbox,
+            "teleop-retarget",
+            "config/allegro/retarget-bench.toml",
+            &[],
+        ),
+        spawn_quiet(
+            &sandbox,
+            "teleop-feedback",
+            "config/allegro/feedback.toml",
+            &[],
+        ),
+    ];
 
     // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
     let drive = drive_glove(
@@ -148,15 +144,7 @@ fn main() {
         &forces,
         |m| recording.store(m, Ordering::SeqCst),
     );
-    for child in &mut children {
-        // SAFETY: kill(2) on our own, not yet reaped child.
-        unsafe {
-            libc::kill(child.id() as libc::pid_t, libc::SIGINT);
-        }
-    }
-    for child in &mut children {
-        let _ = child.wait();
-    }
+    interrupt_all(&mut children);
     stop.store(true, Ordering::SeqCst);
     sniffer.join().unwrap();
     let seen = seen.lock().unwrap().clone();

@@ -29,7 +29,7 @@
 //! Run: `cargo build --release --workspace --bins && cargo run --release -p teleop-e2e --example bench_shadow`
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
 
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::hand::{Hand, Object};
 use sim_shadow::palm::Palm;
-use teleop_e2e::bench::{drive_glove, loadavg, percentiles};
+use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
@@ -117,27 +117,26 @@ fn main() {
     let states: Subscriber<HandState> = node.subscriber().unwrap();
     let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
     let transport = format!("sim:{}", socket.display());
-    let mut children: Vec<Child> = [
-        ("teleop-shadow", "config/shadow.toml"),
-        ("teleop-retarget", "config/shadow/retarget-bench.toml"),
-        ("teleop-feedback", "config/shadow/feedback.toml"),
-    ]
-    .iter()
-    .map(|(program, config)| {
-        let mut c = Command::new(bin(program));
-        c.args(["--config", config]);
-        if *program == "teleop-shadow" {
-            c.args(["--transport", &transport]);
-        }
-        c.envs(sandbox.ipc.to_env())
-            .current_dir(dir)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap()
-    })
-    .collect();
+    let mut children = [
+        spawn_quiet(
+            &sandbox,
+            "teleop-shadow",
+            "config/shadow.toml",
+            &["--transport", &transport],
+        ),
+        spawn_quiet(
+            &sandbox,
+            "teleop-retarget",
+            "config/shadow/retarget-bench.toml",
+            &[],
+        ),
+        spawn_quiet(
+            &sandbox,
+            "teleop-feedback",
+            "config/shadow/feedback.toml",
+            &[],
+        ),
+    ];
 
     // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
     let drive = drive_glove(
@@ -149,15 +148,7 @@ fn main() {
         &forces,
         |m| recording.store(m, Ordering::SeqCst),
     );
-    for child in &mut children {
-        // SAFETY: kill(2) on our own, not yet reaped child.
-        unsafe {
-            libc::kill(child.id() as libc::pid_t, libc::SIGINT);
-        }
-    }
-    for child in &mut children {
-        let _ = child.wait();
-    }
+    interrupt_all(&mut children);
     let seen = seen.lock().unwrap().clone();
     report(
         &seen,

@@ -334,6 +334,40 @@ pub mod bench {
     use teleop_msgs::{GloveForceCommand, GloveState, HandState};
     use teleop_runtime::{now_ns, Publisher, Subscriber};
 
+    /// Starts `program --config CONFIG [extra...]` from this workspace with the sandbox's IPC
+    /// settings, in the sandbox, its output discarded (a benchmark prints only its results).
+    pub fn spawn_quiet(
+        sandbox: &crate::Sandbox,
+        program: &str,
+        config: &str,
+        extra: &[&str],
+    ) -> std::process::Child {
+        use std::process::{Command, Stdio};
+        Command::new(crate::bin(program))
+            .args(["--config", config])
+            .args(extra)
+            .envs(sandbox.ipc.to_env())
+            .current_dir(sandbox.dir.path())
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {program}: {e}"))
+    }
+
+    /// SIGINT to every child, then waits for each (they stop cleanly together).
+    pub fn interrupt_all(children: &mut [std::process::Child]) {
+        for child in children.iter() {
+            // SAFETY: kill(2) on our own, not yet reaped child.
+            unsafe {
+                libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+            }
+        }
+        for child in children.iter_mut() {
+            let _ = child.wait();
+        }
+    }
+
     /// What [`drive_glove`] measured.
     pub struct GloveDrive {
         /// Each step of the middle channel: its publish stamp and whether it closed the finger.

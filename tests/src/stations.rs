@@ -133,21 +133,29 @@ fn prepare(launch: &str, bridge: &str, patch: impl Fn(String) -> String) -> Prep
     Prepared(sandbox, file)
 }
 
-/// The session's certificates, made at the operator's and copied to the robot's `certs/`.
-fn certificates(operator: &Sandbox, robot: &Sandbox) {
-    let out = operator.run_teleop(&[
-        "certs",
-        "--out",
-        "certs",
-        "--station",
-        &format!("operator={OPERATOR_IP}"),
-        "--station",
-        &format!("robot={ROBOT_IP}"),
-    ]);
+/// `teleop certs --out certs --station SPEC...` in `sandbox`: a new CA there and a certificate
+/// per station spec (`NAME=ADDRESS`); panics with its error output unless it succeeded.
+pub fn make_certs(sandbox: &Sandbox, stations: &[String]) {
+    let mut args = vec!["certs", "--out", "certs"];
+    for station in stations {
+        args.extend(["--station", station.as_str()]);
+    }
+    let out = sandbox.run_teleop(&args);
     assert!(
         out.status.success(),
         "teleop certs: {}",
         String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The session's certificates, made at the operator's and copied to the robot's `certs/`.
+fn certificates(operator: &Sandbox, robot: &Sandbox) {
+    make_certs(
+        operator,
+        &[
+            format!("operator={OPERATOR_IP}"),
+            format!("robot={ROBOT_IP}"),
+        ],
     );
     let from = operator.dir.path().join("certs");
     let to = robot.dir.path().join("certs");

@@ -14,9 +14,11 @@
 use std::time::{Duration, Instant};
 
 use teleop_e2e::netns::Netns;
-use teleop_e2e::stations::{collect, Station, OPERATOR_IP};
+use teleop_e2e::stations::{collect, make_certs, Station, OPERATOR_IP};
 use teleop_e2e::{bin, skip_unless_privileged, Sandbox};
-use teleop_msgs::{fixed_text, source_id, EStopAck, GloveForceCommand, HandCommand, HandState};
+use teleop_msgs::{
+    fixed_text, force_flags, source_id, EStopAck, GloveForceCommand, HandCommand, HandState,
+};
 use teleop_runtime::{latch_path, now_ns, NodeRuntime, Publisher, Subscriber};
 
 /// Waits up to `timeout` for `ok`, polled every 10 ms; panics with `what` and both logs.
@@ -37,6 +39,25 @@ fn until(
         "{what}: not within {timeout:?}\n--- operator ---\n{}\n--- robot ---\n{}",
         stations.0.logs(),
         stations.1.logs()
+    );
+}
+
+/// Waits (3 s at most) for a glove force command with every force zero and `flag` set.
+fn forces_zero_because(
+    both: (&Station, &Station),
+    forces: &Subscriber<GloveForceCommand>,
+    flag: u8,
+    what: &str,
+) {
+    until(
+        both,
+        Duration::from_secs(3),
+        &format!("glove forces at zero {what}"),
+        || {
+            let mut zero = false;
+            forces.drain(|f| zero = max_force(f) == 0 && f.flags & flag != 0);
+            zero
+        },
     );
 }
 
@@ -161,16 +182,8 @@ fn two_stations_across_a_veth_pair() {
     assert!(pids.0.is_some() && pids.1.is_some(), "{pids:?}");
     op_ns.ip(&["link", "set", "st0", "down"]);
     let cut = Instant::now();
-    until(
-        both,
-        Duration::from_secs(3),
-        "glove forces at zero after the cut",
-        || {
-            let mut zero = false;
-            forces.drain(|f| zero = max_force(f) == 0);
-            zero
-        },
-    );
+    // Zero because the inputs went stale (the grasp's own release also reads zero).
+    forces_zero_because(both, &forces, force_flags::STALE, "after the cut");
     until(
         both,
         Duration::from_secs(3),
@@ -252,16 +265,7 @@ fn two_stations_across_a_veth_pair() {
             acked && robot_latch.exists() == engage
         });
         if engage {
-            until(
-                both,
-                Duration::from_secs(3),
-                "glove forces at zero under the e-stop",
-                || {
-                    let mut zero = false;
-                    forces.drain(|f| zero = max_force(f) == 0);
-                    zero
-                },
-            );
+            forces_zero_because(both, &forces, force_flags::ESTOP, "under the e-stop");
             let old = pids.1.unwrap();
             // SAFETY: kill(2) of a pid the test's own station runs.
             unsafe {
@@ -337,18 +341,7 @@ fn rogue_is_refused(
     commands: &Subscriber<HandCommand>,
 ) {
     let rogue = Sandbox::new();
-    let out = rogue.run_teleop(&[
-        "certs",
-        "--out",
-        "certs",
-        "--station",
-        &format!("operator={OPERATOR_IP}"),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    make_certs(&rogue, &[format!("operator={OPERATOR_IP}")]);
     let config = std::fs::read_to_string(Sandbox::repo().join("config/bridge/operator.toml"))
         .unwrap()
         .replace("../../certs/", "certs/");

@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use teleop_msgs::{EStop, CONTRACT_VERSION};
 use teleop_runtime::{
-    control, latch_holder, now_ns, qualified, set_latch, set_latch_by, EventLoop, Flow, Health,
-    Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
+    control, latch_engaged, latch_holder, now_ns, qualified, set_latch, set_latch_by, EventLoop,
+    Flow, Health, Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
 };
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
@@ -299,18 +299,8 @@ fn outgoing(
         let echo = shared.echo_send_ns.load(Ordering::Relaxed);
         let received = shared.beat_recv_ns.load(Ordering::Relaxed);
         let estop = match config.estop {
-            EStopRole::Send => {
-                // SAFETY: `latch` is NUL-terminated; lstat fills the zeroed struct.
-                let mut stat: libc::stat = unsafe { core::mem::zeroed() };
-                // SAFETY: both pointers are valid for the call.
-                let gone = unsafe { libc::lstat(latch.as_ptr(), &mut stat) } != 0
-                    && std::io::Error::last_os_error().kind() == std::io::ErrorKind::NotFound;
-                if gone {
-                    EStopState::Released
-                } else {
-                    EStopState::Engaged
-                }
-            }
+            EStopRole::Send if latch_engaged(&latch) => EStopState::Engaged,
+            EStopRole::Send => EStopState::Released,
             _ => EStopState::NotSent,
         };
         let beat = Heartbeat {

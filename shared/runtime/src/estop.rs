@@ -107,7 +107,7 @@ pub fn latch_holder(path: &Path) -> Option<String> {
 
 /// True when the latch at `path` is engaged: the file exists, or whether it does cannot be told
 /// (an error other than "not found": fail safe). Allocates nothing (called from control loops).
-fn latch_engaged(path: &CStr) -> bool {
+pub fn latch_engaged(path: &CStr) -> bool {
     // SAFETY: `path` is NUL-terminated; `stat` is a plain struct that lstat(2) fills.
     let mut stat: libc::stat = unsafe { core::mem::zeroed() };
     // SAFETY: both pointers are valid for the call.

@@ -43,7 +43,8 @@ mod signals;
 pub use clock::{now_ns, sleep_until, sleep_until_ns};
 pub use config_file::{load_toml, parse_toml, ConfigFileError};
 pub use estop::{
-    latch_holder, latch_path, latched_namespaces, set_latch, set_latch_by, EStopInput,
+    latch_engaged, latch_holder, latch_path, latched_namespaces, set_latch, set_latch_by,
+    EStopInput,
 };
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use hand_ports::HandPorts;
