@@ -5,10 +5,16 @@
 //! shipped driver does, or the palm refuses SAFE-OP (0x0017).
 //!
 //! The palm's firmware ([`PalmFirmware`]) polls for the command sync manager being written
-//! (E11's AL event 0x220 bit 8), takes the command and the bridge message, runs one cycle of
-//! [`Palm`] at that time and writes the status (and the bridge status) [`PROCESS_TIME`] later,
-//! so a status read in a cycle answers the previous cycle's command. A status the MainDevice
-//! has not read yet is not overwritten (one-buffer): counted in [`PalmStats::unread_status`].
+//! (E11's AL event 0x220 bit 8) and reads the command (and a written bridge message) out of
+//! its sync managers right away, before its CAN round (E11 `this_node.c`,
+//! `Service_EtherCAT_Packet`: `Read_Commands_From_ET1200` follows the SM0 event; the bridge
+//! command is read before the wait in CAN direct mode), so SM0 is free again for the next
+//! command during the round. It writes the status [`PROCESS_TIME`] later (the bridge status
+//! [`CAN_DIRECT_ROUND`] later), so a status read in a cycle answers the previous cycle's
+//! command. A command written during a round waits in SM0 until the round ends (the firmware
+//! is busy on its CAN buses); a third one meanwhile is refused by the full SM0. A status the
+//! MainDevice has not read yet is not overwritten (one-buffer): counted in
+//! [`PalmStats::unread_status`].
 
 use std::time::Duration;
 
@@ -18,14 +24,14 @@ use teleop_ecat_sim::{
 use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
 use teleop_shadow_protocol::layout::{CanBridge, Command, Protocol, PRODUCT_BRIDGE, PRODUCT_SR06};
 
-use crate::palm::Palm;
+use crate::palm::{Palm, CAN_DIRECT_ROUND, SENSOR_DATA_ROUND};
 
 /// Vendor ID both SubDevices carry: Shadow's entry in the ETG vendor list (ethercrab's
 /// `vendors.rs`); no Shadow source names it (notes/shadow.md, "Open").
 pub const VENDOR_ID: u32 = 0x0000_0530;
-/// From the command being written to the status being written: the firmware's CAN round
-/// (it waits up to 610 us for the ten replies).
-pub const PROCESS_TIME: Duration = Duration::from_micros(610);
+/// From the command being seen to the status being written in SENSOR_DATA mode: the
+/// firmware's CAN round ([`SENSOR_DATA_ROUND`]).
+pub const PROCESS_TIME: Duration = SENSOR_DATA_ROUND;
 /// Sync managers in the order the palm expects them: command, bridge command, status, bridge
 /// status.
 pub const SM_COMMAND: usize = 0;
@@ -101,6 +107,17 @@ pub struct PalmStats {
     pub bridged: u64,
 }
 
+/// A command the firmware has read and is serving (its CAN round).
+#[derive(Debug, Clone, Copy)]
+struct Round {
+    command: Command,
+    bridge: Option<CanBridge>,
+    /// When the firmware saw the command (its frame time 0).
+    start: Duration,
+    /// When it writes what it answers.
+    end: Duration,
+}
+
 /// The palm's firmware behind its ESC.
 #[derive(Debug)]
 pub struct PalmFirmware {
@@ -108,6 +125,9 @@ pub struct PalmFirmware {
     pub palm: Palm,
     /// Counters.
     pub stats: PalmStats,
+    round: Option<Round>,
+    /// When the firmware is back in its loop, polling for the next command.
+    free_at: Duration,
 }
 
 impl PalmFirmware {
@@ -116,6 +136,41 @@ impl PalmFirmware {
         Self {
             palm,
             stats: PalmStats::default(),
+            round: None,
+            free_at: Duration::ZERO,
+        }
+    }
+
+    /// The end of a round: the palm's cycle for its command, and the status and bridge status
+    /// it writes.
+    fn finish(&mut self, round: Round, pdi: &mut Pdi<'_>) {
+        let start_us = round.start.as_micros() as u64;
+        let direct = EdcCommand::from_value(round.command.edc_command, self.palm.numbering)
+            == Some(EdcCommand::CanDirectMode);
+        let (status, reply) = self
+            .palm
+            .cycle_us(&round.command, round.bridge.as_ref(), start_us);
+        // In CAN direct mode a reply that came later (an ERASE's echo) goes out with the next
+        // cycle.
+        let reply = match reply {
+            Some(r) => Some(r),
+            None if direct => {
+                let late = self.palm.pending_reply(start_us / 1000);
+                if late.is_some() {
+                    self.palm
+                        .bridge_status_written(round.end.as_micros() as u64);
+                }
+                late
+            }
+            None => None,
+        };
+        if let Some(status) = status {
+            if !pdi.put(SM_STATUS, &status.pack()) {
+                self.stats.unread_status += 1;
+            }
+        }
+        if let Some(reply) = reply {
+            pdi.put(SM_BRIDGE_STATUS, &reply.pack());
         }
     }
 }
@@ -124,37 +179,45 @@ impl Application for PalmFirmware {
     no_coe!();
 
     fn pdi(&mut self, now: Duration, _: AlState, pdi: &mut Pdi<'_>) {
-        let Some(written) = pdi.written(SM_COMMAND) else {
-            return;
-        };
-        if now < written + PROCESS_TIME {
-            return; // still on the CAN buses
-        }
-        let Some(command) = pdi.take(SM_COMMAND).and_then(|b| Command::unpack(b).ok()) else {
-            return;
-        };
-        let bridge = pdi
-            .written(SM_BRIDGE_COMMAND)
-            .and_then(|_| pdi.take(SM_BRIDGE_COMMAND))
-            .and_then(|b| CanBridge::unpack(b).ok());
-        let at_ms = written.as_millis() as u64;
-        self.stats.cycles += 1;
-        if bridge.is_some_and(|b| !b.is_idle()) {
-            self.stats.bridged += 1;
-        }
-        let direct = EdcCommand::from_value(command.edc_command, self.palm.numbering)
-            == Some(EdcCommand::CanDirectMode);
-        let (status, reply) = self.palm.cycle(&command, bridge.as_ref(), at_ms);
-        // In CAN direct mode a reply that came later (an ERASE's echo) goes out with the next
-        // cycle.
-        let reply = reply.or_else(|| direct.then(|| self.palm.pending_reply(at_ms)).flatten());
-        if let Some(status) = status {
-            if !pdi.put(SM_STATUS, &status.pack()) {
-                self.stats.unread_status += 1;
+        loop {
+            if let Some(round) = self.round {
+                if now < round.end {
+                    return; // still on the CAN buses
+                }
+                self.round = None;
+                self.finish(round, pdi);
             }
-        }
-        if let Some(reply) = reply {
-            pdi.put(SM_BRIDGE_STATUS, &reply.pack());
+            let Some(written) = pdi.written(SM_COMMAND) else {
+                return;
+            };
+            // The firmware polls its AL event register in its main loop: it sees a command as
+            // soon as the command is complete, or when it is back from the previous round.
+            let start = written.max(self.free_at);
+            let Some(command) = pdi.take(SM_COMMAND).and_then(|b| Command::unpack(b).ok()) else {
+                return;
+            };
+            let bridge = pdi
+                .written(SM_BRIDGE_COMMAND)
+                .and_then(|_| pdi.take(SM_BRIDGE_COMMAND))
+                .and_then(|b| CanBridge::unpack(b).ok());
+            self.stats.cycles += 1;
+            if bridge.is_some_and(|b| !b.is_idle()) {
+                self.stats.bridged += 1;
+            }
+            let took = match EdcCommand::from_value(command.edc_command, self.palm.numbering) {
+                Some(EdcCommand::CanDirectMode) => CAN_DIRECT_ROUND,
+                Some(EdcCommand::SensorData | EdcCommand::SensorChannelNumbers) => PROCESS_TIME,
+                // Any other command: the error LED, nothing else.
+                _ => Duration::ZERO,
+            };
+            let end = start + took;
+            self.free_at = end;
+            self.round = Some(Round {
+                command,
+                bridge,
+                start,
+                end,
+            });
         }
     }
 }

@@ -1,14 +1,18 @@
 //! The palm's PIC32 firmware, one EtherCAT cycle at a time (notes/shadow.md, "One 1 kHz cycle":
 //! E11 `this_node.c`), over the 20 motor boards on its two CAN buses.
 //!
-//! - Booting: until [`Palm::BOOT_MS`] the status says EDC_command 0xCC and every other word 0xDEAD.
+//! - Booting: until [`Palm::BOOT_MS`] the status is what the firmware writes on entering INIT
+//!   (E11 `this_node.c`, `Platform_Init_Callback`): EDC_command 0xCC, then every 16-bit word
+//!   from the struct's second on 0xDEAD, so EDC_command's upper half too: it reads 0xDEAD00CC.
 //! - SENSOR_DATA: the motors of the command's parity (`which_motors`, 0 even, 1 odd) answer the
 //!   requested type; each reply sets its packet (slot = motor / 2) and its arrival bit; a reply of
 //!   another type sets both its arrival and error bits and is dropped; the error mask is
 //!   cleared as the firmware does (`&= 0xFFFFFFFE << n`, which clears bits 0..n). The demands of
-//!   `to_motor_data_type` go to every motor; `idle_time_us` is the time since the previous status.
+//!   `to_motor_data_type` go to every motor; `idle_time_us` is the time from the last status (or
+//!   bridge status) write to this command (E11 `calculate_idle_time`), modulo 2^16 as the
+//!   firmware's `int16u` result; the status is written [`SENSOR_DATA_ROUND`] after the command.
 //! - CAN_DIRECT_MODE: a bridge message that was written goes on its bus; a reply that comes within
-//!   600 us is written to the bridge status only; the status is not refilled.
+//!   [`CAN_DIRECT_ROUND`] is written to the bridge status only; the status is not refilled.
 //! - Any other command: nothing is written (the firmware lights its error LED).
 //!
 //! A motor board here is its bootloader ([`crate::bootloader::Board`]) and, while that runs its
@@ -63,6 +67,27 @@ pub fn wiring(sensor: usize) -> u16 {
     let adc = 1 + sensor / 4;
     let channel = (2 * (sensor % 4) + 6) % 8;
     (channel << 8 | adc) as u16
+}
+
+/// From the command to the status write in SENSOR_DATA mode. E11 `this_node.c`
+/// (shadow-robot/sr-ros-interface-ethercat at f478de52, `Service_EtherCAT_Packet`): after the
+/// start-of-frame message and the ADC reads it waits until frame time 562 us, then 617 us (the
+/// BioTac sample), then for the motors' replies until 610 us (already past), sends the demands
+/// and writes the status: at least 617 us after it saw the command.
+pub const SENSOR_DATA_ROUND: std::time::Duration = std::time::Duration::from_micros(617);
+/// From the command to the bridge status write in CAN direct mode (E11: waits until frame time
+/// 600 us for a reply).
+pub const CAN_DIRECT_ROUND: std::time::Duration = std::time::Duration::from_micros(600);
+
+/// The boot status (E11 `Platform_Init_Callback`): EDC_command = 0xCC, then the 16-bit words
+/// 1 .. size/2 of the struct set to 0xDEAD, word 1 being the upper half of EDC_command.
+pub fn boot_status() -> Status {
+    let mut b = [0u8; Status::SIZE];
+    for w in b.chunks_exact_mut(2) {
+        w.copy_from_slice(&0xDEADu16.to_le_bytes());
+    }
+    b[..2].copy_from_slice(&(EDC_BOOTING as u16).to_le_bytes());
+    Status::unpack(&b).unwrap_or_default()
 }
 
 /// The firmware's cut-out temperature (release notes: 60 deg C).
@@ -139,7 +164,9 @@ pub struct Palm {
     pub motors: [Motor; MOTORS],
     /// EDC command numbering of this firmware.
     pub numbering: EdcNumbering,
-    last_status_ms: Option<u64>,
+    /// When the firmware last wrote a status or a bridge status, us since power-up (its idle
+    /// timer's start).
+    idle_since_us: Option<u64>,
     last_cycle_ms: Option<u64>,
     /// The joints the motors move, whose sensors the palm reads.
     pub hand: Hand,
@@ -166,7 +193,7 @@ impl Palm {
                 ..Motor::default()
             }; MOTORS],
             numbering: EdcNumbering::Shipped,
-            last_status_ms: None,
+            idle_since_us: None,
             last_cycle_ms: None,
             hand,
         }
@@ -180,6 +207,19 @@ impl Palm {
         bridge: Option<&CanBridge>,
         now_ms: u64,
     ) -> (Option<Status>, Option<CanBridge>) {
+        self.cycle_us(command, bridge, now_ms * 1000)
+    }
+
+    /// One cycle whose command the firmware saw at `start_us` (us since power-up); what it
+    /// writes is written [`SENSOR_DATA_ROUND`] (a status) or [`CAN_DIRECT_ROUND`] (a bridge
+    /// status) later.
+    pub fn cycle_us(
+        &mut self,
+        command: &Command,
+        bridge: Option<&CanBridge>,
+        start_us: u64,
+    ) -> (Option<Status>, Option<CanBridge>) {
+        let now_ms = start_us / 1000;
         let dt = self
             .last_cycle_ms
             .map_or(1.0, |t| now_ms.saturating_sub(t) as f64);
@@ -193,31 +233,38 @@ impl Palm {
         }
         self.hand.step(&torques, dt / 1000.0);
         if now_ms < Self::BOOT_MS {
-            let mut s = Status {
-                edc_command: EDC_BOOTING,
-                sensors: [0xDEAD; 37],
-                ..Status::default()
-            };
-            s.which_motor_data_arrived = 0xDEAD_DEAD;
-            return (Some(s), None);
+            return (Some(boot_status()), None);
         }
         match EdcCommand::from_value(command.edc_command, self.numbering) {
-            Some(EdcCommand::SensorData) => (Some(self.sensor_data(command, now_ms)), None),
+            Some(EdcCommand::SensorData) => (Some(self.sensor_data(command, start_us)), None),
             Some(EdcCommand::SensorChannelNumbers) => {
                 // As SENSOR_DATA, with each sensor word's ADC and channel instead of its value.
-                let mut s = self.sensor_data(command, now_ms);
+                let mut s = self.sensor_data(command, start_us);
                 s.edc_command = command.edc_command;
                 for (i, w) in s.sensors.iter_mut().enumerate() {
                     *w = wiring(i);
                 }
                 (Some(s), None)
             }
-            Some(EdcCommand::CanDirectMode) => (None, self.bridge(bridge, now_ms)),
+            Some(EdcCommand::CanDirectMode) => {
+                let reply = self.bridge(bridge, now_ms);
+                if reply.is_some() {
+                    self.idle_since_us = Some(start_us + CAN_DIRECT_ROUND.as_micros() as u64);
+                }
+                (None, reply)
+            }
             _ => (None, None),
         }
     }
 
-    fn sensor_data(&mut self, c: &Command, now_ms: u64) -> Status {
+    /// A reply forwarded later (see [`Palm::pending_reply`]) was written to the bridge status at
+    /// `at_us`: the idle timer starts there, as after any bridge status write.
+    pub fn bridge_status_written(&mut self, at_us: u64) {
+        self.idle_since_us = Some(at_us);
+    }
+
+    fn sensor_data(&mut self, c: &Command, start_us: u64) -> Status {
+        let now_ms = start_us / 1000;
         let parity = usize::from(c.which_motors & 1 != 0);
         let kind = FromMotor::from_value(c.from_motor_data_type);
         let mut s = Status {
@@ -279,10 +326,12 @@ impl Palm {
                 words[0] = pressure;
             }
         }
-        s.idle_time_us = self.last_status_ms.map_or(0, |t| {
-            (now_ms.saturating_sub(t) * 1000).min(u64::from(u16::MAX)) as u16
-        });
-        self.last_status_ms = Some(now_ms);
+        // E11 `calculate_idle_time`: core timer ticks from the last status write to this
+        // command, in us, returned as `int16u` (so modulo 2^16). Before any write the timer's
+        // start is 0: the time since power-up (assuming the core timer starts at 0 at reset).
+        let since = self.idle_since_us.unwrap_or(0);
+        s.idle_time_us = start_us.saturating_sub(since) as u16;
+        self.idle_since_us = Some(start_us + SENSOR_DATA_ROUND.as_micros() as u64);
         s
     }
 
@@ -358,7 +407,7 @@ mod tests {
         let mut palm = Palm::new();
         let (s, _) = palm.cycle(&sensor_command(0, FromMotor::Flags), None, 0);
         let s = s.unwrap();
-        assert_eq!(s.edc_command, EDC_BOOTING);
+        assert_eq!(s.edc_command, 0xDEAD_0000 | EDC_BOOTING);
         assert_eq!(s.sensors[0], 0xDEAD);
         let (s, _) = palm.cycle(&sensor_command(1, FromMotor::Temperature), None, 60);
         let s = s.unwrap();
@@ -370,7 +419,11 @@ mod tests {
         let (s, _) = palm.cycle(&sensor_command(0, FromMotor::Flags), None, 61);
         let s = s.unwrap();
         assert_eq!(s.which_motor_data_arrived, 0x55555);
-        assert_eq!(s.idle_time_us, 1000);
+        assert_eq!(
+            s.idle_time_us,
+            1000 - SENSOR_DATA_ROUND.as_micros() as u16,
+            "from the status write to the next command"
+        );
     }
 
     #[test]

@@ -31,8 +31,12 @@ pub enum EdcNumbering {
     Document,
 }
 
-/// The status word a palm writes while it boots (E11: EDC_command 0xCC, the other words 0xDEAD).
+/// The EDC_command a palm writes while it boots (E11 `Platform_Init_Callback`: 0xCC, then every
+/// 16-bit word of the status from the second on 0xDEAD, EDC_command's upper half included, so
+/// the whole word reads [`EDC_BOOTING_WORD`]).
 pub const EDC_BOOTING: u32 = 0xCC;
+/// EDC_command as a booting palm's status carries it: 0xCC with 0xDEAD in the upper half.
+pub const EDC_BOOTING_WORD: u32 = 0xDEAD_0000 | EDC_BOOTING;
 
 impl EdcCommand {
     /// The command's value in `numbering` (`None`: not in that numbering, e.g. TEST_RESULTS in
