@@ -209,11 +209,37 @@ impl<M: Message> Subscriber<M> {
         if let Some(i) = slot {
             let (_, last) = table[i];
             // A publisher that restarted begins at 1 again: not a loss.
-            if last != 0 && header.seq > last + 1 {
+            // Saturating: a sequence number at u64::MAX is followed by no gap, not an overflow.
+            if last != 0 && header.seq > last.saturating_add(1) {
                 self.dropped
                     .set(self.dropped.get() + (header.seq - last - 1));
             }
             table[i] = (header.source_id, header.seq);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use teleop_msgs::HandCommand;
+
+    #[test]
+    fn sequence_numbers_near_the_end_of_u64_do_not_overflow_the_drop_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings = crate::IpcSettings::isolated(dir.path());
+        let node = crate::NodeRuntime::new("seq-edge", &settings).unwrap();
+        let mut publisher = node.publisher::<HandCommand>().unwrap();
+        let subscriber = node.subscriber::<HandCommand>().unwrap();
+        let mut msg = HandCommand::default();
+        msg.header.source_id = 9;
+        for seq in [u64::MAX - 3, u64::MAX, u64::MAX, 1] {
+            msg.header.seq = seq;
+            publisher.send_as_is(&msg).unwrap();
+            subscriber.drain(|_| {});
+        }
+        assert_eq!(subscriber.received(), 4);
+        assert_eq!(subscriber.dropped(), 2);
+        settings.remove_shared_memory();
     }
 }
