@@ -7,7 +7,10 @@
 //! - [`Service::channels`]: SENSOR_CHANNEL_NUMBERS mode: each sensor word's ADC and channel;
 //! - [`Service::can_send`]: CAN direct mode, one crafted message and the reply;
 //! - [`Service::flash`]: CAN direct mode, a motor board flashed by the shipped sequence
-//!   (`teleop_shadow_protocol::flash`), one message per cycle.
+//!   (`teleop_shadow_protocol::flash`), one message per cycle. A failed exchange does not end
+//!   it: the exchange is retried, then the message is sent again when its wait runs out, as the
+//!   shipped driver does (see [`EXCHANGE_TRIES`]); only a bus without a single good exchange
+//!   for [`BUS_GONE`] ends it.
 //!
 //! Freshness is judged by content: the inputs go out as zeros, so a status the palm did not
 //! refill reads EDC command 0 and a bridge status it did not write reads bus 0.
@@ -32,6 +35,16 @@ const INFO_TIMEOUT: Duration = Duration::from_millis(5500);
 const BOOT_TIMEOUT: Duration = Duration::from_secs(2);
 /// How long `can_send` waits for a reply.
 const REPLY_TIMEOUT: Duration = Duration::from_millis(100);
+/// Tries of one exchange while flashing. The shipped driver's loop (shadow-robot/ros_ethercat,
+/// `ethercat_hardware.cpp`, `EthercatHardware::txandrx_PD`) sends the process data again when it
+/// does not come back, up to `max_pd_retries` = 100 ms / its 20 ms timeout = 5 times, and the
+/// flasher (sr-ros-interface-ethercat, `sr_edc.cpp`) only sees a message without its
+/// acknowledgement, which it sends again when its wait runs out. Here the retries carry an
+/// idle bridge: a frame whose reply was lost may have reached the palm, and a DATA sent twice
+/// would put 8 bytes too many into the bootloader's row buffer.
+pub const EXCHANGE_TRIES: u32 = 5;
+/// A flash ends with the bus's error after this long without one good exchange.
+pub const BUS_GONE: Duration = Duration::from_secs(2);
 
 /// The hand in OP, driven one cycle at a time.
 pub struct Service {
@@ -234,6 +247,7 @@ impl Service {
         let mut flasher = Flasher::new(id, image, Settings::default());
         let direct = self.direct();
         let start = Instant::now();
+        let mut last_good = Instant::now();
         let mut shown = (usize::MAX, 0);
         loop {
             let now_ms = start.elapsed().as_millis() as u64;
@@ -249,7 +263,18 @@ impl Service {
                 Poll::Failed(e) => return Err(FlashOutcome::Failed(e)),
             };
             self.put(&direct, &bridge);
-            self.cycle().map_err(FlashOutcome::Bus)?;
+            match self.cycle_retried(&direct) {
+                Ok(()) => last_good = Instant::now(),
+                Err(e) if last_good.elapsed() >= BUS_GONE => {
+                    return Err(FlashOutcome::Bus(e));
+                }
+                // Nothing came back: the flasher sends its message again when its wait runs
+                // out. The inputs are those of an earlier cycle: not read again.
+                Err(e) => {
+                    tracing::warn!("flashing: no exchange in {EXCHANGE_TRIES} tries: {e:#}");
+                    continue;
+                }
+            }
             if let Some(reply) = self.bridge_reply().filter(|r| r.can_bus == bus) {
                 flasher.receive(&BootMessage {
                     id: reply.id,
@@ -261,6 +286,23 @@ impl Service {
             if p != shown {
                 shown = p;
                 progress(p.0, p.1);
+            }
+        }
+    }
+
+    /// One cycle, and up to [`EXCHANGE_TRIES`] in all while the exchange fails, the retries
+    /// with an idle bridge (in `mode`).
+    fn cycle_retried(&mut self, mode: &Command) -> anyhow::Result<()> {
+        let mut tries = 1;
+        loop {
+            match self.cycle() {
+                Ok(()) => return Ok(()),
+                Err(e) if tries >= EXCHANGE_TRIES => return Err(e),
+                Err(e) => {
+                    tracing::debug!("flashing: exchange {tries} failed ({e:#}), retrying");
+                    tries += 1;
+                    self.put(mode, &CanBridge::default());
+                }
             }
         }
     }

@@ -1,0 +1,96 @@
+//! `teleop shadow flash`'s service against the emulated hand over the local-socket transport,
+//! with frames lost on the way to the palm (one in 20, and all of them for 300 ms): a lost
+//! exchange ("timeout: PDU") is retried and a message that got no answer is sent again, as the shipped driver does (ros_ethercat's
+//! `txandrx_PD` retries, sr_edc.cpp's flasher re-sends on its timeouts); the flash completes and
+//! the board runs the new image.
+#![allow(clippy::unwrap_used)]
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use sim_shadow::bootloader::Mode;
+use sim_shadow::ethercat::ShadowBus;
+use sim_shadow::palm::Palm;
+use teleop_ecat_link::{serve_socket, StreamServer};
+use teleop_shadow::service::Service;
+use teleop_shadow::ShadowConfig;
+use teleop_shadow_protocol::can::APP_START;
+use teleop_shadow_protocol::hex;
+
+fn application(len: usize, seed: u32) -> Vec<u8> {
+    let mut x = seed.wrapping_mul(2_654_435_761).max(1);
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as u8
+        })
+        .collect()
+}
+
+#[test]
+fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
+    teleop_runtime::init_logging();
+    let dir = tempfile::tempdir().unwrap();
+    let socket = dir.path().join("shadow.sock");
+    let sim = Arc::new(Mutex::new(ShadowBus::new(
+        Palm::new(),
+        1178,
+        Duration::from_millis(1),
+    )));
+    let stop = Arc::new(AtomicBool::new(false));
+    let server = {
+        let (sim, stop) = (sim.clone(), stop.clone());
+        let listener = StreamServer::bind(&socket).unwrap();
+        std::thread::spawn(move || {
+            let stopping = || stop.load(Ordering::SeqCst);
+            serve_socket(&listener, &*sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
+        })
+    };
+    let config = ShadowConfig {
+        transport: format!("sim:{}", socket.display()),
+        ..ShadowConfig::default()
+    };
+    let checked = config.validate().unwrap();
+    let mut service = Service::open(&config, checked).unwrap();
+
+    // From now on one frame in 20 to the palm is lost (seeded: the same frames every run).
+    {
+        let mut bus = sim.lock().unwrap();
+        let faults = bus.palm.faults();
+        faults.seed = 20;
+        faults.drop_probability = 0.05;
+    }
+    // And once, mid-transfer, the cable is out for 300 ms: every try of those exchanges fails,
+    // the messages are sent again afterwards.
+    let cable = {
+        let sim = sim.clone();
+        std::thread::spawn(move || {
+            let start = Instant::now();
+            while sim.lock().unwrap().palm.app().stats.bridged < 40 {
+                assert!(start.elapsed() < Duration::from_secs(20), "no flashing");
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            sim.lock().unwrap().palm.faults().link_down = true;
+            std::thread::sleep(Duration::from_millis(300));
+            sim.lock().unwrap().palm.faults().link_down = false;
+        })
+    };
+    let app = application(600, 5);
+    let image = hex::parse(&hex::write(APP_START, &app)).unwrap();
+    let result = service.flash(13, image, &mut |_, _| {});
+    cable.join().unwrap();
+    let dropped = sim.lock().unwrap().palm.stats().dropped_frames;
+    service.close();
+    stop.store(true, Ordering::SeqCst);
+    server.join().unwrap();
+    assert!(dropped > 0, "frames were lost");
+    result.unwrap_or_else(|e| panic!("the flash failed after {dropped} lost frames: {e}"));
+    let bus = sim.lock().unwrap();
+    let board = &bus.palm().boards[13];
+    assert_eq!(board.mode(), Mode::Application);
+    let at = APP_START as usize;
+    assert_eq!(&board.flash()[at..at + app.len()], &app[..]);
+}
