@@ -18,14 +18,20 @@ use std::time::{Duration, Instant};
 
 pub use teleop_runtime::IpcSettings;
 
-/// Path of a workspace executable in the same target folder as the running test.
+/// Path of a workspace executable in the same target folder as the running test, or in
+/// `TELEOP_TEST_BIN_DIR` when that is set (to run a test against the binaries of another
+/// build, e.g. an older commit's, and see it fail there).
 pub fn bin(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     // target/<profile>/deps/<test> -> target/<profile>/<name>
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("test executable lives in target/<profile>/deps");
+    let dir = match std::env::var_os("TELEOP_TEST_BIN_DIR") {
+        Some(dir) => PathBuf::from(dir),
+        None => exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable lives in target/<profile>/deps")
+            .to_path_buf(),
+    };
     let path = dir.join(name);
     assert!(
         path.is_file(),

@@ -292,7 +292,7 @@ fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release
     let out = sandbox.run_teleop(&["estop"]);
     assert!(out.status.success(), "{}", text(&out));
     assert!(
-        text(&out).contains("acknowledged by feedback, revo2"),
+        text(&out).contains("acknowledged by feedback, glove, revo2"),
         "{}",
         text(&out)
     );
@@ -406,4 +406,393 @@ fn release_without_namespace_releases_a_side_latched_while_its_nodes_are_down() 
     let out = sandbox.run_teleop(&["estop", "--release"]);
     assert!(text(&out).contains("namespace left"), "{}", text(&out));
     assert!(!latch.exists(), "{}", text(&out));
+}
+
+/// A hand in namespace `ns` (or none) of the sandbox's pipeline.
+fn hand_in(sandbox: &Sandbox, ns: Option<&str>, name: &str) -> (NodeRuntime, Hand) {
+    let mut ipc = sandbox.ipc.clone();
+    ipc.namespace = ns.map(str::to_string);
+    let node = NodeRuntime::new(name, &ipc).unwrap();
+    let hand = Hand {
+        state: node.publisher().unwrap(),
+        tactile: node.publisher().unwrap(),
+        forces: node.subscriber().unwrap(),
+    };
+    (node, hand)
+}
+
+/// Whether this test may mount file systems and change file attributes (root), else the
+/// reason; under `TELEOP_REQUIRE_CHECKS` (CI, as root) a test that cannot fails instead.
+fn root_or_skip() -> bool {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } == 0 {
+        return true;
+    }
+    teleop_e2e::netns::skip("not running as root (mounts a small tmpfs / sets chattr +i)");
+    false
+}
+
+/// Runs `program args`, panicking with its output when it fails.
+fn run(program: &str, args: &[&str]) {
+    let out = std::process::Command::new(program)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{program}: {e}"));
+    assert!(out.status.success(), "{program} {args:?}: {}", text(&out));
+}
+
+/// A mounted tmpfs of `size` (unmounted on drop).
+struct Tmpfs(std::path::PathBuf);
+
+impl Tmpfs {
+    fn mount(at: std::path::PathBuf, size: &str) -> Self {
+        std::fs::create_dir_all(&at).unwrap();
+        run(
+            "mount",
+            &[
+                "-t",
+                "tmpfs",
+                "-o",
+                &format!("size={size},mode=0755"),
+                "tmpfs",
+                at.to_str().unwrap(),
+            ],
+        );
+        Self(at)
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("umount")
+            .arg("-l")
+            .arg(&self.0)
+            .status();
+    }
+}
+
+#[test]
+fn estop_with_a_full_ipc_root_still_stops_the_running_nodes() {
+    if !root_or_skip() {
+        return;
+    }
+    let mut sandbox = Sandbox::new();
+    let mount = Tmpfs::mount(sandbox.dir.path().join("ipcfs"), "16m");
+    sandbox.ipc = teleop_runtime::IpcSettings::isolated(&mount.0);
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
+    );
+    let session = sandbox.launch(&launch);
+    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
+    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+
+    // The disk of the IPC root fills up: `teleop estop` cannot make its iceoryx2 node.
+    let fill = mount.0.join("fill");
+    let _ = std::fs::write(&fill, vec![0u8; 32 << 20]);
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("cannot ring any doorbell") && text(&out).contains("ENGAGED"),
+        "{}",
+        text(&out)
+    );
+    // The latch alone stops the running node.
+    hand.until(
+        Duration::from_secs(2),
+        "e-stop through the latch alone",
+        stopped,
+    );
+    std::fs::remove_file(&fill).unwrap();
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+    drop(session);
+}
+
+#[test]
+fn estop_with_an_unwritable_latch_still_rings_every_doorbell() {
+    if !root_or_skip() {
+        return;
+    }
+    let sandbox = Sandbox::new();
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
+    );
+    let _session = sandbox.launch(&launch);
+    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
+    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+
+    // No file can be made in the IPC root any more (iceoryx2's own files live in folders below
+    // it, so its ports still work): the latch cannot be written.
+    let root = sandbox.ipc.root.clone().unwrap();
+    run("chattr", &["+i", &root]);
+    struct Mutable(String);
+    impl Drop for Mutable {
+        fn drop(&mut self) {
+            let _ = std::process::Command::new("chattr")
+                .args(["-i", &self.0])
+                .status();
+        }
+    }
+    let mutable = Mutable(root);
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("cannot write the e-stop latch"),
+        "{}",
+        text(&out)
+    );
+    hand.until(
+        Duration::from_secs(2),
+        "e-stop through the doorbell alone",
+        stopped,
+    );
+    drop(mutable);
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+}
+
+#[test]
+fn an_estop_engaged_while_nothing_runs_stops_both_sides_of_a_session_started_later() {
+    let sandbox = Sandbox::new();
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    // Nothing runs: engaged all the same (exit 1: nobody acknowledged).
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(!out.status.success(), "{}", text(&out));
+    let said = text(&out);
+    let side = |ns: &str| {
+        format!(
+            "\n[[process]]\nname = \"feedback-{ns}\"\nnode = \"feedback\"\nprogram = \"teleop-feedback\"\nnamespace = \"{ns}\"\nargs = [\"--config\", \"feedback.toml\"]\n"
+        )
+    };
+    let launch = sandbox.write(
+        "launch.toml",
+        &format!(
+            "[session]\nstop_timeout_ms = 2000\n{}{}",
+            side("left"),
+            side("right")
+        ),
+    );
+    let _session = sandbox.launch(&launch);
+    let (_l, mut left) = hand_in(&sandbox, Some("left"), "e2e-left");
+    let (_r, mut right) = hand_in(&sandbox, Some("right"), "e2e-right");
+    left.until(Duration::from_secs(20), "the left side's forces", |_| true);
+    right.until(Duration::from_secs(20), "the right side's forces", |_| true);
+    for (name, hand) in [("left", &mut left), ("right", &mut right)] {
+        let forces = hand.pump(Duration::from_millis(500));
+        assert!(!forces.is_empty(), "{name}: force commands");
+        assert!(
+            forces.iter().all(stopped),
+            "{name} side pushes under the e-stop engaged before it started: {:?}",
+            forces.iter().find(|f| !stopped(f))
+        );
+    }
+    assert!(said.contains("in any namespace, will obey it"), "{said}");
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    left.until(Duration::from_secs(3), "left forces after release", pushing);
+    right.until(
+        Duration::from_secs(3),
+        "right forces after release",
+        pushing,
+    );
+}
+
+#[test]
+fn the_glove_node_obeys_the_estop_itself() {
+    let sandbox = Sandbox::new();
+    let link = sandbox.dir.path().join("glove");
+    let glove_toml = std::fs::read_to_string(Sandbox::repo().join("config/glove.toml"))
+        .unwrap()
+        .replace("/tmp/teleop-glove", link.to_str().unwrap());
+    sandbox.write("glove.toml", &glove_toml);
+    let launch = sandbox.write(
+        "launch.toml",
+        &format!(
+            "[session]\nstop_timeout_ms = 2000\n\n[[process]]\nname = \"sim-glove\"\nprogram = \"teleop-sim-glove\"\nargs = [\"--link\", {link:?}, \"--control\", \"glove.ctl\"]\nnode = \"\"\n\n[[process]]\nname = \"glove\"\nprogram = \"teleop-glove\"\nargs = [\"--config\", \"glove.toml\"]\n",
+            link = link.display().to_string()
+        ),
+    );
+    let session = sandbox.launch(&launch);
+    wait_for(
+        Duration::from_secs(20),
+        "the simulator's control socket",
+        || sandbox.dir.path().join("glove.ctl").exists().then_some(()),
+    );
+    let node = NodeRuntime::new("e2e-forces", &sandbox.ipc).unwrap();
+    // The only writer of glove/force_command here (force feedback is not running): a tool that
+    // ignores the e-stop.
+    let mut forces: Publisher<GloveForceCommand> = node.publisher().unwrap();
+    let force_set = |sandbox: &Sandbox| {
+        let reply = sandbox.control("glove.ctl", "state");
+        reply
+            .split("force_set=[")
+            .nth(1)
+            .and_then(|r| r.split(']').next())
+            .map(str::to_string)
+    };
+    let push = |forces: &mut Publisher<GloveForceCommand>| {
+        forces
+            .publish(&GloveForceCommand {
+                force: [600; 5],
+                ..Default::default()
+            })
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let push_until = |forces: &mut Publisher<GloveForceCommand>, want: &str, what: &str| {
+        wait_for(Duration::from_secs(20), what, || {
+            push(forces);
+            (force_set(&sandbox).as_deref() == Some(want)).then_some(())
+        })
+    };
+    push_until(&mut forces, "600, 600, 600, 600, 600", "the glove pushing");
+    let out = sandbox.run_teleop(&["estop"]);
+    assert!(out.status.success(), "{}\n{}", text(&out), session.log());
+    assert!(
+        text(&out).contains("acknowledged by glove"),
+        "{}",
+        text(&out)
+    );
+    push_until(
+        &mut forces,
+        "0, 0, 0, 0, 0",
+        "the glove limp under the e-stop",
+    );
+    // It stays limp while the tool goes on pushing.
+    for _ in 0..100 {
+        push(&mut forces);
+    }
+    assert_eq!(force_set(&sandbox).as_deref(), Some("0, 0, 0, 0, 0"));
+    let out = sandbox.run_teleop(&["estop", "--release"]);
+    assert!(out.status.success(), "{}", text(&out));
+    push_until(
+        &mut forces,
+        "600, 600, 600, 600, 600",
+        "the glove pushing after release",
+    );
+}
+
+#[test]
+fn a_second_session_on_one_prefix_is_refused_with_the_first_ones_pid() {
+    let sandbox = Sandbox::new();
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    let launch = sandbox.write(
+        "launch.toml",
+        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
+    );
+    let first = sandbox.launch(&launch);
+    wait_for(Duration::from_secs(20), "the first session", || {
+        sandbox.pid_of("feedback")
+    });
+    let out = sandbox
+        .teleop()
+        .arg("launch")
+        .arg(&launch)
+        .arg("--duration")
+        .arg("3")
+        .output()
+        .unwrap();
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("another session runs on IPC prefix") && text(&out).contains("(pid "),
+        "{}",
+        text(&out)
+    );
+    drop(first);
+}
+
+#[test]
+fn an_exit_the_launcher_did_not_ask_for_is_restarted_and_a_required_one_left_stopped_fails() {
+    let sandbox = Sandbox::new();
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    let one = |restart: &str| {
+        format!(
+            "[session]\nstop_timeout_ms = 2000\n\n[[process]]\nname = \"feedback\"\nprogram = \"teleop-feedback\"\nargs = [\"--config\", \"feedback.toml\"]\nrestart = \"{restart}\"\nrestart_delay_ms = 200\nrequired = true\n"
+        )
+    };
+    let term = |pid: u32| {
+        // SAFETY: kill(2) on a pid read from the pipeline's node list.
+        unsafe {
+            libc::kill(pid as libc::pid_t, libc::SIGTERM);
+        }
+    };
+    // on-failure: a clean exit on someone else's SIGTERM is restarted.
+    let launch = sandbox.write("on-failure.toml", &one("on-failure"));
+    let mut session = sandbox.launch(&launch);
+    let first = wait_for(Duration::from_secs(20), "feedback", || {
+        sandbox.pid_of("feedback")
+    });
+    term(first);
+    restarted(&sandbox, "feedback", first);
+    assert!(session
+        .log()
+        .contains("exited without being asked to: exit status 0"));
+    assert!(session.stop().success());
+
+    // never + required: the session ends failed and says what is missing.
+    let launch = sandbox.write("never.toml", &one("never"));
+    let mut session = sandbox.launch(&launch);
+    let pid = wait_for(Duration::from_secs(20), "feedback", || {
+        sandbox.pid_of("feedback")
+    });
+    term(pid);
+    let status = session
+        .wait_exit(Duration::from_secs(20))
+        .expect("the session ends");
+    assert!(!status.success(), "{}", session.log());
+    assert!(
+        session
+            .log()
+            .contains("MISSING required process feedback: exited by itself (exit status 0)"),
+        "{}",
+        session.log()
+    );
+}
+
+#[test]
+fn zero_timeouts_are_refused_when_a_node_loads_its_configuration() {
+    let sandbox = Sandbox::new();
+    for (program, file, contents, field) in [
+        (
+            "teleop-feedback",
+            "feedback.toml",
+            with_profile(&FEEDBACK_TOML.replace("tick_ms = 10", "tick_ms = 0")),
+            "tick_ms = 0",
+        ),
+        (
+            "teleop-glove",
+            "glove.toml",
+            "force_timeout_ms = 0\n".to_string(),
+            "force_timeout_ms = 0",
+        ),
+    ] {
+        let path = sandbox.write(file, &contents);
+        let mut child = std::process::Command::new(teleop_e2e::bin(program))
+            .arg("--config")
+            .arg(&path)
+            .envs(sandbox.ipc.to_env())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while child.try_wait().unwrap().is_none() && start.elapsed() < Duration::from_secs(10) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let refused = child.try_wait().unwrap();
+        let _ = child.kill();
+        let out = child.wait_with_output().unwrap();
+        assert!(
+            refused.is_some_and(|s| !s.success()),
+            "{program} ran with {field}: {}",
+            text(&out)
+        );
+        assert!(text(&out).contains(field), "{program}: {}", text(&out));
+    }
 }

@@ -46,6 +46,17 @@ impl Default for NodeConfig {
     }
 }
 
+impl NodeConfig {
+    /// Checks the node's timeouts and periods; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        use teleop_runtime::check_ms;
+        check_ms("tactile_timeout_ms", self.tactile_timeout_ms)?;
+        check_ms("hand_timeout_ms", self.hand_timeout_ms)?;
+        check_ms("tick_ms", self.tick_ms)?;
+        check_ms("health_period_ms", self.health_period_ms)
+    }
+}
+
 /// Loads and checks the configuration (defaults without a file) and the hand profile (`profile`
 /// when given, else the file the configuration names); errors name the file.
 pub fn load(
@@ -59,6 +70,9 @@ pub fn load(
                 .feedback
                 .validate()
                 .map_err(|e| e.with_origin(&path.display().to_string()))?;
+            config
+                .validate()
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
             let base = path.parent().map(PathBuf::from).unwrap_or_default();
             (config, path.display().to_string(), base)
         }

@@ -116,18 +116,19 @@ fn run(
     }
     tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
 
+    let mut failure: Option<anyhow::Error> = None;
     let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
         let mut events = Vec::new();
+        // The e-stop on every wake: its doorbell, or its latch read every LATCH_POLL when the
+        // doorbell could not be rung.
+        if let Some(engaged) = estop.update()? {
+            events.push(Event::EStop(estop_sample(engaged)));
+        }
         let _taken = match wake {
             Wake::Input(0) => tactile.drain(|t| events.push(Event::Tactile(*t))),
             Wake::Input(1) => state.drain(|s| events.push(Event::State(*s))),
             Wake::Input(2) => command.drain(|c| events.push(Event::Command(*c))),
-            Wake::Input(_) => {
-                if let Some(engaged) = estop.update()? {
-                    events.push(Event::EStop(estop_sample(engaged)));
-                }
-                1
-            }
+            Wake::Input(_) => 1,
             Wake::Timeout(_) | Wake::Tick => {
                 events.push(Event::Tick);
                 1
@@ -160,7 +161,7 @@ fn run(
         |wake| match on_wake(wake) {
             Ok(()) => Flow::Continue(()),
             Err(e) => {
-                tracing::error!("{e:#}");
+                failure = Some(e);
                 Flow::Break(())
             }
         },
@@ -170,6 +171,13 @@ fn run(
         flags: force_flags::STALE,
         ..Default::default()
     })?;
-    tracing::info!(?stop, "stopped; published zero force");
-    Ok(())
+    match failure {
+        // An error in the loop is a failure: the process exits non-zero and its supervisor
+        // restarts it.
+        Some(e) => Err(e.context("force feedback loop failed; published zero force")),
+        None => {
+            tracing::info!(?stop, "stopped; published zero force");
+            Ok(())
+        }
+    }
 }

@@ -1,7 +1,9 @@
 //! The glove node's loop: one exchange per cycle, as fast as the line allows.
 //!
 //! Each cycle sends a force-control frame with the latest glove force command (zero when that
-//! command is stale), reads the 6-DoF answer and publishes `glove/state`. At a low configured
+//! command is stale or the latched e-stop is engaged: the glove node obeys the e-stop itself,
+//! so a second writer of `glove/force_command` cannot push the operator while it is engaged),
+//! reads the 6-DoF answer and publishes `glove/state`. At a low configured
 //! rate a register read (actual forces, currents, error codes, temperatures, voltage) takes the
 //! place of one force exchange; a complete set is published as `glove/diagnostics`. Timeouts and
 //! bad frames are counted and the exchange retried; a port that disappears or stops answering
@@ -15,7 +17,7 @@ use teleop_glove_protocol::{reg, ErrorBits, Register, Request, Response};
 use teleop_msgs::{
     device_kind, fixed_text, DeviceInfo, GloveDiagnostics, GloveForceCommand, GloveState,
 };
-use teleop_runtime::{Health, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
 
 use crate::link::{GloveLink, LinkError, LinkStats};
 
@@ -86,9 +88,12 @@ impl GloveConfig {
                 self.diagnostics_hz
             ));
         }
-        if self.answer_timeout_ms == 0 || self.max_consecutive_timeouts == 0 {
-            return Err("answer_timeout_ms and max_consecutive_timeouts must be > 0".into());
+        if self.max_consecutive_timeouts == 0 {
+            return Err("max_consecutive_timeouts must be > 0".into());
         }
+        teleop_runtime::check_ms("answer_timeout_ms", self.answer_timeout_ms)?;
+        teleop_runtime::check_ms("force_timeout_ms", self.force_timeout_ms)?;
+        teleop_runtime::check_ms("health_period_ms", self.health_period_ms)?;
         if self.reopen_backoff_ms[0] == 0 || self.reopen_backoff_ms[0] > self.reopen_backoff_ms[1] {
             return Err("reopen_backoff_ms = [first, longest] with 0 < first <= longest".into());
         }
@@ -110,6 +115,7 @@ struct Ports {
     state: Publisher<GloveState>,
     diagnostics: Publisher<GloveDiagnostics>,
     forces: Subscriber<GloveForceCommand>,
+    estop: EStopInput,
     health: Health,
 }
 
@@ -140,6 +146,7 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
         state: runtime.publisher()?,
         diagnostics: runtime.publisher()?,
         forces: runtime.subscriber()?,
+        estop: EStopInput::new(runtime)?,
         health: Health::new(runtime)?,
     };
     let mut l = Loop {
@@ -206,6 +213,7 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
                 let until = Instant::now() + backoff;
                 while Instant::now() < until && teleop_runtime::stop_signal().is_none() {
                     std::thread::sleep(Duration::from_millis(10));
+                    l.follow_estop();
                 }
                 backoff = (backoff * 2).min(Duration::from_millis(config.reopen_backoff_ms[1]));
             }
@@ -294,8 +302,16 @@ impl Loop<'_> {
         Ok(())
     }
 
-    /// The force for this cycle: the latest command if fresh, zero otherwise; clamped.
+    /// The force for this cycle: the latest command if fresh and the e-stop released, zero
+    /// otherwise; clamped.
     fn force_to_send(&mut self) -> [i16; 5] {
+        self.follow_estop();
+        if self.ports.estop.engaged() {
+            // Keep the subscriber drained, so what was sent during the e-stop is not applied
+            // after it unless it is still fresh.
+            self.ports.forces.poll_latest();
+            return [0; 5];
+        }
         let now = Instant::now();
         let cmd = self.ports.forces.poll_latest();
         let fresh = self
@@ -428,7 +444,22 @@ impl Loop<'_> {
         self.reported = now;
     }
 
+    /// Reads the e-stop (its doorbell, or the latch every `LATCH_POLL`) and acknowledges a
+    /// change: every force exchange, and while the link is down.
+    fn follow_estop(&mut self) {
+        match self.ports.estop.update() {
+            Ok(Some(true)) => tracing::warn!("e-stop engaged: glove force zero"),
+            Ok(Some(false)) => tracing::info!("e-stop released: applying force commands"),
+            Ok(None) => {}
+            Err(e) => {
+                self.ports.health.count_error();
+                tracing::warn!("e-stop acknowledgement: {e}");
+            }
+        }
+    }
+
     fn publish_link_down(&mut self) -> anyhow::Result<()> {
+        self.follow_estop();
         self.state.link_up = 0;
         self.state.header = Default::default();
         self.ports.state.publish(&self.state)?;

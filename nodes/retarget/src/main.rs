@@ -106,6 +106,7 @@ fn run(
         }
         Ok(())
     };
+    let mut failure: Option<anyhow::Error> = None;
     let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
         match wake {
             Wake::Input(_) => {
@@ -131,11 +132,16 @@ fn run(
         |wake| match on_wake(wake) {
             Ok(()) => Flow::Continue(()),
             Err(e) => {
-                tracing::error!("{e:#}");
+                failure = Some(e);
                 Flow::Break(())
             }
         },
     )?;
+    // An error in the loop is a failure: the process exits non-zero and its supervisor
+    // restarts it.
+    if let Some(e) = failure {
+        return Err(e.context("retargeting loop failed"));
+    }
     tracing::info!(?stop, "stopped");
     Ok(())
 }

@@ -332,13 +332,133 @@ const ESTOP_ACK_WAIT: Duration = Duration::from_secs(1);
 ///
 /// The state is the latch file of each namespace (see `teleop_runtime::EStopInput`), written
 /// and synced before the `estop` topic wakes the running nodes, so it outlives this command
-/// and any node's restart. Then it waits for the nodes' acknowledgements (`estop/ack`) and lists
-/// them; none at all is a failure (exit code 1), although the latch stays as set.
+/// and any node's restart; the plain latch (no namespace) stops every namespace, also those that
+/// start later. Then it waits for the nodes' acknowledgements (`estop/ack`) and lists them; none
+/// at all is a failure (exit code 1), although the latch stays as set.
+///
+/// Engaging is the easy direction: the latches are written first, then every doorbell is rung,
+/// and a step that fails does not keep the next from being tried; what could not be done is
+/// said at the end (exit code 1). A latch written but no doorbell rung still stops every node
+/// within `teleop_runtime::LATCH_POLL`. Releasing is strict: the first error ends it.
 pub fn estop(
     ipc: &IpcSettings,
     engage: bool,
     namespaces: &[Namespace],
 ) -> anyhow::Result<ExitCode> {
+    if !engage {
+        return release(ipc, namespaces);
+    }
+    let mut failures: Vec<String> = Vec::new();
+    // 1. The latches: they alone stop every node that obeys the e-stop.
+    let latches: Vec<Option<Namespace>> = if namespaces.is_empty() {
+        vec![None]
+    } else {
+        namespaces.iter().cloned().map(Some).collect()
+    };
+    let mut latched = Vec::new();
+    for ns in &latches {
+        let path = latch_path(ipc, ns.as_ref());
+        match set_latch(&path, true) {
+            Ok(()) => latched.push(path),
+            Err(e) => failures.push(format!(
+                "cannot write the e-stop latch {}: {e}",
+                path.display()
+            )),
+        }
+    }
+    let mut rung_count = 0;
+    // 2. The doorbells, whatever happened to the latches.
+    let mut sides = Vec::new();
+    let runtime = match NodeRuntime::new(CLI_NODE, ipc) {
+        Ok(runtime) => Some(runtime),
+        Err(e) => {
+            failures.push(format!(
+                "cannot ring any doorbell ({e}): running nodes find the latch within {} ms",
+                teleop_runtime::LATCH_POLL.as_millis()
+            ));
+            None
+        }
+    };
+    let asked_at = now_ns();
+    if let Some(runtime) = &runtime {
+        let mut covered = covered(ipc, namespaces).unwrap_or_else(|e| {
+            failures.push(format!("cannot list the namespaces in use: {e:#}"));
+            latches.clone()
+        });
+        if namespaces.is_empty() {
+            for ns in latched_namespaces(ipc) {
+                if !covered.contains(&Some(ns.clone())) {
+                    covered.push(Some(ns));
+                }
+            }
+        }
+        for ns in covered {
+            // Subscribe to the answers before asking; without them the doorbell still rings.
+            let acks = runtime
+                .subscriber_in::<EStopAck>(ns.as_ref())
+                .inspect_err(|e| {
+                    failures.push(format!(
+                        "namespace {}: cannot read acknowledgements: {e}",
+                        shown(ns.as_ref())
+                    ))
+                })
+                .ok();
+            let rung = runtime
+                .publisher_in::<EStop>(ns.as_ref())
+                .and_then(|mut p| {
+                    p.publish(&EStop {
+                        engaged: 1,
+                        ..Default::default()
+                    })
+                    .map(|_| ())
+                });
+            match rung {
+                Ok(()) => rung_count += 1,
+                Err(e) => failures.push(format!(
+                    "namespace {}: cannot ring the doorbell: {e}",
+                    shown(ns.as_ref())
+                )),
+            }
+            sides.push((ns, acks, Vec::<String>::new()));
+        }
+        wait_for_acks(runtime, &mut sides, asked_at, true);
+    }
+    match (latched.is_empty(), rung_count) {
+        (true, 0) => println!("e-stop COULD NOT BE ENGAGED: no latch written, no doorbell rung"),
+        (true, _) => println!(
+            "e-stop ENGAGED in the running nodes, NOT latched: a node that starts or restarts \
+             does not see it"
+        ),
+        (false, _) => println!(
+            "e-stop ENGAGED (latched): glove forces at zero, hands holding, until `teleop estop \
+             --release`"
+        ),
+    }
+    for path in &latched {
+        println!("  latch {}", path.display());
+    }
+    let acknowledged = print_acks(&mut sides);
+    if !failures.is_empty() {
+        eprintln!("e-stop engaged with failures; what could not be done:");
+        for f in &failures {
+            eprintln!("  - {f}");
+        }
+        return Ok(ExitCode::FAILURE);
+    }
+    if acknowledged == 0 {
+        eprintln!(
+            "no node acknowledged the e-stop within {} ms: none that obeys it is running; the latch \
+             is set and every node that starts, in any namespace, will obey it",
+            ESTOP_ACK_WAIT.as_millis(),
+        );
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `teleop estop --release`: strict, the first error ends it (the latches already removed stay
+/// removed; the rest stay engaged).
+fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     let mut covered = covered(ipc, namespaces)?;
     if namespaces.is_empty() {
@@ -350,33 +470,53 @@ pub fn estop(
         }
     }
     let mut sides = Vec::with_capacity(covered.len());
+    let mut doorbells = Vec::with_capacity(covered.len());
     for ns in covered {
         // Subscribe to the answers before asking.
         let acks = runtime.subscriber_in::<EStopAck>(ns.as_ref())?;
-        let publisher = runtime.publisher_in::<EStop>(ns.as_ref())?;
-        sides.push((ns, acks, publisher, Vec::<String>::new()));
+        doorbells.push(runtime.publisher_in::<EStop>(ns.as_ref())?);
+        sides.push((ns, Some(acks), Vec::<String>::new()));
     }
     let asked_at = now_ns();
-    for (ns, _, publisher, _) in &mut sides {
+    for ((ns, _, _), publisher) in sides.iter().zip(&mut doorbells) {
         let path = latch_path(ipc, ns.as_ref());
-        set_latch(&path, engage).map_err(|e| {
-            anyhow::anyhow!(
-                "cannot {} the e-stop latch {}: {e}",
-                if engage { "engage" } else { "release" },
-                path.display()
-            )
+        set_latch(&path, false).map_err(|e| {
+            anyhow::anyhow!("cannot release the e-stop latch {}: {e}", path.display())
         })?;
-        publisher.publish(&EStop {
-            engaged: u8::from(engage),
-            ..Default::default()
-        })?;
+        publisher.publish(&EStop::default())?;
     }
-    // Every node that obeys the e-stop has one `estop/ack` publisher: wait until each has
-    // answered, or for at most ESTOP_ACK_WAIT.
+    wait_for_acks(&runtime, &mut sides, asked_at, false);
+    println!("e-stop released");
+    for (ns, _, _) in &sides {
+        println!(
+            "  namespace {}: latch {} removed",
+            shown(ns.as_ref()),
+            latch_path(ipc, ns.as_ref()).display()
+        );
+    }
+    if print_acks(&mut sides) == 0 {
+        eprintln!(
+            "no node acknowledged the release within {} ms: none that obeys the e-stop is running; \
+             the latch is cleared",
+            ESTOP_ACK_WAIT.as_millis(),
+        );
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One namespace of `teleop estop`: its acknowledgements (if they could be read) and the nodes
+/// that answered.
+type Side = (Option<Namespace>, Option<Subscriber<EStopAck>>, Vec<String>);
+
+/// Waits until every node that obeys the e-stop (each has one `estop/ack` publisher) answered
+/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`].
+fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engage: bool) {
     let deadline = Instant::now() + ESTOP_ACK_WAIT;
     loop {
         let mut all = true;
-        for (ns, acks, _, answered) in &mut sides {
+        for (ns, acks, answered) in sides.iter_mut() {
+            let Some(acks) = acks else { continue };
             acks.drain(|a| {
                 let name = text_of(&a.node_name);
                 if a.header.stamp_ns >= asked_at
@@ -396,22 +536,17 @@ pub fn estop(
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    println!(
-        "e-stop {}",
-        if engage {
-            "ENGAGED (latched): glove forces at zero, hands holding, until `teleop estop --release`"
-        } else {
-            "released"
-        }
-    );
+}
+
+/// Prints who acknowledged, per namespace; returns how many did.
+fn print_acks(sides: &mut [Side]) -> usize {
     let mut acknowledged = 0;
-    for (ns, _, _, answered) in &mut sides {
+    for (ns, _, answered) in sides.iter_mut() {
         answered.sort();
         acknowledged += answered.len();
         println!(
-            "  namespace {}: latch {}; acknowledged by {}",
+            "  namespace {}: acknowledged by {}",
             shown(ns.as_ref()),
-            latch_path(ipc, ns.as_ref()).display(),
             if answered.is_empty() {
                 "no node".to_string()
             } else {
@@ -419,14 +554,5 @@ pub fn estop(
             }
         );
     }
-    if acknowledged == 0 {
-        eprintln!(
-            "no node acknowledged the e-stop within {} ms: none that obeys it is running; the latch \
-             is {} and every node that starts will obey it",
-            ESTOP_ACK_WAIT.as_millis(),
-            if engage { "set" } else { "cleared" }
-        );
-        return Ok(ExitCode::FAILURE);
-    }
-    Ok(ExitCode::SUCCESS)
+    acknowledged
 }

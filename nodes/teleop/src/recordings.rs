@@ -139,12 +139,18 @@ impl<M: Message> Replay for TopicReplay<M> {
     }
 }
 
-struct MakeReplay<'a>(&'a NodeRuntime, Option<&'a Namespace>);
+/// Makes a topic's replay publisher; `.2`: beside live writers (`--allow-live`).
+struct MakeReplay<'a>(&'a NodeRuntime, Option<&'a Namespace>, bool);
 
 impl TopicVisitor for MakeReplay<'_> {
     type Output = anyhow::Result<Box<dyn Replay>>;
     fn visit<M: Message>(self) -> Self::Output {
-        Ok(Box::new(TopicReplay::<M>(self.0.publisher_in(self.1)?)))
+        let publisher = if self.2 {
+            self.0.publisher_beside_live_in(self.1)?
+        } else {
+            self.0.publisher_in(self.1)?
+        };
+        Ok(Box::new(TopicReplay::<M>(publisher)))
     }
 }
 
@@ -285,14 +291,22 @@ pub fn replay_cmd(
         recorded.join(", ")
     );
     let runtime = NodeRuntime::new("teleop-replay", ipc)?;
+    let live: Vec<String> = targets
+        .iter()
+        .filter(|(_, ns, topic)| {
+            visit_topic(topic, LivePublishers(&runtime, ns.as_ref())).unwrap_or(0) > 0
+        })
+        .map(|(_, ns, topic)| qualified(ns.as_ref(), topic))
+        .collect();
+    if opts.allow_live && !live.is_empty() {
+        eprintln!(
+            "WARNING --allow-live: replaying into {} ({} topic(s) a running process publishes \
+             too): replayed and live samples mix there",
+            live.join(", "),
+            live.len()
+        );
+    }
     if !opts.allow_live {
-        let live: Vec<String> = targets
-            .iter()
-            .filter(|(_, ns, topic)| {
-                visit_topic(topic, LivePublishers(&runtime, ns.as_ref())).unwrap_or(0) > 0
-            })
-            .map(|(_, ns, topic)| qualified(ns.as_ref(), topic))
-            .collect();
         anyhow::ensure!(
             live.is_empty(),
             "refusing to publish into {}: a running process publishes there (replayed samples \
@@ -303,7 +317,7 @@ pub fn replay_cmd(
     }
     let mut publishers: HashMap<String, Box<dyn Replay>> = HashMap::new();
     for (channel, ns, topic) in &targets {
-        let replay = visit_topic(topic, MakeReplay(&runtime, ns.as_ref()))
+        let replay = visit_topic(topic, MakeReplay(&runtime, ns.as_ref(), opts.allow_live))
             .ok_or_else(|| crate::inspect::unknown_topic(topic))??;
         publishers.insert(channel.clone(), replay);
     }

@@ -52,6 +52,11 @@ pub const CDR_LE_HEADER: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 /// `teleop/glove/state`.
 pub const SERVICE_PREFIX: &str = "teleop/";
 
+/// The command topics that take exactly one writer per namespace: a second publisher is refused
+/// (`teleop_runtime`), so two operators, two sessions or a stray tool cannot drive one hand or
+/// one glove in turn. (`teleop replay --allow-live` is the one named, counted exception.)
+pub const SINGLE_WRITER_TOPICS: [&str; 2] = ["hand/command", "glove/force_command"];
+
 /// FNV-1a hash of a node name: the `source_id` a node writes into every header it stamps.
 pub const fn source_id(name: &str) -> u32 {
     let bytes = name.as_bytes();

@@ -70,3 +70,39 @@ mod tests {
         );
     }
 }
+
+/// The longest timeout or period, in ms, a configuration file may give (a minute): anything
+/// longer is a typo, and would wrap when turned into nanoseconds near `u64::MAX`.
+pub const MAX_CONFIG_MS: u64 = 60_000;
+
+/// Checks a duration field of a configuration file: `1..=MAX_CONFIG_MS` ms. The message names
+/// the field, its value and the range.
+pub fn check_ms(field: &str, value: u64) -> Result<(), String> {
+    if (1..=MAX_CONFIG_MS).contains(&value) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{field} = {value}: must be 1..={MAX_CONFIG_MS} ms (0 would never wait or never \
+             time out; longer is not a timeout a session can use)"
+        ))
+    }
+}
+
+#[cfg(test)]
+mod ms_tests {
+    use super::*;
+
+    #[test]
+    fn durations_out_of_range_are_refused_by_name() {
+        assert!(check_ms("tick_ms", 1).is_ok());
+        assert!(check_ms("tick_ms", MAX_CONFIG_MS).is_ok());
+        let zero = check_ms("tick_ms", 0).unwrap_err();
+        assert!(
+            zero.starts_with("tick_ms = 0: must be 1..=60000 ms"),
+            "{zero}"
+        );
+        assert!(check_ms("hand_timeout_ms", u64::MAX)
+            .unwrap_err()
+            .contains("hand_timeout_ms = 18446744073709551615"));
+    }
+}

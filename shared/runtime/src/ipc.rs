@@ -20,6 +20,9 @@ pub const ENV_IPC_PREFIX: &str = "TELEOP_IPC_PREFIX";
 /// Environment variable with the process's topic namespace (e.g. `left`; unset or empty: none).
 pub const ENV_NAMESPACE: &str = "TELEOP_NAMESPACE";
 
+/// iceoryx2's root directory when the settings name none.
+pub(crate) const DEFAULT_ROOT: &str = "/tmp/iceoryx2/";
+
 /// Samples a subscriber can queue before the oldest is overwritten (and counted as dropped).
 pub(crate) const SUBSCRIBER_BUFFER: usize = 256;
 const MAX_PUBLISHERS: usize = 16;
@@ -48,6 +51,30 @@ pub enum RuntimeError {
         name: String,
         /// iceoryx2's error.
         detail: String,
+    },
+    /// Another `teleop launch` runs a session on the same IPC root and prefix.
+    #[error(
+        "another session runs on IPC prefix {prefix:?} in {root} ({holder}): one session per \
+         prefix (stop it, or give this one its own TELEOP_IPC_PREFIX)"
+    )]
+    SessionRunning {
+        /// The iceoryx2 root directory.
+        root: String,
+        /// The prefix.
+        prefix: String,
+        /// Who holds it (`pid N`).
+        holder: String,
+    },
+    /// A command topic (one writer per namespace) already has a live publisher.
+    #[error(
+        "{topic} already has {others} live writer(s): a command topic takes one writer (is \
+         another session or tool running on this IPC prefix? `teleop topics` shows it)"
+    )]
+    SecondWriter {
+        /// The topic, with its namespace.
+        topic: String,
+        /// Its other publishers.
+        others: usize,
     },
     /// A topic's service exists with another payload type: a process built with another
     /// version of the message contract (`teleop_msgs::CONTRACT_VERSION`) created it.
@@ -151,6 +178,68 @@ impl IpcSettings {
         }
     }
 
+    /// The directory of iceoryx2's files (and of the e-stop latches and the session lock).
+    pub fn root_dir(&self) -> std::path::PathBuf {
+        std::path::PathBuf::from(self.root.as_deref().unwrap_or(DEFAULT_ROOT))
+    }
+
+    /// The prefix of the pipeline's files.
+    pub fn file_prefix(&self) -> &str {
+        self.prefix.as_deref().unwrap_or("teleop_")
+    }
+
+    /// Takes the one session of these settings' root and prefix (`teleop launch` does, for the
+    /// whole session): a second is refused naming the holder's pid. The lock is an exclusive
+    /// `flock` on `<root>/<prefix>session.lock`, released by the kernel when the holder exits,
+    /// however it exits.
+    pub fn lock_session(&self) -> Result<SessionLock, RuntimeError> {
+        use std::io::{Read, Seek, Write};
+        use std::os::fd::AsRawFd;
+        use std::os::unix::fs::OpenOptionsExt;
+        self.config()?;
+        let path = self
+            .root_dir()
+            .join(format!("{}session.lock", self.file_prefix()));
+        let failed = |reason: String| RuntimeError::Settings {
+            what: "session lock",
+            value: path.display().to_string(),
+            reason,
+        };
+        let mut file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .custom_flags(libc::O_NOFOLLOW)
+            .mode(0o644)
+            .open(&path)
+            .map_err(|e| failed(e.to_string()))?;
+        // SAFETY: flock(2) on a descriptor this function owns.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let error = std::io::Error::last_os_error();
+            if error.raw_os_error() != Some(libc::EWOULDBLOCK) {
+                return Err(failed(error.to_string()));
+            }
+            let mut holder = String::new();
+            let _ = file.read_to_string(&mut holder);
+            return Err(RuntimeError::SessionRunning {
+                root: self.root_dir().display().to_string(),
+                prefix: self.file_prefix().to_string(),
+                holder: holder.trim().to_string(),
+            });
+        }
+        let written = file
+            .set_len(0)
+            .and_then(|()| file.rewind())
+            .and_then(|()| write!(file, "pid {}", std::process::id()));
+        if let Err(e) = written {
+            // The lock holds without the text; only the message of a refused second session
+            // loses the pid.
+            tracing::warn!(path = %path.display(), "session lock taken, pid not written: {e}");
+        }
+        Ok(SessionLock { _file: file })
+    }
+
     /// The environment variables that carry these settings to a child process.
     pub fn to_env(&self) -> Vec<(&'static str, String)> {
         let mut env = Vec::new();
@@ -186,6 +275,7 @@ impl IpcSettings {
                 value: root.clone(),
                 reason: e.to_string(),
             })?;
+            check_root(std::path::Path::new(&root))?;
             let path = Path::new(root.as_bytes()).map_err(|e| RuntimeError::Settings {
                 what: "root path",
                 value: root.clone(),
@@ -197,6 +287,40 @@ impl IpcSettings {
     }
 }
 
+/// The one session of an IPC root and prefix ([`IpcSettings::lock_session`]), held until
+/// dropped (or the process ends).
+#[derive(Debug)]
+pub struct SessionLock {
+    _file: std::fs::File,
+}
+
+/// Refuses an IPC root that another user owns or that others may write to: its e-stop latches
+/// and iceoryx2's files would be theirs to remove, replace or point elsewhere.
+fn check_root(root: &std::path::Path) -> Result<(), RuntimeError> {
+    use std::os::unix::fs::MetadataExt;
+    let refused = |reason: String| RuntimeError::Settings {
+        what: "root path",
+        value: root.display().to_string(),
+        reason,
+    };
+    let meta = std::fs::metadata(root).map_err(|e| refused(e.to_string()))?;
+    // SAFETY: geteuid(2) cannot fail.
+    let me = unsafe { libc::geteuid() };
+    if meta.uid() != me {
+        return Err(refused(format!(
+            "owned by uid {}, not by this user (uid {me}); use a directory of your own",
+            meta.uid()
+        )));
+    }
+    if meta.mode() & 0o002 != 0 {
+        return Err(refused(format!(
+            "writable by every user (mode {:o}); `chmod o-w` it",
+            meta.mode() & 0o7777
+        )));
+    }
+    Ok(())
+}
+
 /// A pipeline process's iceoryx2 node and the factory for its ports.
 pub struct NodeRuntime {
     node: Node<Service>,
@@ -204,6 +328,7 @@ pub struct NodeRuntime {
     namespace: Option<Namespace>,
     source_id: u32,
     estop_latch: std::path::PathBuf,
+    plain_estop_latch: std::path::PathBuf,
 }
 
 impl NodeRuntime {
@@ -230,6 +355,7 @@ impl NodeRuntime {
             node,
             source_id: teleop_msgs::source_id(&name),
             estop_latch: crate::estop::latch_path(settings, namespace.as_ref()),
+            plain_estop_latch: crate::estop::latch_path(settings, None),
             name,
             namespace,
         })
@@ -250,6 +376,11 @@ impl NodeRuntime {
         &self.estop_latch
     }
 
+    /// The latch file of the topics without a namespace: it stops every namespace too.
+    pub fn plain_estop_latch(&self) -> &std::path::Path {
+        &self.plain_estop_latch
+    }
+
     /// The id this node writes into the headers it stamps.
     pub fn source_id(&self) -> u32 {
         self.source_id
@@ -266,16 +397,59 @@ impl NodeRuntime {
     }
 
     /// A publisher for `M`'s topic in `namespace` (for tools that serve several namespaces).
+    /// On a command topic ([`SINGLE_WRITER_TOPICS`](teleop_msgs::SINGLE_WRITER_TOPICS)) a
+    /// publisher beside another live one is refused ([`RuntimeError::SecondWriter`]).
     pub fn publisher_in<M: Message>(
         &self,
         namespace: Option<&Namespace>,
     ) -> Result<Publisher<M>, RuntimeError> {
+        self.make_publisher(namespace, false)
+    }
+
+    /// [`publisher_in`](Self::publisher_in) that accepts other writers on a command topic
+    /// (`teleop replay --allow-live`): the caller names the topic loudly; the number of writers
+    /// it found is logged as a warning here.
+    pub fn publisher_beside_live_in<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Result<Publisher<M>, RuntimeError> {
+        self.make_publisher(namespace, true)
+    }
+
+    fn make_publisher<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+        beside_live: bool,
+    ) -> Result<Publisher<M>, RuntimeError> {
+        use iceoryx2::prelude::PortFactory;
         let (service, topic) = service_name::<M>(namespace)?;
         let pubsub = self.pubsub::<M>(&service, &topic)?;
         let publisher = pubsub
             .publisher_builder()
             .create()
             .map_err(|e| RuntimeError::ipc("creating publisher", &topic, e))?;
+        if teleop_msgs::SINGLE_WRITER_TOPICS.contains(&M::TOPIC) {
+            let mut writers = pubsub.dynamic_config().number_of_publishers();
+            if writers > 1 {
+                // A writer that died without closing its port still counts until its node's
+                // resources are cleaned up.
+                clean_dead_nodes(self.node.config());
+                writers = pubsub.dynamic_config().number_of_publishers();
+            }
+            if writers > 1 && !beside_live {
+                return Err(RuntimeError::SecondWriter {
+                    topic,
+                    others: writers - 1,
+                });
+            }
+            if writers > 1 {
+                tracing::warn!(
+                    topic = %topic,
+                    others = writers - 1,
+                    "publishing beside another live writer of a command topic"
+                );
+            }
+        }
         let notifier = self
             .event(&service, &topic)?
             .notifier_builder()
@@ -539,7 +713,79 @@ mod tests {
         let r: Result<u8, &str> = retry_interrupted(|| Err("refused"), |e| *e == "interrupted");
         assert_eq!(r, Err("refused"), "other errors at once");
     }
-    use teleop_msgs::{GloveState, NodeHealth};
+    use teleop_msgs::{GloveState, HandCommand, NodeHealth};
+
+    #[test]
+    fn a_second_writer_of_a_command_topic_is_refused_and_a_dead_ones_port_does_not_count() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings = IpcSettings::isolated(dir.path());
+        let a = NodeRuntime::new("a", &settings).unwrap();
+        let b = NodeRuntime::new("b", &settings).unwrap();
+        let first = a.publisher::<HandCommand>().unwrap();
+        let e = b
+            .publisher::<HandCommand>()
+            .err()
+            .expect("second writer refused");
+        assert!(
+            matches!(&e, RuntimeError::SecondWriter { topic, others: 1 } if topic == "hand/command"),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("a command topic takes one writer"),
+            "{e}"
+        );
+        // Sensor topics take several writers; the named exception takes a command topic.
+        let _s1 = a.publisher::<GloveState>().unwrap();
+        let _s2 = b.publisher::<GloveState>().unwrap();
+        let beside = b.publisher_beside_live_in::<HandCommand>(None).unwrap();
+        drop(beside);
+        // Once the first writer is gone, the topic is free again.
+        drop(first);
+        let _second = b.publisher::<HandCommand>().unwrap();
+        drop((a, b));
+        settings.remove_shared_memory();
+    }
+
+    #[test]
+    fn one_session_per_prefix_the_second_names_the_holder() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings = IpcSettings::isolated(dir.path());
+        let held = settings.lock_session().unwrap();
+        let e = settings.lock_session().unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("(pid {})", std::process::id()))
+                && e.contains("one session per prefix"),
+            "{e}"
+        );
+        let other = IpcSettings::isolated(dir.path());
+        let _other = other
+            .lock_session()
+            .expect("another prefix is another session");
+        drop(held);
+        let _again = settings
+            .lock_session()
+            .expect("free once the holder is gone");
+    }
+
+    #[test]
+    fn an_ipc_root_others_may_write_is_refused() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("root");
+        std::fs::create_dir(&root).unwrap();
+        std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o777)).unwrap();
+        let settings = IpcSettings::isolated(&root);
+        let e = settings.config().err().expect("refused").to_string();
+        assert!(e.contains("writable by every user (mode 777)"), "{e}");
+        std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o755)).unwrap();
+        settings.config().unwrap();
+        if unsafe { libc::geteuid() } == 0 {
+            // Owned by another user (root can hand it over).
+            std::os::unix::fs::chown(&root, Some(65534), None).unwrap();
+            let e = settings.config().err().expect("refused").to_string();
+            assert!(e.contains("owned by uid 65534, not by this user"), "{e}");
+        }
+    }
 
     #[test]
     fn service_names_without_a_namespace_are_unchanged() {
@@ -593,5 +839,33 @@ mod tests {
             ..IpcSettings::default()
         };
         assert_eq!(settings.namespace().unwrap().unwrap().as_str(), "left");
+    }
+}
+
+/// Removes the iceoryx2 resources of nodes whose process died (e.g. killed with SIGKILL), so
+/// their ports no longer count (a command topic's one writer) and their restarted successors
+/// start clean. Logs what it removed.
+pub fn clean_dead_nodes(config: &Config) {
+    use iceoryx2::node::{NodeState, NodeView};
+    use iceoryx2::prelude::CallbackProgression;
+    let mut dead = Vec::new();
+    let _ = Node::<Service>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    for view in dead {
+        let name = view
+            .details()
+            .as_ref()
+            .map(|d| d.name().as_str().to_string())
+            .unwrap_or_default();
+        match view.try_remove_stale_resources() {
+            Ok(_) => {
+                tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node")
+            }
+            Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
+        }
     }
 }

@@ -41,17 +41,17 @@ pub mod realtime;
 mod signals;
 
 pub use clock::{now_ns, sleep_until, sleep_until_ns};
-pub use config_file::{load_toml, parse_toml, ConfigFileError};
+pub use config_file::{check_ms, load_toml, parse_toml, ConfigFileError, MAX_CONFIG_MS};
 pub use estop::{
-    latch_engaged, latch_holder, latch_path, latched_namespaces, set_latch, set_latch_by,
-    EStopInput,
+    latch_engaged, latch_holder, latch_path, latched_namespaces, release_latch_held_by, set_latch,
+    set_latch_by, EStopInput, LATCH_POLL,
 };
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
 pub use hand_ports::HandPorts;
 pub use health::Health;
 pub use ipc::{
-    discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, ENV_IPC_PREFIX, ENV_IPC_ROOT,
-    ENV_NAMESPACE,
+    clean_dead_nodes, discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, SessionLock,
+    ENV_IPC_PREFIX, ENV_IPC_ROOT, ENV_NAMESPACE,
 };
 pub use logging::{dropped_log_lines, init_logging};
 pub use ports::{sample_time, Publisher, Subscriber};

@@ -16,9 +16,12 @@ use toml::Spanned;
 pub enum Restart {
     /// Never.
     Never,
-    /// When it exits with a failure status or is killed by a signal.
+    /// Whenever it ends without `teleop launch` asking it to: a failure status, a signal, and
+    /// also a clean exit (status 0, e.g. a SIGTERM from someone else), which left the pipeline
+    /// without it all the same.
     OnFailure,
-    /// Whenever it ends while the session runs.
+    /// Whenever it ends while the session runs (today the same as `on-failure`: the launcher
+    /// asks a process to end only when the session stops).
     Always,
 }
 
@@ -234,6 +237,16 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
         let restart_backoff_max_ms = time(&p.restart_backoff_max_ms, "restart_backoff_max_ms", 1)?;
         let restart_window_s = time(&p.restart_window_s, "restart_window_s", 1000)?;
         let health_timeout_ms = time(&p.health_timeout_ms, "health_timeout_ms", 1)?;
+        // What `teleop launch` itself sets is not the launch file's to change: another IPC
+        // prefix or root would take the process out of the session (and out of its one-writer
+        // checks and its e-stop), another namespace out of its side.
+        if let Some(key) = p.env.keys().find(|k| reserved_env(k)) {
+            anyhow::bail!(
+                "{origin}: process.env of {name:?}: {key} is set by `teleop launch` itself \
+                 (use the process's `namespace`, `sched_*` keys or `teleop launch`'s own \
+                 environment instead)"
+            );
+        }
         let realtime = realtime(&p, &|span, field, why| {
             anyhow::anyhow!("{origin}:{}: process.{field} of {name:?}: {why}", at(span))
         })?;
@@ -263,6 +276,19 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
         session: raw.session,
         processes,
     })
+}
+
+/// True for an environment variable `teleop launch` sets for every process itself.
+fn reserved_env(key: &str) -> bool {
+    [
+        teleop_runtime::ENV_IPC_ROOT,
+        teleop_runtime::ENV_IPC_PREFIX,
+        teleop_runtime::ENV_NAMESPACE,
+        teleop_runtime::ENV_SUPERVISOR_PID,
+        "TELEOP_LAUNCH_FILE",
+    ]
+    .contains(&key)
+        || teleop_runtime::realtime::ENV_ALL.contains(&key)
 }
 
 /// The scheduling settings of a process entry, checked; `error(span, field, why)` makes the
@@ -487,6 +513,28 @@ mod tests {
 
         let e = parse_str("[session]\n").unwrap_err().to_string();
         assert!(e.contains("no [[process]]"), "{e}");
+    }
+
+    #[test]
+    fn env_that_teleop_launch_sets_itself_is_refused() {
+        for key in ["TELEOP_IPC_PREFIX", "TELEOP_IPC_ROOT", "TELEOP_NAMESPACE"] {
+            let e = parse_str(&format!(
+                "[[process]]\nname = \"a\"\nprogram = \"x\"\nenv = {{ {key} = \"other_\" }}\n"
+            ))
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.starts_with(&format!(
+                    "dir/launch.toml: process.env of \"a\": {key} is set by `teleop launch` itself"
+                )),
+                "{e}"
+            );
+        }
+        let ok = parse_str(
+            "[[process]]\nname = \"a\"\nprogram = \"x\"\nenv = { RUST_LOG = \"debug\" }\n",
+        )
+        .unwrap();
+        assert_eq!(ok.processes[0].env["RUST_LOG"], "debug");
     }
 
     #[test]

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::prelude::CallbackProgression;
-use teleop_runtime::{IpcSettings, Service};
+use teleop_runtime::{clean_dead_nodes, IpcSettings, Service};
 
 use super::config::{Launch, Process, Restart};
 
@@ -36,6 +36,8 @@ struct Slot<'a> {
     restart_at: Option<Instant>,
     node_seen: bool,
     warned_no_node: bool,
+    /// How the process last ended by itself (for the summary of a process left stopped).
+    last_exit: Option<String>,
 }
 
 /// Runs the session until a signal, the end of `duration`, or a failed required process.
@@ -45,6 +47,8 @@ pub fn run(
     duration: Option<Duration>,
 ) -> anyhow::Result<Outcome> {
     teleop_runtime::install_stop_handlers();
+    // One session per IPC prefix: a second would run every topic with two writers.
+    let _session = ipc.lock_session()?;
     let config = ipc.config()?;
     clean_dead_nodes(&config);
     let mut watch = super::summary::SessionWatch::new(ipc, &launch.namespaces())?;
@@ -72,6 +76,7 @@ pub fn run(
             restart_at: None,
             node_seen: false,
             warned_no_node: false,
+            last_exit: None,
         });
     }
     tracing::info!(
@@ -130,6 +135,23 @@ pub fn run(
         Outcome::Stopped(why) => tracing::info!("stopping ({why})"),
         Outcome::Failed(why) => tracing::error!("stopping: {why}"),
     }
+    // Processes that ended by themselves and were not restarted: the session ran without them.
+    let missing: Vec<String> = slots
+        .iter()
+        .filter(|s| s.child.is_none() && s.restart_at.is_none())
+        .map(|s| {
+            format!(
+                "MISSING {} process {}: {}, not restarted",
+                if s.process.required {
+                    "required"
+                } else {
+                    "optional"
+                },
+                s.process.name,
+                s.last_exit.as_deref().unwrap_or("ended")
+            )
+        })
+        .collect();
     stop_all(&mut slots, stop_timeout);
     clean_dead_nodes(&config);
     watch.poll();
@@ -139,6 +161,9 @@ pub fn run(
         .collect();
     let recorded = recordings.lock().map(|r| r.clone()).unwrap_or_default();
     print!("{}", watch.report(started.elapsed(), &restarts, &recorded));
+    for line in &missing {
+        println!("{line}");
+    }
     Ok(outcome)
 }
 
@@ -189,6 +214,11 @@ fn kill_hung(watch: &super::summary::SessionWatch, slots: &mut [Slot]) {
 
 /// Notices processes that ended; schedules restarts; returns why the session must stop if a
 /// required process failed for good.
+///
+/// Every exit seen here is one `teleop launch` did not ask for (it stops processes itself only
+/// in [`stop_all`]): even a clean exit (status 0, e.g. after a SIGTERM from someone else) left
+/// the pipeline without that process, so `on-failure` restarts it like any failure, and a
+/// required process that is not restarted ends the session as failed.
 fn reap(slots: &mut [Slot]) -> Option<String> {
     for slot in slots.iter_mut() {
         let Some(child) = slot.child.as_mut() else {
@@ -204,18 +234,17 @@ fn reap(slots: &mut [Slot]) -> Option<String> {
         };
         let pid = child.id();
         slot.child = None;
-        let failed = !status.success();
         let p = slot.process;
         let what = describe(status);
-        if failed {
-            tracing::error!(process = %p.name, pid, "exited: {what}");
-        } else {
-            tracing::info!(process = %p.name, pid, "exited: {what}");
-        }
+        tracing::error!(
+            process = %p.name,
+            pid,
+            "exited without being asked to: {what}"
+        );
+        slot.last_exit = Some(format!("exited by itself ({what})"));
         let wants_restart = match p.restart {
             Restart::Never => false,
-            Restart::OnFailure => failed,
-            Restart::Always => true,
+            Restart::OnFailure | Restart::Always => true,
         };
         let now = Instant::now();
         let window = p.restart_window();
@@ -235,16 +264,24 @@ fn reap(slots: &mut [Slot]) -> Option<String> {
                 p.max_restarts,
                 p.restart_window_s
             );
-        } else if failed && p.required {
+        } else if p.required {
             let why = if wants_restart {
                 format!(
-                    "required process {} failed ({what}) after {recent} restarts within {} s",
+                    "required process {} exited ({what}) after {recent} restarts within {} s",
                     p.name, p.restart_window_s
                 )
             } else {
-                format!("required process {} failed ({what})", p.name)
+                format!(
+                    "required process {} exited ({what}) and is not restarted",
+                    p.name
+                )
             };
             return Some(why);
+        } else {
+            tracing::warn!(
+                process = %p.name,
+                "not restarted: the session goes on without it (required = false)"
+            );
         }
     }
     None
@@ -430,31 +467,6 @@ fn check_liveness(config: &iceoryx2::config::Config, slots: &mut [Slot], grace: 
                 slot.started.elapsed().as_secs()
             );
             slot.warned_no_node = true;
-        }
-    }
-}
-
-/// Removes the iceoryx2 resources of nodes whose process died (e.g. killed with SIGKILL), so
-/// their restarted successors start clean.
-pub fn clean_dead_nodes(config: &iceoryx2::config::Config) {
-    let mut dead = Vec::new();
-    let _ = Node::<Service>::list(config, |state| {
-        if let NodeState::Dead(view) = state {
-            dead.push(view);
-        }
-        CallbackProgression::Continue
-    });
-    for view in dead {
-        let name = view
-            .details()
-            .as_ref()
-            .map(|d| d.name().as_str().to_string())
-            .unwrap_or_default();
-        match view.try_remove_stale_resources() {
-            Ok(_) => {
-                tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node")
-            }
-            Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
         }
     }
 }
