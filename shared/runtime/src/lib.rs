@@ -14,6 +14,8 @@
 //!   the `estop` topic as its doorbell, `estop/ack` as the nodes' answer);
 //! - [`HandPorts`]: the ports of every hand node (fresh, e-stop-gated commands in; state,
 //!   tactile, device info and health out);
+//! - [`Resume`]: the ramp from a hand's held target back to the operator's pose after a hold
+//!   (pure; the EtherCAT hands' ports and the Allegro's loop use it);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
@@ -38,6 +40,7 @@ mod ipc;
 mod logging;
 mod ports;
 pub mod realtime;
+pub mod resume;
 mod signals;
 
 pub use clock::{now_ns, sleep_until, sleep_until_ns};
@@ -55,6 +58,7 @@ pub use ipc::{
 };
 pub use logging::{dropped_log_lines, init_logging};
 pub use ports::{sample_time, Publisher, Subscriber};
+pub use resume::Resume;
 pub use signals::{
     follow_supervisor, install_stop_handlers, stop_signal, take_over_stop_signals,
     ENV_SUPERVISOR_PID,
