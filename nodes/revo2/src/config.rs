@@ -71,6 +71,10 @@ pub struct Revo2Config {
     pub joint_max: [f32; 6],
     /// Health report period.
     pub health_period_ms: u64,
+    /// After a hold (a stale command, the e-stop, a refused command), position targets move
+    /// from the held ones back to the operator's at most this fast, in joint travel per second
+    /// (the device's full speed is about `full_speed_travel_per_s`), then track the commands.
+    pub resume_speed: f64,
     /// 0x8000 configuration applied in PRE-OP.
     pub device: DeviceSettings,
 }
@@ -89,10 +93,14 @@ impl Default for Revo2Config {
             joint_min: [0.0; 6],
             joint_max: [1.0; 6],
             health_period_ms: 500,
+            resume_speed: 1.0,
             device: DeviceSettings::default(),
         }
     }
 }
+
+/// The fastest `resume_speed`, travel per second (the whole travel in a tenth of a second).
+pub const MAX_RESUME_SPEED: f64 = 10.0;
 
 impl Revo2Config {
     /// The parsed transport and every value checked; messages name the field.
@@ -134,8 +142,18 @@ impl Revo2Config {
                 ));
             }
         }
-        if self.link_timeout_ms == 0 {
-            return Err("link_timeout_ms must be > 0".into());
+        for (name, ms) in [
+            ("stale_command_ms", self.stale_command_ms),
+            ("link_timeout_ms", self.link_timeout_ms),
+            ("health_period_ms", self.health_period_ms),
+        ] {
+            teleop_runtime::check_ms(name, ms)?;
+        }
+        if !(self.resume_speed > 0.0 && self.resume_speed <= MAX_RESUME_SPEED) {
+            return Err(format!(
+                "resume_speed = {}: must be in (0, {MAX_RESUME_SPEED}] travel per second",
+                self.resume_speed
+            ));
         }
         Ok(transport)
     }
@@ -153,6 +171,27 @@ mod tests {
             ..Default::default()
         };
         assert!(bad.validate().unwrap_err().contains("joint_max[2]"));
+        for (text, field) in [
+            ("stale_command_ms = 0\n", "stale_command_ms = 0"),
+            ("stale_command_ms = 60001\n", "stale_command_ms = 60001"),
+            (
+                "stale_command_ms = 18446744073709551615\n",
+                "stale_command_ms = 18446744073709551615",
+            ),
+            ("link_timeout_ms = 0\n", "link_timeout_ms"),
+            ("health_period_ms = 100000\n", "health_period_ms"),
+            ("resume_speed = 0.0\n", "resume_speed"),
+            ("resume_speed = nan\n", "resume_speed"),
+            ("resume_speed = inf\n", "resume_speed"),
+        ] {
+            let cfg: Revo2Config = teleop_runtime::parse_toml(text, "r.toml").unwrap();
+            let err = cfg.validate().unwrap_err();
+            assert!(err.starts_with(field), "{text}: {err}");
+        }
+        let cfg: Revo2Config =
+            teleop_runtime::parse_toml("stale_command_ms = 60000\nresume_speed = 0.25\n", "r.toml")
+                .unwrap();
+        assert!(cfg.validate().is_ok());
         let cfg: Revo2Config =
             teleop_runtime::parse_toml("[device]\nled_switch = 1\nunit_mode = 0\n", "r.toml")
                 .unwrap();

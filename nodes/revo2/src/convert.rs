@@ -13,8 +13,14 @@ use teleop_revo2_protocol::{
 use crate::config::Revo2Config;
 
 /// Outputs for `cmd` in the device's `units`, and how many targets were clamped to the
-/// configured joint limits. `None` when the command is not for a Revo2 or has a mode the Revo2
-/// lacks.
+/// configured joint limits. `None` when the command is not for a Revo2, has a mode the Revo2
+/// lacks, or is no valid command: a NaN or infinite target or speed limit on any joint (the
+/// hand then holds; such a value never becomes a target).
+///
+/// Position targets are clamped to `joint_min`..`joint_max`. Velocity, effort and duty commands
+/// have no target to clamp: a joint `measured` (normalised, the latest reading) at or past a
+/// limit gets zero toward it (counted as clamped) and is free to move away; before the first
+/// reading (`None`) they move nothing.
 ///
 /// Normalised values become the unit mode's values (percent: per mille of travel, of full speed
 /// and of the maximum current; physical: degrees over the joint's range, degrees per second, mA)
@@ -24,8 +30,15 @@ pub fn outputs_for(
     cmd: &HandCommand,
     config: &Revo2Config,
     units: UnitMode,
+    measured: Option<&[f32; JOINTS]>,
 ) -> Option<(Outputs, u32)> {
     if cmd.hand_model != hand_model::REVO2 || usize::from(cmd.joint_count) < JOINTS {
+        return None;
+    }
+    if cmd.joints[..JOINTS]
+        .iter()
+        .any(|j| !(j.target.is_finite() && j.speed_limit.is_finite()))
+    {
         return None;
     }
     if cmd.units != units::NORMALISED {
@@ -40,8 +53,19 @@ pub fn outputs_for(
         _ => return None,
     };
     let full = config.full_speed_travel_per_s;
-    let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
     let mut clamps = 0;
+    let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+    // A non-position drive of joint `j` (positive closes): zero toward a limit the joint is at.
+    let limit_drive = |j: usize, v: f32| -> (f32, u32) {
+        let Some(at) = measured.map(|m| m[j]) else {
+            return (0.0, 0);
+        };
+        if (v > 0.0 && at >= config.joint_max[j]) || (v < 0.0 && at <= config.joint_min[j]) {
+            (0.0, 1)
+        } else {
+            (v, 0)
+        }
+    };
     let mut targets = [0.0; JOINTS];
     let mut seconds = [0.0; JOINTS];
     for (j, range) in DEFAULT_JOINT_RANGES.iter().enumerate() {
@@ -76,18 +100,26 @@ pub fn outputs_for(
                 };
             }
             ControlMode::Speed => {
+                let (v, c) = limit_drive(j, share(finite(joint.target) / full));
+                clamps += c;
                 targets[j] = match units {
-                    UnitMode::Percent => share(finite(joint.target) / full) * span,
-                    UnitMode::Physical => share(finite(joint.target) / full) * full * span,
+                    UnitMode::Percent => v * span,
+                    UnitMode::Physical => v * full * span,
                 }
             }
             ControlMode::Current => {
+                let (v, c) = limit_drive(j, share(joint.target));
+                clamps += c;
                 targets[j] = match units {
-                    UnitMode::Percent => share(joint.target) * f32::from(PERCENT_FULL),
-                    UnitMode::Physical => share(joint.target) * MAX_CURRENT_MA,
+                    UnitMode::Percent => v * f32::from(PERCENT_FULL),
+                    UnitMode::Physical => v * MAX_CURRENT_MA,
                 }
             }
-            ControlMode::Pwm => targets[j] = share(joint.target) * f32::from(PERCENT_FULL),
+            ControlMode::Pwm => {
+                let (v, c) = limit_drive(j, share(joint.target));
+                clamps += c;
+                targets[j] = v * f32::from(PERCENT_FULL);
+            }
         }
     }
     let multi = multi_command(mode, targets, seconds, units).ok()?;
@@ -236,9 +268,10 @@ mod tests {
             ..Default::default()
         };
         let (out, clamps) = outputs_for(
-            &cmd([0.0, 0.5, 0.9, 1.0, 0.25, f32::NAN], 1.0),
+            &cmd([0.0, 0.5, 0.9, 1.0, 0.25, 0.0], 1.0),
             &config,
             UnitMode::Percent,
+            None,
         )
         .unwrap();
         assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
@@ -248,11 +281,77 @@ mod tests {
             "1 travel/s of 2 travel/s full speed"
         );
         assert_eq!(clamps, 1);
-        let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent).unwrap();
+        let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent, None).unwrap();
         assert_eq!(out.multi.param2, [1000; 6], "no limit = full speed");
         let mut other = cmd([0.5; 6], 0.0);
         other.hand_model = hand_model::ALLEGRO;
-        assert!(outputs_for(&other, &config, UnitMode::Percent).is_none());
+        assert!(outputs_for(&other, &config, UnitMode::Percent, None).is_none());
+    }
+
+    #[test]
+    fn a_non_finite_value_is_no_command() {
+        let config = Revo2Config::default();
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            for mode in [
+                control_mode::POSITION,
+                control_mode::POSITION_TIME,
+                control_mode::VELOCITY,
+                control_mode::EFFORT,
+                control_mode::DUTY,
+            ] {
+                let mut c = cmd([0.9, 0.9, 0.9, 0.9, 0.9, bad], 1.0);
+                c.control_mode = mode;
+                let at = Some(&[0.5; 6]);
+                assert!(outputs_for(&c, &config, UnitMode::Percent, at).is_none());
+                let mut c = cmd([0.9; 6], bad);
+                c.control_mode = mode;
+                assert!(outputs_for(&c, &config, UnitMode::Physical, at).is_none());
+            }
+        }
+    }
+
+    #[test]
+    fn drives_stop_toward_a_limit_the_joint_is_at() {
+        let config = Revo2Config {
+            joint_min: [0.0, 0.2, 0.0, 0.0, 0.0, 0.0],
+            joint_max: [1.0, 0.5, 1.0, 1.0, 1.0, 1.0],
+            ..Default::default()
+        };
+        for mode in [
+            control_mode::VELOCITY,
+            control_mode::EFFORT,
+            control_mode::DUTY,
+        ] {
+            let mut c = cmd([0.5, 0.5, -0.5, 0.5, 0.5, 0.5], 0.0);
+            c.control_mode = mode;
+            let at = [0.3, 0.5, 0.2, 0.2, 0.2, 0.2];
+            let (free, clamps) =
+                outputs_for(&c, &config, UnitMode::Percent, Some(&[0.3; 6])).unwrap();
+            assert_eq!(clamps, 0, "{mode}");
+            assert!(
+                free.multi.param1[1] > 0 && free.multi.param1[2] < 0,
+                "{mode}"
+            );
+            let (out, clamps) = outputs_for(&c, &config, UnitMode::Percent, Some(&at)).unwrap();
+            assert_eq!(clamps, 1, "{mode}: joint 1 at its upper limit, closing");
+            assert_eq!(out.multi.param1[1], 0, "{mode}");
+            assert_eq!(out.multi.param1[0], free.multi.param1[0], "{mode}");
+            assert!(
+                out.multi.param1[2] < 0,
+                "{mode}: joint 2 above its lower limit"
+            );
+            // Away from the limit: followed.
+            c.joints[1].target = -0.5;
+            let (out, clamps) = outputs_for(&c, &config, UnitMode::Percent, Some(&at)).unwrap();
+            assert_eq!((clamps, out.multi.param1[1] < 0), (0, true), "{mode}");
+            // At the lower limit, opening: stopped.
+            let (out, clamps) =
+                outputs_for(&c, &config, UnitMode::Percent, Some(&[0.1; 6])).unwrap();
+            assert_eq!((clamps, out.multi.param1[1]), (1, 0), "{mode}");
+            // Before the first reading nothing moves.
+            let (out, _) = outputs_for(&c, &config, UnitMode::Percent, None).unwrap();
+            assert_eq!(out.multi.param1, [0; 6], "{mode}");
+        }
     }
 
     #[test]
@@ -262,6 +361,7 @@ mod tests {
             &cmd([0.0, 0.5, 1.0, 0.25, 0.5, 0.5], 1.0),
             &config,
             UnitMode::Physical,
+            None,
         )
         .unwrap();
         assert_eq!(clamps, 0);
@@ -271,19 +371,20 @@ mod tests {
         assert_eq!(out.multi.param2, [90; 6]);
         let mut effort = cmd([0.5; 6], 0.0);
         effort.control_mode = control_mode::EFFORT;
-        let (out, _) = outputs_for(&effort, &config, UnitMode::Physical).unwrap();
+        let (out, _) = outputs_for(&effort, &config, UnitMode::Physical, Some(&[0.5; 6])).unwrap();
         assert_eq!(
             out.multi.param1, [500; 6],
             "half the maximum current, in mA"
         );
         let mut velocity = cmd([-1.0; 6], 0.0);
         velocity.control_mode = control_mode::VELOCITY;
-        let (out, _) = outputs_for(&velocity, &config, UnitMode::Physical).unwrap();
+        let (out, _) =
+            outputs_for(&velocity, &config, UnitMode::Physical, Some(&[0.5; 6])).unwrap();
         assert_eq!(
             out.multi.param1, [-90; 6],
             "half of full speed over 90 degrees"
         );
-        let (out, _) = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
+        let (out, _) = outputs_for(&velocity, &config, UnitMode::Percent, Some(&[0.5; 6])).unwrap();
         assert_eq!(out.multi.param1, [-500; 6]);
     }
 
@@ -299,7 +400,8 @@ mod tests {
         assert_eq!(out.multi.param1, [10, 20, 30, 40, 50, 60]);
         assert_eq!(out.multi.param2, [300; 6]);
         // A grasp: the target lies past where the object stopped the fingers.
-        let (grasp, _) = outputs_for(&cmd([0.8; 6], 1.0), &config, UnitMode::Percent).unwrap();
+        let (grasp, _) =
+            outputs_for(&cmd([0.8; 6], 1.0), &config, UnitMode::Percent, None).unwrap();
         let target = position_targets(&grasp).unwrap();
         let out = hold_outputs(Some(&target), &joints, &speeds);
         assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
@@ -307,7 +409,8 @@ mod tests {
         assert_eq!(out.multi.param2, [300; 6], "at the hold speed");
         let mut velocity = cmd([0.5; 6], 0.0);
         velocity.control_mode = control_mode::VELOCITY;
-        let (moving, _) = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
+        let (moving, _) =
+            outputs_for(&velocity, &config, UnitMode::Percent, Some(&[0.5; 6])).unwrap();
         assert_eq!(position_targets(&moving), None, "no position to hold");
         // 300 per mille of 2 travel/s over 90 degrees.
         assert_eq!(hold_speeds(&config, UnitMode::Physical), [54; 6]);

@@ -1,8 +1,10 @@
 //! The Revo2 node: the master's cycle (`teleop-ecat-master`) with the [`Revo2`] driver, and the
 //! node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp; none
-//! followed while the latched e-stop is engaged, so the hand holds), hand state and tactile data
-//! out for every valid exchange, the link state while the hand is away, health and device info
-//! periodically.
+//! followed while the latched e-stop is engaged, so the hand holds; after a hold, position
+//! targets ramp back to the operator's pose at `resume_speed`), hand state and tactile data out
+//! for every valid exchange, the link state while the hand is away, health and device info
+//! periodically (also while the hand is away). A refused command (a NaN target, another hand's)
+//! is counted as an error; the hand holds.
 
 use std::time::Duration;
 
@@ -28,6 +30,7 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
         runtime,
         Duration::from_millis(config.stale_command_ms),
         Duration::from_millis(config.health_period_ms),
+        config.resume_speed,
     )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
@@ -98,6 +101,10 @@ impl Host<Revo2> for Ports {
     fn event(&mut self, event: Event) {
         match event {
             Event::Stale => self.0.health().count_timeout(),
+            Event::Refused => {
+                self.0.health().count_error();
+                self.0.refused();
+            }
             Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
             Event::Recovered | Event::Lost => self.0.health().count_error(),
         }

@@ -16,7 +16,7 @@ use teleop_ecat_sim::{AlState, SubDevice};
 mod common;
 
 use common::{position_command, positions};
-use teleop_msgs::{HandCommand, HandState, Tactile};
+use teleop_msgs::{control_mode, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
@@ -37,6 +37,7 @@ struct Rig {
     commands: Publisher<HandCommand>,
     states: Subscriber<HandState>,
     tactile: Subscriber<Tactile>,
+    health: Subscriber<NodeHealth>,
     _runtime: NodeRuntime,
     node: Option<Child>,
     sim: Sim,
@@ -88,6 +89,7 @@ impl Rig {
             commands: runtime.publisher().unwrap(),
             states: runtime.subscriber().unwrap(),
             tactile: runtime.subscriber().unwrap(),
+            health: runtime.subscriber().unwrap(),
             _runtime: runtime,
             node: Some(node),
             sim,
@@ -123,6 +125,28 @@ impl Rig {
             std::thread::sleep(Duration::from_millis(10));
         }
         self.states.poll_latest().unwrap()
+    }
+
+    /// Publishes `cmd` every 10 ms for `d`, returning the last hand state.
+    fn send(&mut self, cmd: &HandCommand, d: Duration) -> HandState {
+        let start = Instant::now();
+        while start.elapsed() < d {
+            self.commands.publish(cmd).unwrap();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.states.poll_latest().unwrap()
+    }
+
+    /// The node's health reports received since the last call (the test's own node publishes
+    /// none).
+    fn node_health(&self) -> Vec<NodeHealth> {
+        let mut out = Vec::new();
+        self.health.drain(|h| {
+            if h.name() == "revo2" {
+                out.push(*h);
+            }
+        });
+        out
     }
 }
 
@@ -286,5 +310,159 @@ fn tactile_polled_by_sdo_when_not_in_the_process_data() {
     assert!(
         lock(&rig.sim).stats().mailbox_requests > 50,
         "polled over the mailbox"
+    );
+}
+
+/// Issue 20, item 4: a NaN or infinite target is no valid command. The hand holds where it was
+/// (it used to open fully: NaN read as 0), the state says it holds, and the refusal is counted.
+#[test]
+fn non_finite_targets_hold_and_are_counted() {
+    let mut rig = Rig::new("");
+    let s = rig.command([0.9; 6], Duration::from_millis(1200));
+    let before = positions(&s);
+    assert!(
+        (before[1] - 0.9).abs() < 0.03,
+        "thumb abduction closed: {before:?}"
+    );
+    let errors_before = rig.node_health().last().map_or(0, |h| h.errors);
+    for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+        let mut cmd = position_command([0.9; 6]);
+        cmd.joints[1].target = bad; // one bad joint spoils the command
+        cmd.joints[0].target = bad;
+        let s = rig.send(&cmd, Duration::from_millis(400));
+        let p = positions(&s);
+        for (j, (a, b)) in before.iter().zip(&p).enumerate() {
+            assert!(
+                (a - b).abs() < 0.03,
+                "{bad}: joint {j} moved: {before:?} -> {p:?}"
+            );
+        }
+        assert_eq!(s.holding, 1, "{bad}: the state says the hand holds");
+    }
+    std::thread::sleep(Duration::from_millis(600));
+    let errors = rig.node_health().last().map_or(0, |h| h.errors);
+    assert!(
+        errors > errors_before,
+        "refused commands counted: errors {errors_before} -> {errors}"
+    );
+    assert!(rig.log().contains("refused"), "{}", rig.log());
+    // A valid command is followed again.
+    let s = rig.command([0.5; 6], Duration::from_millis(1200));
+    assert!((positions(&s)[1] - 0.5).abs() < 0.03, "{:?}", positions(&s));
+    assert_eq!(s.holding, 0);
+}
+
+/// Issue 20, item 4: velocity and duty commands respect `joint_min`/`joint_max`: motion toward
+/// a limit stops once the joint reaches it (it used to run on to the end of travel), motion away
+/// from it is followed.
+#[test]
+fn velocity_and_duty_commands_stop_at_the_joint_limits() {
+    let mut rig = Rig::new(
+        "joint_min = [0.0, 0.2, 0.0, 0.0, 0.0, 0.0]\njoint_max = [1.0, 0.5, 1.0, 1.0, 1.0, 1.0]\n",
+    );
+    let mut cmd = position_command([0.0; 6]);
+    cmd.control_mode = control_mode::VELOCITY;
+    for j in &mut cmd.joints {
+        j.target = 0.0;
+    }
+    cmd.joints[1].target = 1.0; // travel per second, closing
+    let s = rig.send(&cmd, Duration::from_millis(1500));
+    let p = positions(&s)[1];
+    assert!(
+        (0.45..=0.55).contains(&p),
+        "velocity: thumb abduction stopped at its limit 0.5: {p}"
+    );
+    let mut duty = cmd;
+    duty.control_mode = control_mode::DUTY;
+    duty.joints[1].target = -0.5; // opening, toward joint_min
+    let s = rig.send(&duty, Duration::from_millis(1500));
+    let p = positions(&s)[1];
+    assert!(
+        (0.15..=0.25).contains(&p),
+        "duty: thumb abduction stopped at its limit 0.2: {p}"
+    );
+    duty.joints[1].target = 0.5; // away from the lower limit: followed
+    let s = rig.send(&duty, Duration::from_millis(150));
+    assert!(positions(&s)[1] > p + 0.05, "{:?}", positions(&s));
+    let clamps = {
+        std::thread::sleep(Duration::from_millis(600));
+        rig.node_health().last().map_or(0, |h| h.clamps)
+    };
+    assert!(clamps > 0, "limited commands counted as clamps");
+}
+
+/// Issue 20, item 8: while the link is down the node keeps publishing its health, so the
+/// launch supervisor does not take it for hung (it published none and was killed).
+#[test]
+fn health_keeps_coming_while_the_link_is_down() {
+    let mut rig = Rig::new("");
+    rig.command([0.3; 6], Duration::from_millis(300));
+    lock(&rig.sim).faults().link_down = true;
+    rig.wait_state(Duration::from_secs(5), "link down", |s| s.link_up == 0);
+    let _ = rig.node_health();
+    let start = Instant::now();
+    let mut reports = 0;
+    let mut at = Vec::new();
+    while start.elapsed() < Duration::from_secs(4) {
+        let n = rig.node_health().len();
+        if n > 0 {
+            at.push(start.elapsed());
+        }
+        reports += n;
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let down = rig.states.poll_latest().unwrap();
+    lock(&rig.sim).faults().link_down = false;
+    assert_eq!(down.link_up, 0, "the link stayed down throughout");
+    // Every 500 ms (health_period_ms): about 8 in 4 s.
+    assert!(
+        reports >= 4,
+        "health reports while the link was down: {reports} at {at:?}\n{}",
+        rig.log()
+    );
+    rig.wait_state(Duration::from_secs(15), "link up again", |s| s.link_up == 1);
+}
+
+/// Issue 20, item 12: when the command comes back after a stale period, the hand does not jump
+/// to the operator's pose at full speed: the target ramps from the held position at the
+/// configured resume speed (the default: 1 travel per second; the device and these commands
+/// could do 2), then tracks.
+#[test]
+fn after_a_stale_period_the_hand_ramps_to_the_new_pose() {
+    let mut rig = Rig::new("");
+    rig.command([0.1; 6], Duration::from_millis(1000));
+    rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
+    std::thread::sleep(Duration::from_millis(200));
+    // Far pose B for the free thumb abduction, at the commands' full speed (2 travel/s).
+    let b = [0.1, 0.9, 0.1, 0.1, 0.1, 0.1];
+    let _ = rig.states.drain(|_| {});
+    let mut track: Vec<(u64, f32)> = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(2000) {
+        rig.commands.publish(&position_command(b)).unwrap();
+        rig.states.drain(|s| {
+            if s.link_up == 1 {
+                track.push((s.header.origin_ns, s.joints[1].position));
+            }
+        });
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let last = track.last().unwrap().1;
+    assert!((last - 0.9).abs() < 0.03, "reached B: {last}");
+    // The fastest motion over any 50 ms: bounded by the resume speed (with room for the
+    // device's own lag), not the full speed.
+    let mut fastest = 0.0f32;
+    for (i, &(t0, p0)) in track.iter().enumerate() {
+        if let Some(&(t1, p1)) = track[i..].iter().find(|(t, _)| t - t0 >= 50_000_000) {
+            fastest = fastest.max((p1 - p0).abs() / ((t1 - t0) as f32 * 1e-9));
+        }
+    }
+    assert!(
+        fastest < 1.3,
+        "the hand moved at {fastest} travel/s toward B: a jump, not a ramp"
+    );
+    assert!(
+        fastest > 0.7,
+        "it moves at about the resume speed: {fastest}"
     );
 }

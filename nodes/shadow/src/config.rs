@@ -43,6 +43,9 @@ pub struct ShadowConfig {
     pub motor_timeout_ms: u64,
     /// Health report period.
     pub health_period_ms: u64,
+    /// After a hold (a stale command, the e-stop, a refused command), joint targets move from
+    /// the held ones back to the operator's at most this fast, rad/s, then track the commands.
+    pub resume_speed: f64,
     /// Joint -> motor mapping of this hand: `E_v3`, `E_v4` or `E_v5` (sr_hand_config's
     /// `general_info.yaml` names it).
     pub mapping: String,
@@ -76,6 +79,7 @@ impl Default for ShadowConfig {
             link_timeout_ms: 100,
             motor_timeout_ms: 100,
             health_period_ms: 500,
+            resume_speed: 1.0,
             mapping: "E_v3".into(),
             demand: "pwm".into(),
             numbering: "shipped".into(),
@@ -141,6 +145,9 @@ fn check_gains(name: &str, g: &Gains, demand: DemandMode) -> Result<(), String> 
     Ok(())
 }
 
+/// The fastest `resume_speed`, rad/s.
+pub const MAX_RESUME_SPEED: f64 = 20.0;
+
 impl ShadowConfig {
     /// Every value checked; messages name the field.
     pub fn validate(&self) -> Result<Checked, String> {
@@ -152,10 +159,15 @@ impl ShadowConfig {
             ("link_timeout_ms", self.link_timeout_ms),
             ("motor_timeout_ms", self.motor_timeout_ms),
             ("stale_command_ms", self.stale_command_ms),
+            ("health_period_ms", self.health_period_ms),
         ] {
-            if v == 0 {
-                return Err(format!("{name} must be > 0"));
-            }
+            teleop_runtime::check_ms(name, v)?;
+        }
+        if !(self.resume_speed > 0.0 && self.resume_speed <= MAX_RESUME_SPEED) {
+            return Err(format!(
+                "resume_speed = {}: must be in (0, {MAX_RESUME_SPEED}] rad/s",
+                self.resume_speed
+            ));
         }
         let mapping = match self.mapping.as_str() {
             "E_v3" => Mapping::EV3,
@@ -271,6 +283,22 @@ mod tests {
             .validate()
             .unwrap_err()
             .contains("increasing raw order"));
+        for (text, field) in [
+            ("stale_command_ms = 0\n", "stale_command_ms = 0"),
+            ("stale_command_ms = 60001\n", "stale_command_ms = 60001"),
+            (
+                "link_timeout_ms = 18446744073709551615\n",
+                "link_timeout_ms",
+            ),
+            ("motor_timeout_ms = 0\n", "motor_timeout_ms"),
+            ("health_period_ms = 0\n", "health_period_ms"),
+            ("resume_speed = -1.0\n", "resume_speed"),
+            ("resume_speed = nan\n", "resume_speed"),
+        ] {
+            let cfg: ShadowConfig = teleop_runtime::parse_toml(text, "s.toml").unwrap();
+            let err = cfg.validate().unwrap_err();
+            assert!(err.starts_with(field), "{text}: {err}");
+        }
         let err = teleop_runtime::parse_toml::<ShadowConfig>("gain = 1\n", "s.toml").unwrap_err();
         assert!(err.to_string().contains("unknown field `gain`"), "{err}");
     }

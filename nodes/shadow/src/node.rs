@@ -1,9 +1,11 @@
 //! The Shadow node: the master's cycle (`teleop-ecat-master`) with the [`Shadow`] driver, and
 //! the node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp;
-//! none followed while the latched e-stop is engaged, so the hand holds its last target),
+//! none followed while the latched e-stop is engaged, so the hand holds its last target; after a
+//! hold, targets ramp back to the operator's pose at `resume_speed`; a refused command, e.g. a
+//! NaN target, is counted as an error and the hand holds),
 //! `hand/state` (24 joints, efforts from the strain gauges, each joint's motor flags as its
 //! status) and `hand/tactile` (PST pressure) out for every valid exchange, the link state while
-//! the hand is away, health and device info periodically.
+//! the hand is away, health and device info periodically (also while the hand is away).
 
 use std::time::Duration;
 
@@ -32,6 +34,7 @@ pub fn run(
         runtime,
         Duration::from_millis(config.stale_command_ms),
         Duration::from_millis(config.health_period_ms),
+        config.resume_speed,
     )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
@@ -125,6 +128,10 @@ impl Host<Shadow> for Ports {
     fn event(&mut self, event: Event) {
         match event {
             Event::Stale => self.0.health().count_timeout(),
+            Event::Refused => {
+                self.0.health().count_error();
+                self.0.refused();
+            }
             Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
             Event::Recovered | Event::Lost => self.0.health().count_error(),
         }

@@ -13,7 +13,7 @@ use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::hand::{Hand, Object};
 use sim_shadow::palm::{Palm, CUT_OUT_C};
 use teleop_ecat_link::{serve_socket, StreamServer};
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, Tactile};
+use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 use teleop_shadow::joints::JOINTS;
 use teleop_shadow_protocol::mapping::Mapping;
@@ -32,6 +32,7 @@ struct Rig {
     commands: Publisher<HandCommand>,
     states: Subscriber<HandState>,
     tactile: Subscriber<Tactile>,
+    health: Subscriber<NodeHealth>,
     _runtime: NodeRuntime,
     node: Option<Child>,
     sim: Sim,
@@ -83,6 +84,7 @@ impl Rig {
             commands: runtime.publisher().unwrap(),
             states: runtime.subscriber().unwrap(),
             tactile: runtime.subscriber().unwrap(),
+            health: runtime.subscriber().unwrap(),
             _runtime: runtime,
             node: Some(node),
             sim,
@@ -147,6 +149,17 @@ impl Rig {
             std::thread::sleep(Duration::from_millis(10));
         }
         self.states.poll_latest().unwrap()
+    }
+
+    /// The node's health reports received since the last call.
+    fn node_health(&self) -> Vec<NodeHealth> {
+        let mut out = Vec::new();
+        self.health.drain(|h| {
+            if h.name() == "shadow" {
+                out.push(*h);
+            }
+        });
+        out
     }
 
     fn pid(&self) -> u32 {
@@ -283,4 +296,31 @@ fn a_silent_motor_is_reported_and_an_overheated_one_stopped_while_the_rest_work(
         0,
         "the flag in hand/state"
     );
+}
+
+/// Issue 20, item 8: while the link is down the node keeps publishing its health, so the
+/// launch supervisor does not take it for hung (it published none and was killed).
+#[test]
+fn health_keeps_coming_while_the_link_is_down() {
+    let mut rig = Rig::new();
+    rig.command(&[("FFJ3", 0.2)], Duration::from_millis(300));
+    lock(&rig.sim).bridge.faults().link_down = true;
+    rig.wait_state(Duration::from_secs(3), "link down", |s| s.link_up == 0);
+    let _ = rig.node_health();
+    let start = Instant::now();
+    let mut reports = 0;
+    while start.elapsed() < Duration::from_secs(4) {
+        reports += rig.node_health().len();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let down = rig.states.poll_latest().unwrap();
+    lock(&rig.sim).bridge.faults().link_down = false;
+    assert_eq!(down.link_up, 0, "the link stayed down throughout");
+    // Every 500 ms (health_period_ms): about 8 in 4 s.
+    assert!(
+        reports >= 4,
+        "health reports while the link was down: {reports}\n{}",
+        rig.log()
+    );
+    rig.wait_state(Duration::from_secs(10), "link up again", |s| s.link_up == 1);
 }

@@ -19,6 +19,9 @@ use crate::driver::{Driver, Image, OwnExchange, OwnLayout};
 /// Cycles the device gets its hold outputs for before the master leaves OP on stop.
 const STOP_HOLD_CYCLES: u32 = 10;
 
+/// How often [`Host::link_down`] is called while the master waits to bring the bus up again.
+pub const LINK_DOWN_REPORT: Duration = Duration::from_millis(100);
+
 /// How the master cycles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Settings {
@@ -45,6 +48,9 @@ pub struct Counters {
 pub enum Event {
     /// The command went stale: the device holds.
     Stale,
+    /// A fresh command was refused by the driver (not for this device, or not a valid command,
+    /// e.g. a NaN target): the device holds. Reported every cycle it is refused.
+    Refused,
     /// A fresh command was packed with this many values clamped.
     Clamped(u32),
     /// A SubDevice dropped to SAFE-OP; its error was acknowledged and OP requested.
@@ -88,7 +94,10 @@ pub trait Host<D: Driver> {
     /// Something to count (see [`Event`]).
     fn event(&mut self, event: Event);
 
-    /// The link is down (bring-up failed, or the device was lost); `counters` so far.
+    /// The link is down (bring-up failed, or the device was lost); `counters` so far. Called
+    /// after each failed bring-up and each loss, and every [`LINK_DOWN_REPORT`] while waiting to
+    /// try again, so the host can keep reporting (its health above all) while the device is
+    /// away.
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()>;
 }
 
@@ -164,7 +173,7 @@ pub fn run<D: Driver, H: Host<D>>(
                     backoff.as_millis()
                 );
                 host.link_down(&counters)?;
-                sleep_interruptible(backoff, host);
+                wait_link_down(backoff, host, &counters)?;
                 backoff = (backoff * 2).min(Duration::from_secs(2));
             }
         }
@@ -173,11 +182,23 @@ pub fn run<D: Driver, H: Host<D>>(
     Ok(())
 }
 
-fn sleep_interruptible<D: Driver>(d: Duration, host: &impl Host<D>) {
-    let end = Instant::now() + d;
-    while Instant::now() < end && !host.stop_requested() {
+/// Waits `d` (less when the host asks to stop), telling the host the link is down every
+/// [`LINK_DOWN_REPORT`].
+fn wait_link_down<D: Driver>(
+    d: Duration,
+    host: &mut impl Host<D>,
+    counters: &Counters,
+) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let mut reported = start;
+    while start.elapsed() < d && !host.stop_requested() {
         std::thread::sleep(Duration::from_millis(10));
+        if reported.elapsed() >= LINK_DOWN_REPORT {
+            reported = Instant::now();
+            host.link_down(counters)?;
+        }
     }
+    Ok(())
 }
 
 /// Copies `outputs` into ethercrab's process image, SubDevice by SubDevice.
@@ -304,6 +325,7 @@ fn cycle<D: Driver, H: Host<D>>(
             let mut deadline = Instant::now();
             let mut last_inputs: Option<D::Inputs> = None;
             let mut stale = true;
+            let mut refused = false;
             let mut holding = false;
             let mut lost_in_a_row = 0u32;
             let mut wrong_in_a_row = 0u32;
@@ -318,21 +340,39 @@ fn cycle<D: Driver, H: Host<D>>(
                     deadline = now; // far behind (e.g. after a stall): re-anchor instead of bursting
                 }
                 // What to send.
-                let packed = host.command().and_then(|c| driver.pack(&c, &mut outputs));
+                let command = host.command();
+                let fresh = command.is_some();
+                let packed = command.and_then(|c| driver.pack(&c, &mut outputs));
                 let write = match packed {
                     Some(clamps) => {
                         if stale {
                             tracing::info!("hand commands fresh: following them");
                         }
                         stale = false;
+                        refused = false;
                         holding = false;
                         host.event(Event::Clamped(clamps));
                         true
                     }
                     None => {
+                        if fresh {
+                            if !refused {
+                                tracing::warn!(
+                                    "hand command refused (not for the {}, or not a valid \
+                                     command): the device holds",
+                                    driver.name()
+                                );
+                                refused = true;
+                            }
+                            host.event(Event::Refused);
+                        } else {
+                            refused = false;
+                        }
                         if !stale {
-                            tracing::warn!("hand command stale: the device holds");
-                            host.event(Event::Stale);
+                            if !fresh {
+                                tracing::warn!("hand command stale: the device holds");
+                                host.event(Event::Stale);
+                            }
                             stale = true;
                         }
                         if holding && !driver.hold_every_cycle() {

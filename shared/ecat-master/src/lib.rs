@@ -35,7 +35,9 @@ pub use bus::{
     connector, expected_wkc, recover_op, scan, Bus, CurrentBus, Found, OpGroup, PreOpGroup,
     MAX_PDI, MAX_SUBDEVICES,
 };
-pub use cycle::{bring_up, discover, leave_op, run, Counters, Event, Exchange, Host, Settings};
+pub use cycle::{
+    bring_up, discover, leave_op, run, Counters, Event, Exchange, Host, Settings, LINK_DOWN_REPORT,
+};
 pub use driver::{Driver, Image, OwnExchange, OwnLayout};
 pub use pump::{Connect, Pump, PumpStatus};
 pub use transport::Transport;

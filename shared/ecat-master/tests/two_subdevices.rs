@@ -439,7 +439,7 @@ impl Host<Gripper> for TestHost {
             Event::Stale => self.seen().stale += 1,
             Event::Lost => self.seen().lost += 1,
             Event::Recovered => self.seen().recovered += 1,
-            Event::Clamped(_) => {}
+            Event::Clamped(_) | Event::Refused => {}
         }
     }
 
