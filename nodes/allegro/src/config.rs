@@ -132,6 +132,10 @@ pub struct AllegroConfig {
     pub info_period_ms: u64,
     /// Health and device info report period.
     pub health_period_ms: u64,
+    /// After a hold (a stale or refused command, the e-stop) and at the first command, joint
+    /// targets move from the held ones back to the operator's at most this fast, rad/s, then
+    /// track the commands.
+    pub resume_speed: f64,
     /// The hand profile (joint names and limits), relative to this file's folder.
     pub hand_profile: Option<PathBuf>,
 }
@@ -179,6 +183,7 @@ impl Default for AllegroConfig {
             reconnect_backoff_ms: [100, 2000],
             info_period_ms: 1000,
             health_period_ms: 500,
+            resume_speed: 1.0,
             hand_profile: None,
         }
     }
@@ -229,7 +234,12 @@ pub struct Settings {
     pub info_period: Option<Duration>,
     /// Health period.
     pub health_period: Duration,
+    /// Most joint target motion after a hold, rad/s.
+    pub resume_speed: f64,
 }
+
+/// The fastest `resume_speed`, rad/s.
+pub const MAX_RESUME_SPEED: f64 = 20.0;
 
 impl AllegroConfig {
     /// Checks every value; the message names the field.
@@ -290,10 +300,18 @@ impl AllegroConfig {
             ("bringup_timeout_ms", self.bringup_timeout_ms),
             ("health_period_ms", self.health_period_ms),
             ("reconnect_backoff_ms[0]", self.reconnect_backoff_ms[0]),
+            ("reconnect_backoff_ms[1]", self.reconnect_backoff_ms[1]),
         ] {
-            if v == 0 {
-                return Err(format!("{name} must be > 0"));
-            }
+            teleop_runtime::check_ms(name, v)?;
+        }
+        if self.info_period_ms > 0 {
+            teleop_runtime::check_ms("info_period_ms", self.info_period_ms)?;
+        }
+        if !(self.resume_speed > 0.0 && self.resume_speed <= MAX_RESUME_SPEED) {
+            return Err(format!(
+                "resume_speed = {}: must be in (0, {MAX_RESUME_SPEED}] rad/s",
+                self.resume_speed
+            ));
         }
         if self.reconnect_backoff_ms[1] < self.reconnect_backoff_ms[0] {
             return Err(format!(
@@ -342,6 +360,7 @@ impl AllegroConfig {
             info_period: (self.info_period_ms > 0)
                 .then(|| Duration::from_millis(self.info_period_ms)),
             health_period: Duration::from_millis(self.health_period_ms),
+            resume_speed: self.resume_speed,
         })
     }
 }
@@ -422,5 +441,30 @@ mod tests {
         cfg = AllegroConfig::default();
         cfg.pwm_limit[2] = 0;
         assert!(cfg.validate().unwrap_err().contains("pwm_limit[2]"));
+        for (text, field) in [
+            ("stale_command_ms = 0\n", "stale_command_ms = 0"),
+            ("stale_command_ms = 60001\n", "stale_command_ms = 60001"),
+            (
+                "frame_timeout_ms = 18446744073709551615\n",
+                "frame_timeout_ms = 18446744073709551615",
+            ),
+            ("bringup_timeout_ms = 0\n", "bringup_timeout_ms"),
+            ("health_period_ms = 120000\n", "health_period_ms"),
+            (
+                "reconnect_backoff_ms = [100, 3600000]\n",
+                "reconnect_backoff_ms[1]",
+            ),
+            ("info_period_ms = 86400000\n", "info_period_ms"),
+            ("resume_speed = 0.0\n", "resume_speed"),
+            ("resume_speed = inf\n", "resume_speed"),
+        ] {
+            let err = parse(text).unwrap().validate().unwrap_err();
+            assert!(err.starts_with(field), "{text}: {err}");
+        }
+        let s = parse("info_period_ms = 0\nresume_speed = 0.5\n")
+            .unwrap()
+            .validate()
+            .unwrap();
+        assert_eq!((s.info_period, s.resume_speed), (None, 0.5));
     }
 }

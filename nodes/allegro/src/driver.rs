@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use teleop_allegro_protocol::{v4, Generation, Protocol, JOINTS};
 use teleop_can_link::{BusState, CanLink, LinkError};
+use teleop_runtime::Resume;
 
 use crate::bringup::{self, Hand, Identity};
 use crate::config::Settings;
@@ -23,7 +24,8 @@ use crate::wire::{Incoming, Wire};
 pub enum Target {
     /// Hold the last target (where the hand was at bring-up if there was none).
     Hold,
-    /// Go to these joint angles (rad, joint order).
+    /// Go to these joint angles (rad, joint order); after a hold (and at the first command) the
+    /// target ramps there from the held one at `resume_speed` ([`Resume`]).
     Follow([f64; JOINTS]),
 }
 
@@ -301,8 +303,10 @@ fn serve(
     })?;
     let mut identity = hand.identity.clone();
     let mut gather = Gather::new();
-    // Before any command the target is where the hand is (set at the first complete cycle).
-    let mut held: Option<[f64; JOINTS]> = None;
+    // The held target, and the ramp back to the commands after a hold: before any command the
+    // hand holds where it is (set at the first complete cycle), and the first command ramps
+    // from there too.
+    let mut resume = Resume::new(settings.resume_speed);
     let mut run = 0u32;
     let mut missed_since_complete = 0u32;
     let period = settings.period.as_secs_f64();
@@ -338,15 +342,23 @@ fn serve(
                         Pushed::Complete => {
                             let received_ns = teleop_runtime::now_ns();
                             let q = *gather.positions();
-                            let (target, holding) = match host.target() {
-                                Target::Follow(t) => {
-                                    held = Some(t);
-                                    (t, false)
-                                }
-                                Target::Hold => (*held.get_or_insert(q), true),
-                            };
                             let dt = period * f64::from(1 + missed_since_complete);
                             missed_since_complete = 0;
+                            resume.held_at(&q);
+                            let (target, holding) = match host.target() {
+                                Target::Follow(mut t) => {
+                                    resume.follow(&mut t, dt);
+                                    (t, false)
+                                }
+                                Target::Hold => {
+                                    resume.hold();
+                                    let mut t = q;
+                                    for (t, h) in t.iter_mut().zip(resume.held().unwrap_or(&q)) {
+                                        *t = *h;
+                                    }
+                                    (t, true)
+                                }
+                            };
                             let out = controller.step(&q, dt, &target);
                             counters.limited += u64::from(out.limited);
                             let mut sent = true;
