@@ -516,6 +516,42 @@ mod tests {
     }
 
     #[test]
+    fn every_shipped_launch_file_runs_its_time_critical_processes_at_real_time_priority() {
+        let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut files = vec![repo.join("launch.toml")];
+        files.extend(
+            std::fs::read_dir(repo.join("launch"))
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.extension().is_some_and(|e| e == "toml")),
+        );
+        assert!(files.len() >= 10, "{files:?}");
+        let time_critical = [
+            "teleop-glove",
+            "teleop-revo2",
+            "teleop-allegro",
+            "teleop-shadow",
+            "teleop-retarget",
+            "teleop-feedback",
+            "teleop-bridge",
+        ];
+        for file in files {
+            let launch = load(&file).unwrap();
+            for p in &launch.processes {
+                if time_critical.contains(&p.program.as_str()) {
+                    assert_eq!(
+                        p.realtime.policy,
+                        SchedPolicy::Fifo,
+                        "{}: process {} runs without a real-time policy",
+                        file.display(),
+                        p.name
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn env_that_teleop_launch_sets_itself_is_refused() {
         for key in ["TELEOP_IPC_PREFIX", "TELEOP_IPC_ROOT", "TELEOP_NAMESPACE"] {
             let e = parse_str(&format!(
