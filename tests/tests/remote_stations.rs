@@ -390,6 +390,159 @@ fn rogue_is_refused(
     }
 }
 
+/// A bridge of a third station in the operator's namespace, in a sandbox of its own, with the
+/// configuration `config` (its certificate files under `certs/` there, copied from `certs`);
+/// its log goes to `bridge.log` in the sandbox.
+fn third_bridge(
+    ns: &Netns,
+    certs: &std::path::Path,
+    files: &[&str],
+    config: &str,
+) -> (Sandbox, std::process::Child) {
+    let third = Sandbox::new();
+    let to = third.dir.path().join("certs");
+    std::fs::create_dir_all(&to).unwrap();
+    for f in files {
+        // fs::copy keeps the mode: keys stay readable by their owner only.
+        std::fs::copy(certs.join(f), to.join(f)).unwrap();
+    }
+    let config = third.write("bridge.toml", config);
+    let log = std::fs::File::create(third.dir.path().join("bridge.log")).unwrap();
+    let mut cmd = ns.command(bin("teleop-bridge"));
+    cmd.arg("--config")
+        .arg(&config)
+        .envs(third.ipc.to_env())
+        .env("TELEOP_LOG", "info")
+        .current_dir(third.dir.path())
+        .stdout(log.try_clone().unwrap())
+        .stderr(log);
+    teleop_e2e::netns::die_with_parent(&mut cmd);
+    let child = cmd.spawn().unwrap();
+    (third, child)
+}
+
+/// A certificate from the session's own CA made for another station (`viewer`), in a bridge
+/// configured as `station = "operator"`, cannot act as the operator: its commands never reach
+/// the robot, its released e-stop does not release the robot's latch that the real operator's
+/// engaged, it receives no hand state; the robot's bridge logs and counts the refusal, and the
+/// real operator goes on working (issue 20, item 1).
+#[test]
+fn a_certificate_of_another_station_cannot_act_as_the_operator() {
+    skip_unless_privileged!();
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let (op_ns, _robot_ns, operator, robot) = teleop_e2e::stations::start("tlsv", |_, t| t);
+    let both = (&operator, &robot);
+    let commands = robot.node.subscriber::<HandCommand>().unwrap();
+    let retarget = source_id("retarget");
+    let mut crossed = 0;
+    until(
+        both,
+        Duration::from_secs(60),
+        "the operator's commands cross",
+        || {
+            commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+            crossed > 50
+        },
+    );
+
+    // The real operator's e-stop engages the robot's latch.
+    let robot_latch = latch_path(&robot.sandbox.ipc, None);
+    let out = operator.sandbox.run_teleop(&["estop"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    until(
+        both,
+        Duration::from_secs(5),
+        "the robot's latch engaged",
+        || robot_latch.exists(),
+    );
+
+    // `viewer`, certified by the same CA, in a bridge that says it is the operator (its own
+    // e-stop released: its heartbeats say so).
+    make_certs(&operator.sandbox, &[format!("viewer={OPERATOR_IP}")]);
+    let config = std::fs::read_to_string(Sandbox::repo().join("config/bridge/operator.toml"))
+        .unwrap()
+        .replace("../../certs/", "certs/")
+        .replace("operator.pem", "viewer.pem")
+        .replace("operator.key", "viewer.key");
+    assert!(config.contains("station = \"operator\"") && config.contains("viewer.key"));
+    let (viewer, mut child) = third_bridge(
+        &op_ns,
+        &operator.sandbox.dir.path().join("certs"),
+        &["ca.pem", "viewer.pem", "viewer.key"],
+        &config,
+    );
+    let node = NodeRuntime::new("viewer-cmd", &viewer.ipc).unwrap();
+    let mut publisher: Publisher<HandCommand> = node.publisher().unwrap();
+    let states_at_viewer = node.subscriber::<HandState>().unwrap();
+    let viewer_id = source_id("viewer-cmd");
+    let (mut reached, mut released, mut states) = (0u32, 0u32, 0usize);
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(6) {
+        publisher.publish(&HandCommand::default()).unwrap();
+        commands.drain(|c| reached += u32::from(c.header.source_id == viewer_id));
+        states += states_at_viewer.drain(|_| {});
+        released += u32::from(!robot_latch.exists());
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    teleop_e2e::netns::stop(&mut child);
+    let log = std::fs::read_to_string(viewer.dir.path().join("bridge.log")).unwrap();
+    assert!(log.contains("zenoh session open"), "{log}");
+    assert!(
+        reached == 0 && released == 0 && states == 0 && !log.contains("link up"),
+        "a certificate for `viewer` acting as the operator: {reached} commands reached the \
+         robot, the robot's latch seen released {released} times, {states} hand states reached \
+         it\n--- viewer ---\n{log}\n--- robot ---\n{}",
+        robot.logs()
+    );
+    // The robot's bridge says whom it refused, and counts it.
+    let robot_log = robot.logs();
+    assert!(
+        robot_log.contains("certificate names \"viewer\""),
+        "the robot's bridge does not report the refused certificate\n{robot_log}"
+    );
+    let mut errors = 0;
+    until(
+        both,
+        Duration::from_secs(3),
+        "the refusal counted in health",
+        || {
+            robot.health_of("bridge", |h| errors = errors.max(h.errors));
+            errors > 0
+        },
+    );
+
+    // The real operator still works: its release crosses and its commands go on crossing.
+    let out = operator.sandbox.run_teleop(&["estop", "--release"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    until(
+        both,
+        Duration::from_secs(5),
+        "the robot's latch released by the operator",
+        || !robot_latch.exists(),
+    );
+    let mut crossed = 0;
+    until(
+        both,
+        Duration::from_secs(10),
+        "the operator's commands still cross",
+        || {
+            commands.drain(|c| crossed += u32::from(c.header.source_id == retarget));
+            crossed > 50
+        },
+    );
+    let (mut operator, mut robot) = (operator, robot);
+    assert!(operator.session.stop().success(), "{}", operator.logs());
+    assert!(robot.session.stop().success(), "{}", robot.logs());
+}
+
 /// The Allegro's and the Shadow Hand's stations close their loops across the bridges too: the
 /// operator's commands reach the hand node, its states come back, the glove feels the ball.
 #[test]

@@ -151,6 +151,80 @@ pub fn valid_name(name: &str) -> bool {
             .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_' || b == b'-')
 }
 
+/// The longest time a configuration may give, in ms: a day. (Anything near `u64::MAX / 10^6`
+/// would overflow the bridge's nanosecond clock.)
+pub const MAX_MS: u64 = 24 * 3600 * 1000;
+
+fn too_large(ms: u64) -> String {
+    format!("{ms} ms is too large (at most {MAX_MS}, a day)")
+}
+
+/// True for an endpoint whose address is 0.0.0.0 or `[::]` (every interface).
+fn listens_everywhere(endpoint: &str) -> bool {
+    let address = endpoint.split_once('/').map_or(endpoint, |(_, a)| a);
+    let address = address.split(['?', '#']).next().unwrap_or(address);
+    address
+        .parse::<std::net::SocketAddr>()
+        .is_ok_and(|a| a.ip().is_unspecified())
+}
+
+/// A private key readable by group or others is refused, naming the fix; a missing one is left
+/// to [`BridgeConfig::missing_files`].
+fn check_key_mode(key: &Path) -> Result<(), String> {
+    use std::os::unix::fs::PermissionsExt;
+    let Ok(meta) = std::fs::metadata(key) else {
+        return Ok(());
+    };
+    let mode = meta.permissions().mode() & 0o777;
+    if mode & 0o077 != 0 {
+        return Err(format!(
+            "{} is readable by others (mode {mode:03o}): a private key must be its owner's \
+             only; run `chmod 600 {}`",
+            key.display(),
+            key.display()
+        ));
+    }
+    Ok(())
+}
+
+/// This station's certificate must be signed by the configured CA (the one the peer's
+/// certificate is checked against and the peer checks this one against): otherwise the peer
+/// refuses it in the handshake, with a message on the peer's side only. Missing files are left
+/// to [`BridgeConfig::missing_files`].
+fn check_issuer(ca: &Path, certificate: &Path) -> Result<(), String> {
+    use x509_parser::pem::parse_x509_pem;
+    let (Ok(ca_bytes), Ok(cert_bytes)) = (std::fs::read(ca), std::fs::read(certificate)) else {
+        return Ok(());
+    };
+    let not_pem =
+        |path: &Path, e: String| format!("{}: not a PEM certificate: {e}", path.display());
+    let (_, ca_pem) = parse_x509_pem(&ca_bytes).map_err(|e| not_pem(ca, e.to_string()))?;
+    let (_, cert_pem) =
+        parse_x509_pem(&cert_bytes).map_err(|e| not_pem(certificate, e.to_string()))?;
+    let ca_x509 = ca_pem
+        .parse_x509()
+        .map_err(|e| not_pem(ca, e.to_string()))?;
+    let cert_x509 = cert_pem
+        .parse_x509()
+        .map_err(|e| not_pem(certificate, e.to_string()))?;
+    let signed = cert_x509.issuer() == ca_x509.subject()
+        && cert_x509
+            .verify_signature(Some(ca_x509.public_key()))
+            .is_ok();
+    if signed {
+        return Ok(());
+    }
+    Err(format!(
+        "certificate from another CA: {} (issued by \"{}\") is not signed by the CA {} \
+         (\"{}\"); use the ca.pem of the session that made this certificate, or make this \
+         station's certificate with this CA (`teleop certs`)",
+        certificate.display(),
+        cert_x509.issuer(),
+        ca.display(),
+        ca_x509.subject()
+    ))
+}
+
 impl BridgeConfig {
     /// Reads and checks the file at `path`; the certificate paths are relative to its folder.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
@@ -160,6 +234,18 @@ impl BridgeConfig {
             for file in [&mut tls.ca, &mut tls.certificate, &mut tls.key] {
                 *file = dir.join(&*file);
             }
+        }
+        if let Some(tls) = &config.tls {
+            let invalid = |field: &'static str| {
+                let file = path.display().to_string();
+                move |reason| ConfigError::Invalid {
+                    file,
+                    field: field.into(),
+                    reason,
+                }
+            };
+            check_key_mode(&tls.key).map_err(invalid("tls.key"))?;
+            check_issuer(&tls.ca, &tls.certificate).map_err(invalid("tls.certificate"))?;
         }
         Ok(config)
     }
@@ -232,6 +318,26 @@ impl BridgeConfig {
                 ));
             }
         }
+        for endpoint in &self.listen {
+            if listens_everywhere(endpoint) {
+                return Err(invalid(
+                    "listen",
+                    format!(
+                        "{endpoint:?} listens on every interface: give this station's own \
+                         address (the one its certificate names and the peer connects to)"
+                    ),
+                ));
+            }
+        }
+        for (field, ms) in [
+            ("heartbeat_ms", self.heartbeat_ms),
+            ("link_timeout_ms", self.link_timeout_ms),
+            ("lease_ms", self.lease_ms),
+        ] {
+            if ms > MAX_MS {
+                return Err(invalid(field, too_large(ms)));
+            }
+        }
         if self.heartbeat_ms == 0 || self.link_timeout_ms < 2 * self.heartbeat_ms {
             return Err(invalid(
                 "link_timeout_ms",
@@ -257,6 +363,9 @@ impl BridgeConfig {
             }
             if seen.contains(&topic.name.as_str()) {
                 return Err(invalid(&field, format!("{:?} is listed twice", topic.name)));
+            }
+            if let Some(ms) = topic.max_age_ms.filter(|ms| *ms > MAX_MS) {
+                return Err(invalid(&format!("topic[{i}].max_age_ms"), too_large(ms)));
             }
             if topic.max_age_ms.is_some() && topic.direction == Direction::Out {
                 return Err(invalid(
@@ -295,6 +404,15 @@ impl BridgeConfig {
             "transport/link/protocols",
             json!([if self.insecure { "tcp" } else { "quic" }]),
         )?;
+        // zenoh's default is 1 GiB (DEFAULT_CONFIG.json5, transport.link.rx.max_message_size):
+        // no frame of ours is near this bound; larger messages are dropped by zenoh.
+        set(
+            "transport/link/rx/max_message_size",
+            json!(crate::frame::MAX_FRAME_LEN),
+        )?;
+        if self.tls.is_some() {
+            set("access_control", self.access_control())?;
+        }
         if let Some(tls) = &self.tls {
             let path = |p: &Path| json!(p.display().to_string());
             set("transport/link/tls/root_ca_certificate", path(&tls.ca))?;
@@ -315,6 +433,46 @@ impl BridgeConfig {
             )?;
         }
         Ok(config)
+    }
+
+    /// zenoh's access control binding the link to the peer's certificate: only a link whose
+    /// certificate's common name is the peer station's (`teleop certs` writes the station's name
+    /// there) may put on the peer's keys and subscribe to this station's; only such a link is
+    /// sent this station's samples and subscriptions. Everything else is denied, in zenoh, per
+    /// link (zenoh 1.10 `src/net/routing/interceptor/access_control.rs`: subjects by
+    /// `cert_common_names`, from the QUIC link's peer certificate, `zenoh-link-commons`
+    /// `quic/utils.rs` `get_cert_common_name`).
+    pub fn access_control(&self) -> serde_json::Value {
+        use serde_json::json;
+        let keys = |station: &str| json!([format!("teleop/{}/{station}/**", self.session)]);
+        let rule = |id: &str, flow: &str, message: &str, station: &str| {
+            json!({
+                "id": id,
+                "permission": "allow",
+                "flows": [flow],
+                "messages": [message],
+                "key_exprs": keys(station),
+            })
+        };
+        json!({
+            "enabled": true,
+            "default_permission": "deny",
+            "rules": [
+                rule("peer-puts", "ingress", "put", &self.peer),
+                rule("peer-subscribes", "ingress", "declare_subscriber", &self.station),
+                rule("puts-to-peer", "egress", "put", &self.station),
+                rule("subscribes-at-peer", "egress", "declare_subscriber", &self.peer),
+            ],
+            "subjects": [{
+                "id": "peer",
+                "cert_common_names": [self.peer],
+                "link_protocols": ["quic"],
+            }],
+            "policies": [{
+                "rules": ["peer-puts", "peer-subscribes", "puts-to-peer", "subscribes-at-peer"],
+                "subjects": ["peer"],
+            }],
+        })
     }
 
     /// Every file the configuration names that does not exist (certificates), with its field.
@@ -411,5 +569,160 @@ max_age_ms = 100
         assert!(config.insecure && config.tls.is_none());
         assert!(config.missing_files().is_empty());
         config.zenoh().unwrap();
+    }
+
+    #[test]
+    fn millisecond_values_that_overflow_the_nanosecond_clock_are_refused() {
+        // i64::MAX is TOML's largest integer; in nanoseconds it overflows u64.
+        let huge = "9223372036854775807";
+        let e = refusal(|t| format!("link_timeout_ms = {huge}\n{t}"));
+        assert!(
+            e.contains("link_timeout_ms") && e.contains("too large"),
+            "{e}"
+        );
+        let e = refusal(|t| t.replace("max_age_ms = 100", &format!("max_age_ms = {huge}")));
+        assert!(
+            e.contains("topic[1].max_age_ms") && e.contains("too large"),
+            "{e}"
+        );
+        let e = refusal(|t| format!("lease_ms = {huge}\n{t}"));
+        assert!(e.contains("lease_ms") && e.contains("too large"), "{e}");
+    }
+
+    #[test]
+    fn a_station_listens_on_its_own_address_not_every_interface() {
+        for any in ["quic/0.0.0.0:7447", "quic/[::]:7447"] {
+            let e =
+                refusal(|t| t.replace("connect = ", &format!("listen = [\"{any}\"]\nconnect = ")));
+            assert!(
+                e.contains("listen") && e.contains("every interface"),
+                "{any}: {e}"
+            );
+        }
+        let config = BridgeConfig::parse(
+            &GOOD.replace(
+                "connect = ",
+                "listen = [\"quic/192.0.2.1:7447\"]\nconnect = ",
+            ),
+            "bridge.toml",
+        )
+        .unwrap();
+        assert_eq!(config.listen, ["quic/192.0.2.1:7447"]);
+        // As shipped, the robot's bridge listens on its own address.
+        let shipped = include_str!("../../../config/bridge/robot.toml");
+        let robot = BridgeConfig::parse(shipped, "config/bridge/robot.toml").unwrap();
+        assert_eq!(robot.listen, ["quic/192.0.2.2:7447"]);
+    }
+
+    #[test]
+    fn key_files_readable_by_others_are_refused_naming_the_fix() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("bridge.toml");
+        std::fs::write(&file, GOOD).unwrap();
+        std::fs::create_dir(dir.path().join("certs")).unwrap();
+        let key = dir.path().join("certs/operator.key");
+        std::fs::write(&key, "not read").unwrap();
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o644)).unwrap();
+        let e = BridgeConfig::load(&file).unwrap_err().to_string();
+        assert!(
+            e.contains("tls.key") && e.contains("readable by others") && e.contains("chmod 600"),
+            "{e}"
+        );
+        std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).unwrap();
+        BridgeConfig::load(&file).unwrap();
+    }
+
+    #[test]
+    fn zenoh_bounds_messages_and_binds_the_peer_to_its_certificate() {
+        let config = BridgeConfig::parse(GOOD, "bridge.toml").unwrap();
+        let zenoh = config.zenoh().unwrap();
+        let get = |key: &str| zenoh.get_json(key).unwrap();
+        let max: u64 = get("transport/link/rx/max_message_size").parse().unwrap();
+        assert!(max <= 65_536, "zenoh takes messages up to {max} bytes");
+        // Access control on: only a link whose certificate names the peer may put on the
+        // peer's keys, and only it receives this station's.
+        assert_eq!(get("access_control/enabled"), "true");
+        assert_eq!(get("access_control/default_permission"), "\"deny\"");
+        let subjects = get("access_control/subjects");
+        assert!(
+            subjects.contains("\"cert_common_names\":[\"robot\"]"),
+            "{subjects}"
+        );
+        let rules = get("access_control/rules");
+        assert!(
+            rules.contains("teleop/lab/robot/**") && rules.contains("teleop/lab/operator/**"),
+            "{rules}"
+        );
+        // Plain TCP has no certificate: no access control to bind it to.
+        let text = GOOD
+            .replace("quic/192", "tcp/192")
+            .split("[tls]")
+            .next()
+            .unwrap()
+            .to_string()
+            + "insecure = true\n";
+        let insecure = BridgeConfig::parse(&text, "bridge.toml")
+            .unwrap()
+            .zenoh()
+            .unwrap();
+        assert_eq!(
+            insecure.get_json("access_control/enabled").unwrap(),
+            "false"
+        );
+    }
+
+    /// A CA named as every CA of `teleop certs` was before (issue 20), and its key.
+    fn old_style_ca() -> (rcgen::Issuer<'static, rcgen::KeyPair>, String) {
+        let key = rcgen::KeyPair::generate().unwrap();
+        let mut params = rcgen::CertificateParams::new(Vec::<String>::new()).unwrap();
+        params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Constrained(0));
+        params
+            .distinguished_name
+            .push(rcgen::DnType::CommonName, "teleop session CA");
+        let pem = params.self_signed(&key).unwrap().pem();
+        (rcgen::Issuer::new(params, key), pem)
+    }
+
+    #[test]
+    fn a_certificate_from_another_ca_is_named_as_such() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("certs")).unwrap();
+        let write = |name: &str, text: &str| std::fs::write(dir.path().join(name), text).unwrap();
+        // Two sessions' CAs of one name: the certificate of the first, the CA of the second.
+        let ((first, _), (_, second_pem)) = (old_style_ca(), old_style_ca());
+        let key = rcgen::KeyPair::generate().unwrap();
+        let mut params = rcgen::CertificateParams::new(vec!["operator".to_string()]).unwrap();
+        params
+            .distinguished_name
+            .push(rcgen::DnType::CommonName, "operator");
+        let cert = params.signed_by(&key, &first).unwrap();
+        write("certs/operator.pem", &cert.pem());
+        write("certs/operator.key", &key.serialize_pem());
+        let key_path = dir.path().join("certs/operator.key");
+        std::fs::set_permissions(&key_path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        write("certs/ca.pem", &second_pem);
+        write("bridge.toml", GOOD);
+        let e = BridgeConfig::load(&dir.path().join("bridge.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("tls.certificate: certificate from another CA"),
+            "{e}"
+        );
+        // Its own CA: accepted.
+        write("certs/ca.pem", &cert_ca_pem(&first));
+        BridgeConfig::load(&dir.path().join("bridge.toml")).unwrap();
+    }
+
+    fn cert_ca_pem(issuer: &rcgen::Issuer<'static, rcgen::KeyPair>) -> String {
+        // The CA's self-signed certificate again, from its parameters and key.
+        let mut params = rcgen::CertificateParams::new(Vec::<String>::new()).unwrap();
+        params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Constrained(0));
+        params
+            .distinguished_name
+            .push(rcgen::DnType::CommonName, "teleop session CA");
+        params.self_signed(issuer.key()).unwrap().pem()
     }
 }

@@ -31,6 +31,9 @@ pub const FORMAT: u8 = 1;
 pub const HEADER_LEN: usize = 64;
 /// Longest station name.
 pub const MAX_STATION: usize = 32;
+/// Longest frame a bridge sends or takes (zenoh's `max_message_size`; larger is dropped before
+/// it is queued): the header, the length and the largest contract payload fit with room.
+pub const MAX_FRAME_LEN: usize = 64 * 1024;
 const HEARTBEAT_LEN: usize = 32;
 
 /// What a frame is about: where it came from and which contract it speaks.
@@ -415,6 +418,17 @@ mod tests {
             accept(&o, "operator", 2, 1),
             Err(Refusal::Contract { .. })
         ));
+    }
+
+    #[test]
+    fn every_contract_topic_fits_in_a_frame() {
+        for topic in teleop_msgs::topics() {
+            assert!(
+                HEADER_LEN + 4 + topic.size <= MAX_FRAME_LEN,
+                "{}",
+                topic.name
+            );
+        }
     }
 
     proptest! {

@@ -65,6 +65,14 @@ impl PeerClock {
         }
     }
 
+    /// The peer restarted (its heartbeats count from 1 again): the exchanges with its former
+    /// clock are forgotten, the offset is 0 until the next exchange.
+    pub fn restart(&mut self) {
+        self.exchanges.clear();
+        self.offset_ns = 0;
+        self.rtt_ns = None;
+    }
+
     /// The newest round trip (None before the first exchange).
     pub fn rtt_ns(&self) -> Option<u64> {
         self.rtt_ns
@@ -82,6 +90,55 @@ impl PeerClock {
         }
         let local = i128::from(peer_ns) - i128::from(self.offset_ns);
         u64::try_from(local.max(1)).unwrap_or(u64::MAX)
+    }
+}
+
+/// The peer's heartbeat sequence: it counts up from 1 per bridge start, so a number not above
+/// the last one means the peer's bridge restarted (and, between machines, its clock may have).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PeerRun {
+    last: Option<u64>,
+}
+
+impl PeerRun {
+    /// Takes a heartbeat's `seq`; true when the peer restarted since the previous one.
+    pub fn restarted(&mut self, seq: u64) -> bool {
+        let restarted = self.last.is_some_and(|last| seq <= last);
+        self.last = Some(seq);
+        restarted
+    }
+}
+
+/// Heartbeats this bridge sent that a peer's echo may name.
+pub const SENT_WINDOW: usize = 1024;
+
+/// The send stamps of this bridge's newest [`SENT_WINDOW`] heartbeats: an echo that names none of
+/// them (forged, or from before a restart) is no exchange.
+#[derive(Debug, Clone)]
+pub struct SentBeats {
+    stamps: Vec<u64>,
+    next: usize,
+}
+
+impl Default for SentBeats {
+    fn default() -> Self {
+        Self {
+            stamps: vec![0; SENT_WINDOW],
+            next: 0,
+        }
+    }
+}
+
+impl SentBeats {
+    /// A heartbeat sent with this stamp (ns, never 0).
+    pub fn record(&mut self, send_ns: u64) {
+        self.stamps[self.next] = send_ns;
+        self.next = (self.next + 1) % SENT_WINDOW;
+    }
+
+    /// True when `send_ns` is the stamp of one of the newest heartbeats sent.
+    pub fn contains(&self, send_ns: u64) -> bool {
+        send_ns != 0 && self.stamps.contains(&send_ns)
     }
 }
 
@@ -120,7 +177,8 @@ impl GapCounter {
     /// Counts the sample `(source, seq)`; returns the samples missing before it.
     pub fn count(&mut self, source: u32, seq: u64) -> u64 {
         let gap = match self.last {
-            Some((s, last)) if s == source && seq > last + 1 => seq - last - 1,
+            // Saturating: a sequence number at u64::MAX is followed by no gap, not an overflow.
+            Some((s, last)) if s == source && seq > last.saturating_add(1) => seq - last - 1,
             _ => 0,
         };
         self.last = Some((source, seq));
@@ -190,7 +248,12 @@ pub struct DelayLine<T> {
     rng: u64,
     /// Frames the injector dropped.
     pub lost: u64,
+    /// Frames dropped because [`MAX_DELAYED`] were waiting.
+    pub overflow: u64,
 }
+
+/// Most frames the delay line holds.
+pub const MAX_DELAYED: usize = 4096;
 
 impl<T> DelayLine<T> {
     /// An empty line.
@@ -199,11 +262,17 @@ impl<T> DelayLine<T> {
             queue: VecDeque::new(),
             rng: seed | 1,
             lost: 0,
+            overflow: 0,
         }
     }
 
-    /// Puts `item`, received at `now_ns`, into the line (or loses it).
+    /// Puts `item`, received at `now_ns`, into the line (or loses it; or, with
+    /// [`MAX_DELAYED`] already waiting, drops it and counts it in `overflow`).
     pub fn push(&mut self, faults: Faults, now_ns: u64, item: T) {
+        if self.queue.len() >= MAX_DELAYED {
+            self.overflow += 1;
+            return;
+        }
         if faults.loss_ppm > 0 {
             self.rng ^= self.rng << 13;
             self.rng ^= self.rng >> 7;
@@ -308,6 +377,7 @@ mod tests {
         };
         for i in 0..10_000 {
             line.push(lossy, i, 'x');
+            let _ = line.pop_due(i);
         }
         assert!((800..1200).contains(&line.lost), "{}", line.lost);
         // A delay beyond any clock never overflows.
@@ -321,5 +391,60 @@ mod tests {
             'z',
         );
         assert_eq!(far.next_due(), Some(u64::MAX));
+    }
+
+    #[test]
+    fn gaps_near_the_end_of_u64_do_not_overflow() {
+        let mut gaps = GapCounter::default();
+        assert_eq!(gaps.count(7, u64::MAX - 3), 0);
+        assert_eq!(gaps.count(7, u64::MAX), 2);
+        assert_eq!(gaps.count(7, u64::MAX), 0, "a repeat is no gap");
+        assert_eq!(gaps.count(7, 1), 0, "a restarted publisher");
+        assert_eq!(gaps.missing, 2);
+    }
+
+    #[test]
+    fn a_restarted_peer_clock_is_estimated_afresh() {
+        let mut run = PeerRun::default();
+        let mut clock = PeerClock::new(ClockMode::Estimate);
+        assert!(!run.restarted(1));
+        // The peer's clock 5 s ahead, 1 ms round trip.
+        clock.exchange(0, 0, 5_000_500_000, 1_000_000);
+        assert_eq!(clock.offset_ns(), 5_000_000_000);
+        assert!(!run.restarted(2));
+        // Its machine restarted: its clock now 3 s behind, a slower exchange (4 ms).
+        assert!(run.restarted(1), "seq back to 1");
+        clock.restart();
+        assert_eq!((clock.offset_ns(), clock.rtt_ns()), (0, None));
+        clock.exchange(10_000_000_000, 0, 7_002_000_000, 10_004_000_000);
+        assert_eq!(clock.offset_ns(), -3_000_000_000);
+        assert!(!run.restarted(2));
+    }
+
+    #[test]
+    fn only_echoes_of_heartbeats_sent_count() {
+        let mut sent = SentBeats::default();
+        assert!(!sent.contains(0) && !sent.contains(7));
+        sent.record(7);
+        assert!(sent.contains(7) && !sent.contains(8));
+        for ns in 100..100 + SENT_WINDOW as u64 {
+            sent.record(ns);
+        }
+        assert!(!sent.contains(7), "forgotten after {SENT_WINDOW} more");
+        assert!(sent.contains(100) && sent.contains(99 + SENT_WINDOW as u64));
+    }
+
+    #[test]
+    fn the_delay_line_is_bounded() {
+        let mut line = DelayLine::new(3);
+        let hold = Faults {
+            delay_ns: 1_000_000_000,
+            loss_ppm: 0,
+        };
+        for i in 0..MAX_DELAYED as u64 + 10 {
+            line.push(hold, i, i);
+        }
+        assert_eq!(line.overflow, 10);
+        assert_eq!(line.pop_due(u64::MAX), Some(0));
     }
 }

@@ -23,7 +23,9 @@ use zenoh::Wait;
 
 use crate::config::{BridgeConfig, Direction, EStopRole, TopicConfig};
 use crate::frame::{self, EStopState, Frame, Heartbeat, Origin};
-use crate::link::{DelayLine, Faults, GapCounter, LatencyWindow, LinkState, PeerClock};
+use crate::link::{
+    DelayLine, Faults, GapCounter, LatencyWindow, LinkState, PeerClock, PeerRun, SentBeats,
+};
 use crate::ports::{Arrival, MakeIn, MakeOut};
 
 /// What the bridge is started with.
@@ -57,6 +59,10 @@ struct Shared {
     superseded: AtomicU64,
     errors: AtomicU64,
     lost: AtomicU64,
+    /// Frames dropped because the incoming queue or the delay line was full (also in `errors`).
+    overflow: AtomicU64,
+    /// The send stamps of the heartbeats sent: only their echoes make exchanges.
+    sent_beats: Mutex<SentBeats>,
     latency: Mutex<Option<LatencyWindow>>,
 }
 
@@ -75,6 +81,9 @@ impl Shared {
             .and_then(|w| w.as_ref().and_then(LatencyWindow::percentiles))
     }
 }
+
+/// Frames waiting between zenoh's callbacks and the incoming side; more are dropped (counted).
+const INBOX: usize = 256;
 
 /// A frame from zenoh: which subscription, when, its bytes.
 struct Received {
@@ -148,7 +157,7 @@ pub fn run(options: Options) -> anyhow::Result<()> {
         .filter(|t| t.direction == Direction::In)
         .cloned()
         .collect();
-    let (tx, rx) = mpsc::channel::<Received>();
+    let (tx, rx) = mpsc::sync_channel::<Received>(INBOX);
     let mut subscribers = Vec::new();
     let wanted = ins
         .iter()
@@ -156,19 +165,14 @@ pub fn run(options: Options) -> anyhow::Result<()> {
         .map(|(i, t)| (Slot::Topic(i), t.name.as_str()))
         .chain([(Slot::Heartbeat, HEARTBEAT_TOPIC)]);
     for (slot, topic) in wanted {
-        let tx = tx.clone();
         let key = key(config, &config.peer, namespace.as_ref(), topic);
-        let subscriber = session
-            .declare_subscriber(key.clone())
-            .callback(move |sample| {
-                let _ = tx.send(Received {
-                    slot,
-                    bytes: sample.payload().to_bytes().into_owned(),
-                });
-            })
-            .wait()
-            .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
-        subscribers.push(subscriber);
+        subscribers.push(subscribe(
+            &session,
+            key,
+            slot,
+            tx.clone(),
+            Arc::clone(&shared),
+        )?);
     }
     drop(tx);
 
@@ -192,6 +196,38 @@ pub fn run(options: Options) -> anyhow::Result<()> {
         .join()
         .map_err(|_| anyhow::anyhow!("the incoming side panicked"))?;
     result.and(incoming)
+}
+
+/// Subscribes to `key`: each frame (at most [`frame::MAX_FRAME_LEN`] bytes; zenoh drops larger
+/// messages, this is the second check) goes to `tx` unless [`INBOX`] frames wait there already
+/// (then it is dropped and counted: a peer cannot queue without bound).
+fn subscribe(
+    session: &zenoh::Session,
+    key: String,
+    slot: Slot,
+    tx: mpsc::SyncSender<Received>,
+    shared: Arc<Shared>,
+) -> anyhow::Result<zenoh::pubsub::Subscriber<()>> {
+    session
+        .declare_subscriber(key.clone())
+        .callback(move |sample| {
+            let payload = sample.payload();
+            let full = if payload.len() > frame::MAX_FRAME_LEN {
+                true
+            } else {
+                let bytes = payload.to_bytes().into_owned();
+                matches!(
+                    tx.try_send(Received { slot, bytes }),
+                    Err(mpsc::TrySendError::Full(_))
+                )
+            };
+            if full {
+                shared.overflow.fetch_add(1, Ordering::Relaxed);
+                shared.errors.fetch_add(1, Ordering::Relaxed);
+            }
+        })
+        .wait()
+        .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))
 }
 
 /// The longest delay the fault injector takes.
@@ -224,7 +260,7 @@ fn answer(shared: &Shared, line: &str) -> String {
             let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
             let (p50, p99, max) = shared.percentiles().unwrap_or_default();
             format!(
-                "ok received {} gaps {} superseded {} stale {} errors {} lost {} rtt_us {} one_way_us {p50} {p99} {max}",
+                "ok received {} gaps {} superseded {} stale {} errors {} lost {} rtt_us {} one_way_us {p50} {p99} {max} overflow {}",
                 load(&shared.received),
                 load(&shared.gaps),
                 load(&shared.superseded),
@@ -232,6 +268,7 @@ fn answer(shared: &Shared, line: &str) -> String {
                 load(&shared.errors),
                 load(&shared.lost),
                 load(&shared.rtt_ns) / 1000,
+                load(&shared.overflow),
             )
         }
         _ => format!(
@@ -286,6 +323,7 @@ fn outgoing(
     let mut last_health = Instant::now();
     let mut last_report = Instant::now();
     let mut counted = (0u64, 0u64); // errors, stale already in health
+    let mut refused_links = Vec::new();
     let timeout_ns = config.link_timeout_ms * 1_000_000;
     let origin = |now| Origin::new(&config.station, CONTRACT_VERSION, fingerprint, now);
     tracing::info!(
@@ -314,6 +352,9 @@ fn outgoing(
             estop,
         };
         frame::encode_heartbeat(buf, &origin(now), &beat);
+        if let Ok(mut sent) = shared.sent_beats.lock() {
+            sent.record(now);
+        }
         if heartbeat.put(buf.as_slice()).wait().is_err() {
             *send_errors += 1;
         }
@@ -381,6 +422,9 @@ fn outgoing(
         }
         if last_health.elapsed() >= Duration::from_secs(1) {
             last_health = Instant::now();
+            if config.tls.is_some() {
+                audit_links(session, config, shared, &mut refused_links);
+            }
             let errors = shared.errors.load(Ordering::Relaxed) + send_errors;
             let stale = shared.stale.load(Ordering::Relaxed);
             health.count_errors(errors - counted.0);
@@ -428,6 +472,45 @@ fn outgoing(
     Ok(())
 }
 
+/// Links reported as refused, remembered so that each is reported once.
+const REFUSED_LINKS: usize = 64;
+
+/// Each link whose peer certificate names another station than the configured peer is logged
+/// once and counted in `errors`. zenoh's access control ([`BridgeConfig::access_control`])
+/// already denies such a link every put on the peer's keys and sends it nothing; this makes the
+/// attempt visible. (The name is the certificate's common name, as zenoh reads it from the QUIC
+/// link: zenoh 1.10 `src/api/info.rs` `Link::auth_identifier`.)
+fn audit_links(
+    session: &zenoh::Session,
+    config: &BridgeConfig,
+    shared: &Shared,
+    reported: &mut Vec<String>,
+) {
+    for link in session.info().links().wait() {
+        let name = link.auth_identifier();
+        if name == Some(config.peer.as_str()) {
+            continue;
+        }
+        let id = format!("{} {}", link.zid(), link.dst());
+        if reported.contains(&id) {
+            continue;
+        }
+        if reported.len() == REFUSED_LINKS {
+            reported.remove(0);
+        }
+        reported.push(id);
+        shared.errors.fetch_add(1, Ordering::Relaxed);
+        tracing::warn!(
+            peer = %config.peer,
+            link = %link.dst(),
+            "refused a peer: its certificate names {:?}, only {:?} may be this station's peer \
+             (zenoh's access control drops what it sends and sends it nothing)",
+            name.unwrap_or("no station"),
+            config.peer
+        );
+    }
+}
+
 /// Logs the first of a kind of refusal; the rest are counted and reported.
 struct Once(bool);
 
@@ -467,6 +550,9 @@ fn incoming(
     let mut clock = PeerClock::new(config.clock);
     let mut gaps = vec![GapCounter::default(); ports.len()];
     let mut line = DelayLine::new(now_ns());
+    let mut line_overflow = 0u64;
+    let mut run = PeerRun::default();
+    let mut stray_echo = Once(false);
     let mut stale_logged = vec![false; ports.len()];
     let (mut bad_frame, mut wrong_station, mut bad_payload) =
         (Once(false), Once(false), Once(false));
@@ -494,6 +580,12 @@ fn incoming(
             line.push(shared.faults(), now_ns(), r);
         }
         shared.lost.store(line.lost, Ordering::Relaxed);
+        if line.overflow > line_overflow {
+            let more = line.overflow - line_overflow;
+            line_overflow = line.overflow;
+            shared.overflow.fetch_add(more, Ordering::Relaxed);
+            shared.errors.fetch_add(more, Ordering::Relaxed);
+        }
         let now = now_ns();
         while let Some(r) = line.pop_due(now) {
             let frame = match frame::decode(&r.bytes) {
@@ -534,8 +626,26 @@ fn incoming(
             shared.refused.store(false, Ordering::Relaxed);
             match (frame, r.slot) {
                 (Frame::Heartbeat(origin, beat), Slot::Heartbeat) => {
-                    if beat.echo_send_ns != 0 {
+                    if run.restarted(beat.seq) {
+                        // Its clock may have restarted with it (another machine's reboot).
+                        clock.restart();
+                        tracing::info!(
+                            peer = %config.peer,
+                            "the peer's bridge restarted: its clock is estimated afresh"
+                        );
+                    }
+                    let echoed = shared
+                        .sent_beats
+                        .lock()
+                        .is_ok_and(|sent| sent.contains(beat.echo_send_ns));
+                    if echoed {
                         clock.exchange(beat.echo_send_ns, beat.hold_ns, origin.send_ns, now);
+                    } else if beat.echo_send_ns != 0 && stray_echo.first() {
+                        tracing::warn!(
+                            peer = %config.peer,
+                            "a heartbeat echoes a stamp this bridge never sent (or long ago): \
+                             no clock exchange from it (further ones are ignored silently)"
+                        );
                     }
                     shared
                         .rtt_ns
