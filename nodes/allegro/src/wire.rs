@@ -39,6 +39,13 @@ pub enum Incoming {
         /// Hardware type.
         hw_type: u8,
     },
+    /// Document protocol: one finger's answer to QUERY_STATE_DATA (0x0E, the document's "joint
+    /// state response"). Not a frame of the stream (0x0F): it neither completes nor breaks a
+    /// period, and its payload is not documented, so no position is taken from it.
+    StateAnswer {
+        /// Finger 0..4.
+        finger: u8,
+    },
     /// A frame of the other protocol generation: the hand is not the one configured.
     Foreign(Protocol),
     /// Understood and not used (v4 IMU, another device id's frames).
@@ -109,6 +116,7 @@ impl Wire {
                     }
                     Incoming::Position { finger, q }
                 }
+                Ok(doc::Report::State { finger, .. }) => Incoming::StateAnswer { finger },
                 Ok(doc::Report::Id {
                     revision,
                     firmware,

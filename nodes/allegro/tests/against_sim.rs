@@ -648,3 +648,39 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         "{err}"
     );
 }
+
+/// A document-protocol hand answers QUERY_STATE_DATA with 0x0E frames from each finger (the
+/// device document's table); their payload is not documented, so the simulator lays it out as a
+/// position frame or sends none. Either way the node comes up on the 0x0F stream (the answers
+/// to its bring-up's QUERY_STATE are not a period), and answers arriving mid-stream are neither
+/// finger frames nor unknown ones.
+#[test]
+fn v3_tells_state_answers_from_the_stream_with_either_payload() {
+    for (payload, inject) in [("positions", "0000000000000000"), ("empty", "")] {
+        let rig = Rig::with_sim_options("v3", "v3", "none", &["--state-answer", payload]);
+        rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
+        let before = rig.latest_health();
+        for _ in 0..10 {
+            for id in ["393", "394", "395", "396"] {
+                let reply = rig.sim.control(&format!("inject {id}#{inject}"));
+                assert!(reply.starts_with("ok"), "{reply}");
+            }
+        }
+        std::thread::sleep(Duration::from_millis(400));
+        let h = rig.latest_health();
+        assert_eq!(
+            (h.detail[2], h.detail[3]),
+            (before.detail[2], before.detail[3]),
+            "{payload}: state answers counted as unknown or bad frames\n{}",
+            rig.log()
+        );
+        let s = rig.wait_state(Duration::from_secs(2), "still up", |s| s.link_up == 1);
+        // Positions from the stream only: every joint near where the hand rests, none at the
+        // injected counts' -166 deg.
+        assert!(
+            positions(&s).iter().all(|q| q.abs() < 2.0),
+            "{payload}: {:?}",
+            positions(&s)
+        );
+    }
+}

@@ -8,8 +8,11 @@
 //! - `SYSTEM_ON` starts the stream: the four position frames (`0x0F`, src 3..6, dest
 //!   `ID_DEVICE_MAIN`) every period on the hand's own clock; `SYSTEM_OFF` stops it and zeroes
 //!   the torques; torque frames are applied only while the system is on;
-//! - `QUERY_STATE_DATA` is answered with one set of the four position frames (the reply
-//!   payload is not documented; drivers only decode `0x0F`, notes "Open");
+//! - `QUERY_STATE_DATA` is answered as the document's command table says: one
+//!   `ID_CMD_QUERY_STATE_DATA` (0x0E) frame from each finger (`ID_DEVICE_SUB_01..04`) to
+//!   `ID_DEVICE_MAIN`, not with the stream's 0x0F frames. Its payload is not documented
+//!   (notes "Open"): [`FirmwareOptions::state_answer`] chooses the four raw counts laid out as a
+//!   position frame, or none;
 //! - `QUERY_ID` (R1/L, not in the document) is answered with revision, firmware and hardware
 //!   type;
 //! - torque frames (`0x06`..`0x09`, i16 big-endian PWM) are read in the generation's joint
@@ -56,6 +59,29 @@ pub mod status {
     pub const HIGH_TEMPERATURE: u8 = 0x02;
 }
 
+/// The payload of the document protocol's answer to `QUERY_STATE_DATA` (not documented).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StateAnswer {
+    /// The finger's four raw counts, u16 little-endian, as its position frame has them.
+    #[default]
+    Positions,
+    /// No payload (DLC 0).
+    Empty,
+}
+
+impl std::str::FromStr for StateAnswer {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "positions" => Ok(Self::Positions),
+            "empty" => Ok(Self::Empty),
+            other => Err(format!(
+                "state answer `{other}`: `positions` (as a position frame) or `empty`"
+            )),
+        }
+    }
+}
+
 /// What the firmware is built with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FirmwareOptions {
@@ -80,6 +106,8 @@ pub struct FirmwareOptions {
     pub firmware_version: u16,
     /// v4 hand type: 0 right, 1 left.
     pub hand_type: u8,
+    /// Document protocol: the payload of the 0x0E answer to `QUERY_STATE_DATA`.
+    pub state_answer: StateAnswer,
 }
 
 impl FirmwareOptions {
@@ -100,6 +128,7 @@ impl FirmwareOptions {
             v4_stream_on_period: false,
             firmware_version: 0x0102,
             hand_type: 0,
+            state_answer: StateAnswer::default(),
         }
     }
 
@@ -438,6 +467,32 @@ impl Firmware {
         }
     }
 
+    /// The document protocol's answer to `QUERY_STATE_DATA`: one 0x0E frame per finger.
+    fn state_answer(&mut self, at: Duration, out: &mut Vec<(Duration, CanFrame)>) {
+        let q = self.hand.positions();
+        for f in 0..FINGERS {
+            let mut data = [0u8; 8];
+            let len = match self.options.state_answer {
+                StateAnswer::Positions => {
+                    for k in 0..JOINTS_PER_FINGER {
+                        let j = f * JOINTS_PER_FINGER + k;
+                        let raw = self.options.calibration[j].rad_to_doc_raw(q[j]);
+                        data[2 * k..2 * k + 2].copy_from_slice(&raw.to_le_bytes());
+                    }
+                    8
+                }
+                StateAnswer::Empty => 0,
+            };
+            let frame = doc::Report::State {
+                finger: f as u8,
+                len,
+                data,
+            }
+            .encode(doc::ID_DEVICE_MAIN);
+            self.emit(at, frame, out);
+        }
+    }
+
     fn temperatures(&mut self, at: Duration, out: &mut Vec<(Duration, CanFrame)>) {
         let t = self.hand.temperatures();
         for f in 0..FINGERS {
@@ -516,7 +571,7 @@ impl Firmware {
             doc::Request::ModeJoint => self.mode = Some("joint"),
             doc::Request::ModeTask => self.mode = Some("task"),
             doc::Request::Torque { finger, pwm } => self.set_torque(finger, pwm),
-            doc::Request::QueryState => self.positions(now, out),
+            doc::Request::QueryState => self.state_answer(now, out),
             doc::Request::QueryId => {
                 let frame = doc::Report::Id {
                     revision: self.revision(),
@@ -730,7 +785,11 @@ mod tests {
         let g = Generation::V3;
         let mut fw = firmware(g);
         let out = send(&mut fw, ms(5), &[doc(doc::Request::QueryState, g)]);
-        assert_eq!(ids(&out), [0x3D3, 0x3D4, 0x3D5, 0x3D6]);
+        assert_eq!(
+            ids(&out),
+            [0x393, 0x394, 0x395, 0x396],
+            "0x0E from each finger"
+        );
         let out = send(&mut fw, ms(6), &[doc(doc::Request::QueryId, g)]);
         assert_eq!(out.len(), 1);
         assert_eq!(

@@ -23,7 +23,7 @@ use std::time::Duration;
 
 use clap::Parser;
 use sim_allegro::adapter::AckStyle;
-use sim_allegro::firmware::{Firmware, FirmwareOptions};
+use sim_allegro::firmware::{Firmware, FirmwareOptions, StateAnswer};
 use sim_allegro::hand::{Ball, Hand, HandParams, JOINTS};
 use sim_allegro::{parse_frame, Sim, SimOptions};
 use teleop_allegro_protocol::{Generation, JointCalibration};
@@ -75,6 +75,10 @@ struct Args {
     /// v4: stream positions on SET_PERIOD alone (default: only after SYSTEM_ON).
     #[arg(long)]
     v4_stream_on_period: bool,
+    /// Document protocol: the payload of the 0x0E answer to QUERY_STATE_DATA (undocumented):
+    /// `positions` (the four raw counts, as a position frame) or `empty`.
+    #[arg(long, default_value = "positions")]
+    state_answer: StateAnswer,
     /// PWM counts per N m (default: the generation's, 800 for v1/v2, 1200 for v3/v4).
     #[arg(long)]
     pwm_per_nm: Option<f64>,
@@ -161,6 +165,7 @@ fn firmware_options(args: &Args) -> anyhow::Result<FirmwareOptions> {
     });
     o.torque_timeout = args.torque_timeout_ms.map(Duration::from_millis);
     o.v4_stream_on_period = args.v4_stream_on_period;
+    o.state_answer = args.state_answer;
     if let Some(k) = args.pwm_per_nm {
         if !(k.is_finite() && k > 0.0) {
             anyhow::bail!("--pwm-per-nm {k}: must be positive");

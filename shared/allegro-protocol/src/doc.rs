@@ -10,10 +10,13 @@
 //! (`src` 3..6). Their destination is not checked: the document's table says `ID_DEVICE_MAIN`,
 //! no driver checks it (notes).
 //!
-//! Joint state. The document lists both 0x0E ("joint state response") and 0x0F
-//! (`ID_CMD_QUERY_CONTROL_DATA`, "joint state response"); its decoding sample and every driver
-//! decode 0x0F only, so 0x0F from a finger is [`Report::Position`] and 0x0E is a host request
-//! ([`Request::QueryState`]).
+//! Joint state. The document's command table lists `ID_CMD_QUERY_STATE_DATA` (0x0E) twice: as
+//! the host's request (`ID_COMMON` <- `ID_DEVICE_MAIN`, [`Request::QueryState`]) and as the
+//! "joint state response" from `ID_DEVICE_SUB_01..04` to `ID_DEVICE_MAIN`
+//! ([`Report::State`]); the stream's position frames are `ID_CMD_QUERY_CONTROL_DATA` (0x0F,
+//! [`Report::Position`]), the only ones its decoding sample and every driver decode. The
+//! document gives no payload for the 0x0E answer, so [`Report::State`] keeps its bytes as they
+//! came (a hand may lay them out as a position frame; nothing here assumes it).
 //!
 //! Torque frames are big-endian `i16` PWM counts in the joint order of the hand version
 //! ([`TorqueOrder`](crate::TorqueOrder)); position frames are little-endian `u16` counts, zero at
@@ -50,7 +53,8 @@ pub const CMD_SET_MODE_TASK: u8 = 0x05;
 pub const CMD_SET_TORQUE_1: u8 = 0x06;
 /// Position commands (0x0A..0x0D): unused.
 pub const CMD_SET_POSITION_1: u8 = 0x0A;
-/// Request the joint state.
+/// Request the joint state (host -> hand); also the id of the hand's answer, one frame per
+/// finger ([`Report::State`]).
 pub const CMD_QUERY_STATE_DATA: u8 = 0x0E;
 /// Joint positions of one finger (hand -> host; the document's `ID_CMD_QUERY_CONTROL_DATA`).
 pub const CMD_POSITION: u8 = 0x0F;
@@ -196,6 +200,17 @@ pub enum Report {
         /// Raw counts of joints 0..3.
         raw: [u16; 4],
     },
+    /// One finger's answer to `QUERY_STATE_DATA` (the document: 0x0E from `ID_DEVICE_SUB_01..04`
+    /// to `ID_DEVICE_MAIN`, "joint state response"). Its payload is not documented: the bytes
+    /// as they came, any length 0..8.
+    State {
+        /// Finger 0..3.
+        finger: u8,
+        /// Payload length.
+        len: u8,
+        /// Payload (bytes past `len` are 0).
+        data: [u8; 8],
+    },
     /// The reply to `QUERY_ID` (R1, L): revision u16 LE at byte 2, firmware u16 LE at byte 4,
     /// hardware type u8 at byte 7.
     Id {
@@ -224,6 +239,10 @@ impl Report {
                     &bytes,
                 )
             }
+            Report::State { finger, len, data } => data_frame(
+                id(CMD_QUERY_STATE_DATA, dest, ID_DEVICE_SUB_01 + finger % 4),
+                &data[..usize::from(len.min(8))],
+            ),
             Report::Id {
                 revision,
                 firmware,
@@ -239,7 +258,8 @@ impl Report {
     }
 
     /// What a frame from the hand reports. Positions need 8 bytes and a finger source (3..6);
-    /// the id reply 8 bytes from a non-finger source. Anything else is an error (a host
+    /// a state answer a finger source (any length); the id reply 8 bytes from a non-finger
+    /// source. Anything else is an error (a host
     /// command on the bus is `UnknownCommand` here: it is not a report).
     pub fn decode<F: Frame>(frame: &F) -> Result<Report, DecodeError> {
         let id = standard_id(frame)?;
@@ -267,6 +287,17 @@ impl Report {
                 Ok(Report::Position {
                     finger: src - ID_DEVICE_SUB_01,
                     raw,
+                })
+            }
+            // From a finger it is the answer; from anyone else the host's request.
+            CMD_QUERY_STATE_DATA if (ID_DEVICE_SUB_01..=ID_DEVICE_SUB_04).contains(&src) => {
+                let mut bytes = [0u8; 8];
+                let n = data.len().min(8);
+                bytes[..n].copy_from_slice(&data[..n]);
+                Ok(Report::State {
+                    finger: src - ID_DEVICE_SUB_01,
+                    len: n as u8,
+                    data: bytes,
                 })
             }
             CMD_QUERY_ID if src != ID_DEVICE_MAIN => {
@@ -371,6 +402,39 @@ mod tests {
     }
 
     #[test]
+    fn state_answers_are_told_from_positions_and_from_the_request() {
+        // The document's table: 0x0E from ID_DEVICE_SUB_01 (3) to ID_DEVICE_MAIN (2): 0x393.
+        let r = Report::State {
+            finger: 0,
+            len: 8,
+            data: [1, 2, 3, 4, 5, 6, 7, 8],
+        };
+        assert_eq!(
+            bytes(&r.encode::<TestFrame>(ID_DEVICE_MAIN)),
+            (0x393, vec![1, 2, 3, 4, 5, 6, 7, 8])
+        );
+        assert_eq!(
+            Report::decode(&data(0x393, &[1, 2, 3, 4, 5, 6, 7, 8])).unwrap(),
+            r
+        );
+        // No payload: still the thumb's state answer, not a position.
+        assert_eq!(
+            Report::decode(&data(0x396, &[])).unwrap(),
+            Report::State {
+                finger: 3,
+                len: 0,
+                data: [0; 8]
+            }
+        );
+        // The host's request (src 2) is not a report, and a finger's answer not a request.
+        assert!(matches!(
+            Report::decode(&data(0x38A, &[])),
+            Err(DecodeError::UnknownCommand { id: 0x38A })
+        ));
+        assert!(Request::decode(&data(0x393, &[]), TorqueOrder::J0First).is_err());
+    }
+
+    #[test]
     fn id_reply_as_r1_reads_it() {
         let r = Report::Id {
             revision: 0x0302,
@@ -460,7 +524,11 @@ mod tests {
 
         #[test]
         fn reports_round_trip(finger in 0u8..4, raw in any::<[u16; 4]>(), rev in any::<u16>(), fw in any::<u16>(), hw in any::<u8>()) {
-            for r in [Report::Position { finger, raw }, Report::Id { revision: rev, firmware: fw, hw_type: hw }] {
+            let mut state = [0u8; 8];
+            state[..2].copy_from_slice(&rev.to_le_bytes());
+            let len = hw % 9;
+            state[usize::from(len)..].fill(0);
+            for r in [Report::Position { finger, raw }, Report::State { finger, len, data: state }, Report::Id { revision: rev, firmware: fw, hw_type: hw }] {
                 let f: TestFrame = r.encode(ID_DEVICE_MAIN);
                 prop_assert_eq!(Report::decode(&f).unwrap(), r);
             }
