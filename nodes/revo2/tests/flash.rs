@@ -77,9 +77,9 @@ fn options() -> FlashOptions {
 
 /// The device comes up to OP and exchanges process data.
 fn usable(sim: &Sim, bus: &Bus) -> teleop_revo2::bus::DeviceInfo {
-    let (group, info) = block_on(bring_up(&bus.md, &Revo2Config::default())).unwrap();
+    let (group, info) = block_on(bring_up(bus.md(), &Revo2Config::default())).unwrap();
     for _ in 0..20 {
-        let r = block_on(group.tx_rx(&bus.md)).unwrap();
+        let r = block_on(group.tx_rx(bus.md())).unwrap();
         assert_eq!(r.working_counter, 3);
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -101,7 +101,7 @@ fn both_boards_are_flashed_and_show_their_new_versions() {
     let firmware =
         Firmware::new(&name(Board::Wrist, (1, 0, 3)), wrist.clone(), Board::Wrist).unwrap();
     let mut events = Vec::new();
-    let report = flash(&bus.md, &firmware, &options(), &mut |e| {
+    let report = flash(bus.md(), &firmware, &options(), &mut |e| {
         events.push(e.clone())
     })
     .unwrap();
@@ -148,7 +148,7 @@ fn both_boards_are_flashed_and_show_their_new_versions() {
     let control = file(Board::Control, (2, 1, 0), 8000);
     let firmware =
         Firmware::new(&name(Board::Control, (2, 1, 0)), control, Board::Control).unwrap();
-    let report = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap();
+    let report = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap();
     assert_eq!(
         (report.before.as_str(), report.after.as_str()),
         ("1.4.2", "2.1.0")
@@ -269,7 +269,7 @@ fn a_wrong_authentication_code_is_refused_by_the_device() {
         auth_code: Some("BRCC2025".into()),
         ..options()
     };
-    let err = flash(&bus.md, &firmware, &wrong_code, &mut |_| {}).unwrap_err();
+    let err = flash(bus.md(), &firmware, &wrong_code, &mut |_| {}).unwrap_err();
     let text = err.to_string();
     match &err {
         FlashError::Transfer(e) => assert_eq!(e.code(), Some(ErrorCode::NO_RIGHTS)),
@@ -289,7 +289,7 @@ fn a_wrong_authentication_code_is_refused_by_the_device() {
     }
     usable(&sim, &bus);
     // The right code works on the same device.
-    let report = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap();
+    let report = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap();
     assert_eq!(report.after, "1.1.0");
     usable(&sim, &bus);
 }
@@ -303,7 +303,7 @@ fn send(
     data: &[u8],
 ) -> FoeError {
     let (rx, tx) = layout.bootstrap;
-    let port = EcatMailbox::new(&bus.md, address, rx, tx);
+    let port = EcatMailbox::new(bus.md(), address, rx, tx);
     let config = ClientConfig {
         reply_timeout: Duration::from_millis(300),
         ..ClientConfig::default()
@@ -318,7 +318,7 @@ fn the_device_checks_what_it_receives() {
     let _serial = serial();
     let sim = sim();
     let bus = bus(&sim);
-    let md = &bus.md;
+    let md = bus.md();
     let timeout = Duration::from_secs(2);
     let good_name = name(Board::Wrist, (1, 2, 0));
     let good = file(Board::Wrist, (1, 2, 0), 600);
@@ -419,7 +419,7 @@ fn a_device_that_stops_answering_mid_transfer_is_reported_and_recovers() {
     )
     .unwrap();
     let started = Instant::now();
-    let err = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap_err();
+    let err = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap_err();
     match &err {
         FlashError::Transfer(FoeError::NoAnswer {
             packet, attempts, ..
@@ -442,7 +442,7 @@ fn a_device_that_stops_answering_mid_transfer_is_reported_and_recovers() {
         assert_eq!(sim.app().firmware_versions().1, "0.9.7");
     }
     usable(&sim, &bus);
-    let report = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap();
+    let report = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap();
     assert_eq!(report.after, "1.3.0");
 }
 
@@ -475,7 +475,7 @@ fn a_device_that_leaves_the_bus_mid_transfer_is_reported_and_recovers() {
             false
         })
     };
-    let err = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap_err();
+    let err = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap_err();
     assert!(
         pull.join().unwrap(),
         "the link went down during the transfer"
@@ -531,7 +531,7 @@ fn a_device_without_foe_or_bootstrap_mailbox_is_refused() {
             Board::Wrist,
         )
         .unwrap();
-        let err = flash(&bus.md, &firmware, &options(), &mut |_| {}).unwrap_err();
+        let err = flash(bus.md(), &firmware, &options(), &mut |_| {}).unwrap_err();
         assert!(err.to_string().contains(expected), "{err}");
         assert_eq!(sim.lock().unwrap().stats().mailbox_requests, 0);
     }

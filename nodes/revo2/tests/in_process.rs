@@ -47,7 +47,7 @@ fn drive(
     cycles: u32,
     assignment: &[u16],
 ) -> Inputs {
-    let sd = group.subdevice(&bus.md, 0).unwrap();
+    let sd = group.subdevice(bus.md(), 0).unwrap();
     let mut last = None;
     let mut lost = 0;
     for _ in 0..cycles {
@@ -58,7 +58,7 @@ fn drive(
         }
         // A cycle whose frame times out (20 ms, reachable when the machine is loaded) is lost, as
         // on a real bus: the next one goes on. What matters here is where the fingers go.
-        match block_on(group.tx_rx(&bus.md)) {
+        match block_on(group.tx_rx(bus.md())) {
             Ok(r) => {
                 assert_eq!(r.working_counter, 3);
                 last = Some(Inputs::unpack(sd.io_raw().inputs(), assignment).unwrap());
@@ -83,7 +83,7 @@ fn run_modes(unit_mode: u8) {
         },
         ..Default::default()
     };
-    let (group, info) = block_on(bring_up(&bus.md, &config)).unwrap();
+    let (group, info) = block_on(bring_up(bus.md(), &config)).unwrap();
     assert_eq!(sim.lock().unwrap().al_state(), (AlState::Op, false, 0));
     assert_eq!(info.unit_mode, unit_mode);
     assert!(info.tactile_in_pdo());
@@ -199,7 +199,7 @@ fn a_wrong_identity_is_refused_with_a_clear_error() {
     let sim: Sim = Arc::new(Mutex::new(SubDevice::new(config, app)));
     let clock = Clock::default();
     let bus = bus(&sim, &clock);
-    let err = block_on(bring_up(&bus.md, &Revo2Config::default()))
+    let err = block_on(bring_up(bus.md(), &Revo2Config::default()))
         .err()
         .unwrap()
         .to_string();
@@ -223,7 +223,7 @@ fn driver_on(
         },
         ..Default::default()
     });
-    let group = block_on(teleop_ecat_master::bring_up(&bus.md, &mut driver)).unwrap();
+    let group = block_on(teleop_ecat_master::bring_up(bus.md(), &mut driver)).unwrap();
     (bus, group, driver)
 }
 
@@ -299,7 +299,7 @@ fn bring_up_error(sim: &Sim) -> String {
     let mut driver = teleop_revo2::Revo2::new(Revo2Config::default());
     format!(
         "{:#}",
-        block_on(teleop_ecat_master::bring_up(&bus.md, &mut driver))
+        block_on(teleop_ecat_master::bring_up(bus.md(), &mut driver))
             .err()
             .unwrap()
     )

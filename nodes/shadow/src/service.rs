@@ -75,7 +75,7 @@ impl Service {
         let period = Duration::from_secs_f64(1.0 / config.cycle_hz);
         let bus = Bus::open(teleop_ecat_master::connector(&checked.transport))?;
         let mut driver = Shadow::new(config.clone(), checked);
-        let group = block_on(bring_up(&bus.md, &mut driver))?;
+        let group = block_on(bring_up(bus.md(), &mut driver))?;
         let layout = driver
             .own_layout()
             .ok_or_else(|| anyhow::anyhow!("the Shadow driver has no process data layout"))?;
@@ -127,7 +127,7 @@ impl Service {
             self.next = now;
         }
         self.exchange.write(&self.outputs);
-        block_on(self.exchange.exchange_any(&self.bus.md, &mut self.inputs))
+        block_on(self.exchange.exchange_any(self.bus.md(), &mut self.inputs))
             .map_err(|e| anyhow::anyhow!("exchange with the palm failed: {e}"))
     }
 

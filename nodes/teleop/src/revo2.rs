@@ -94,7 +94,7 @@ pub fn run(target: &Target, command: &Revo2Command) -> anyhow::Result<ExitCode> 
     }
     let transport = Transport::parse(&target.transport).map_err(anyhow::Error::msg)?;
     let bus = Bus::open(bus::connector(&transport))?;
-    let group = block_on(bus::discover(&bus.md)).map_err(|e| {
+    let group = block_on(bus::discover(bus.md())).map_err(|e| {
         anyhow::anyhow!(
             "{e:#} (on {}; is the Revo2 node running? stop it first)",
             target.transport
@@ -111,7 +111,7 @@ pub fn run(target: &Target, command: &Revo2Command) -> anyhow::Result<ExitCode> 
 }
 
 async fn read_value(bus: &Bus, group: &PreOpGroup, e: &Entry) -> anyhow::Result<ConfigValue> {
-    let sd = group.subdevice(&bus.md, 0)?;
+    let sd = group.subdevice(bus.md(), 0)?;
     let raw: heapless::Vec<u8, 64> = sd
         .sdo_read(e.index, e.sub)
         .await
@@ -120,7 +120,7 @@ async fn read_value(bus: &Bus, group: &PreOpGroup, e: &Entry) -> anyhow::Result<
 }
 
 fn info(bus: &Bus, group: &PreOpGroup) -> anyhow::Result<()> {
-    let sd = group.subdevice(&bus.md, 0)?;
+    let sd = group.subdevice(bus.md(), 0)?;
     let id = sd.identity();
     println!("device        {}", sd.name());
     println!(
@@ -146,7 +146,7 @@ fn set(bus: &Bus, group: &PreOpGroup, name: &str, text: &str) -> anyhow::Result<
             "{name} is a string: writing it needs a normal (segmented) SDO download, which ethercrab 0.7 does not implement (it writes expedited values of at most 4 bytes)"
         );
     }
-    let sd = group.subdevice(&bus.md, 0)?;
+    let sd = group.subdevice(bus.md(), 0)?;
     let result = block_on(async {
         match value {
             ConfigValue::U8(v) => sd.sdo_write(index, sub, v).await,
@@ -175,7 +175,7 @@ fn set(bus: &Bus, group: &PreOpGroup, name: &str, text: &str) -> anyhow::Result<
 }
 
 fn calibrate(bus: &Bus, group: &PreOpGroup, tactile: bool) -> anyhow::Result<()> {
-    let sd = group.subdevice(&bus.md, 0)?;
+    let sd = group.subdevice(bus.md(), 0)?;
     block_on(sd.sdo_write(obj::CONFIG, 0x06, 1u8))
         .map_err(|e| anyhow::anyhow!("position calibration: {e}"))?;
     println!("position calibration started (0x8000:06): the fingers run to their end stops");
@@ -210,7 +210,7 @@ fn flash_file(
         ..FlashOptions::default()
     };
     let mut bar = ProgressBar::new(std::io::stderr().is_terminal());
-    let result = flash::flash(&bus.md, &firmware, &options, &mut |event| match event {
+    let result = flash::flash(bus.md(), &firmware, &options, &mut |event| match event {
         FlashEvent::Step(text) => {
             bar.end_line();
             println!("{text}");

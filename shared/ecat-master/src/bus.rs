@@ -79,8 +79,9 @@ struct UseEthercrabTask {
 /// [`current`](Self::current) opens a fresh bus once the interface is up. The pump ignores such
 /// replies and reopens its socket instead.
 pub struct Bus {
-    /// The ethercrab MainDevice.
-    pub md: MainDevice<'static>,
+    /// The ethercrab MainDevice. Private: it borrows `_storage`, which this bus frees; a public
+    /// field could be moved or swapped out of the bus and outlive it (see [`md`](Self::md)).
+    md: MainDevice<'static>,
     /// The frame pump (link state and counters); `None` on the `ethercrab:` transport.
     pub pump: Option<Pump>,
     /// ethercrab's own task, on the `ethercrab:` transport.
@@ -188,6 +189,27 @@ impl Bus {
             latest: Mutex::new(None),
             _storage: storage,
         })
+    }
+
+    /// The ethercrab MainDevice, borrowed from the bus: it cannot outlive the bus, whose PDU
+    /// storage it uses (ethercrab's calls tie what they return to this borrow).
+    ///
+    /// ```
+    /// fn main_device(bus: &teleop_ecat_master::Bus) -> &ethercrab::MainDevice<'static> {
+    ///     bus.md()
+    /// }
+    /// ```
+    ///
+    /// It cannot be taken out of the bus (the field was public: swapped into another bus, or
+    /// moved out, it used a storage freed with its own bus):
+    ///
+    /// ```compile_fail,E0616
+    /// fn swap(a: &mut teleop_ecat_master::Bus, b: &mut teleop_ecat_master::Bus) {
+    ///     std::mem::swap(&mut a.md, &mut b.md);
+    /// }
+    /// ```
+    pub fn md(&self) -> &MainDevice<'static> {
+        &self.md
     }
 
     /// True while frames can flow: on the pump's transports, while its link is open (the pump

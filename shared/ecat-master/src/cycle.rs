@@ -139,13 +139,13 @@ pub fn run<D: Driver, H: Host<D>>(
     let mut backoff = Duration::from_millis(100);
     while !host.stop_requested() {
         let bus = bus.current(); // a fresh bus once ethercrab's own task has ended (ethercrab:)
-        match block_on(bring_up(&bus.md, driver)) {
+        match block_on(bring_up(bus.md(), driver)) {
             Ok(group) => {
                 tracing::info!(
                     period_us = settings.period.as_micros() as u64,
                     expected_wkc = driver
                         .own_layout()
-                        .map_or_else(|| expected_wkc(&bus.md, &group), |l| l.expected_wkc),
+                        .map_or_else(|| expected_wkc(bus.md(), &group), |l| l.expected_wkc),
                     "{} in OP",
                     driver.name()
                 );
@@ -299,7 +299,7 @@ fn cycle<D: Driver, H: Host<D>>(
     settings: &Settings,
     counters: &mut Counters,
 ) -> anyhow::Result<()> {
-    let md = &bus.md;
+    let md = bus.md();
     let period = settings.period;
     let mut exchanger = Exchanger::new(driver.own_layout());
     let expected = exchanger.expected_wkc(md, group);
@@ -534,9 +534,9 @@ fn side_channel<D: Driver>(
 /// Takes the device from OP down to INIT (logs the outcome; `name` is the device's).
 pub fn leave_op(bus: &Bus, group: OpGroup, name: &str) {
     match block_on(async {
-        let g = group.into_safe_op(&bus.md).await?;
-        let g = g.into_pre_op(&bus.md).await?;
-        g.into_init(&bus.md).await
+        let g = group.into_safe_op(bus.md()).await?;
+        let g = g.into_pre_op(bus.md()).await?;
+        g.into_init(bus.md()).await
     }) {
         Ok(_) => tracing::info!("{name} back in INIT"),
         Err(e) => tracing::warn!("leaving OP failed: {e}"),

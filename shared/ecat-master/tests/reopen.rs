@@ -49,7 +49,7 @@ fn two_hundred_reopened_buses_leave_one_pdu_storage() {
         assert_eq!(Bus::live_storages(), 1, "reopen {reopen}");
         if reopen % 50 == 0 {
             // The bus works: frames go through its storage.
-            let (group, found) = block_on(scan(&bus.md)).unwrap();
+            let (group, found) = block_on(scan(bus.md())).unwrap();
             assert_eq!((group.len(), found.len()), (1, 1));
         }
     }

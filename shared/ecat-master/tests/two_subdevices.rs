@@ -337,18 +337,18 @@ fn the_expected_working_counter_comes_from_the_subdevices_process_data() {
             outputs,
             parameter: 7,
         };
-        let group = block_on(bring_up(&rig.bus.md, &mut driver)).unwrap();
+        let group = block_on(bring_up(rig.bus.md(), &mut driver)).unwrap();
         assert_eq!(group.len(), 2);
-        let bridge = group.subdevice(&rig.bus.md, 0).unwrap();
+        let bridge = group.subdevice(rig.bus.md(), 0).unwrap();
         assert!(bridge.io_raw().inputs().is_empty() && bridge.io_raw().outputs().is_empty());
         assert_eq!(
-            expected_wkc(&rig.bus.md, &group),
+            expected_wkc(rig.bus.md(), &group),
             expected,
             "palm outputs: {outputs}"
         );
         let mut good = 0;
         for _ in 0..20 {
-            if let Ok(r) = block_on(group.tx_rx(&rig.bus.md)) {
+            if let Ok(r) = block_on(group.tx_rx(rig.bus.md())) {
                 assert_eq!(r.working_counter, expected, "palm outputs: {outputs}");
                 good += 1;
             }
@@ -367,7 +367,7 @@ fn a_foreign_subdevice_is_refused_by_name() {
         outputs: true,
         parameter: 0,
     };
-    let err = block_on(bring_up(&rig.bus.md, &mut driver))
+    let err = block_on(bring_up(rig.bus.md(), &mut driver))
         .err()
         .unwrap()
         .to_string();
