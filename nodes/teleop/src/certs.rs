@@ -5,8 +5,11 @@
 //! `ca.key` (its key: keep it off the stations, it signs new stations), and for each station
 //! `<name>.pem` and `<name>.key` (ECDSA P-256, PKCS#8). Each station certificate names the
 //! station and the addresses given for it (the peer checks the address it connects to against
-//! them) and may act as TLS server and client. An existing `ca.pem`/`ca.key` pair in the folder
-//! signs the new stations (adding a station later); nothing is overwritten.
+//! them) and may act as TLS server and client; its common name is the station's name, which the
+//! bridge binds its link to. Each CA has a name of its own (`teleop session CA <key hash>`), so a
+//! certificate from another session's CA is refused as from an unknown issuer. An existing
+//! `ca.pem`/`ca.key` pair in the folder signs the new stations (adding a station later); nothing
+//! is overwritten.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -90,7 +93,7 @@ pub fn run(out: &Path, stations: &[StationSpec], days: u32) -> anyhow::Result<Ex
         params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
         params
             .distinguished_name
-            .push(DnType::CommonName, "teleop session CA");
+            .push(DnType::CommonName, ca_name(&key));
         params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
         params.not_before = not_before;
         params.not_after = not_after;
@@ -145,6 +148,20 @@ pub fn run(out: &Path, stations: &[StationSpec], days: u32) -> anyhow::Result<Ex
         "copy ca.pem and the station's .pem/.key to each station; keep ca.key elsewhere; valid {days} days"
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The CA's own name, `teleop session CA <16 hex digits of its key>`: two sessions' CAs differ
+/// by name, so a certificate from another session's CA is refused as from an unknown issuer (TLS
+/// finds no CA of that name), not as a bad signature (a CA of the same name that did not sign
+/// it).
+fn ca_name(key: &KeyPair) -> String {
+    // FNV-1a, 64 bit, over the public key.
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in key.public_key_raw() {
+        hash ^= u64::from(*b);
+        hash = hash.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("teleop session CA {hash:016x}")
 }
 
 fn paths(out: &Path, station: &str) -> (PathBuf, PathBuf) {
@@ -240,5 +257,45 @@ mod tests {
                 .contains("already has a certificate for robot"),
             "{e}"
         );
+    }
+
+    /// The common name of the CA in `dir/ca.pem`: the DER's UTF8String (tag 12, one length
+    /// byte) that starts with "teleop session CA".
+    fn ca_common_name(dir: &Path) -> String {
+        let pem = std::fs::read_to_string(dir.join("ca.pem")).unwrap();
+        let text: String = pem.lines().filter(|l| !l.starts_with("-----")).collect();
+        let value = |c: u8| match c {
+            b'A'..=b'Z' => u32::from(c - b'A'),
+            b'a'..=b'z' => u32::from(c - b'a') + 26,
+            b'0'..=b'9' => u32::from(c - b'0') + 52,
+            b'+' => 62,
+            _ => 63,
+        };
+        let mut der = Vec::new();
+        for chunk in text.trim_end_matches('=').as_bytes().chunks(4) {
+            let n = chunk
+                .iter()
+                .enumerate()
+                .fold(0u32, |n, (i, c)| n | value(*c) << (18 - 6 * i));
+            der.extend_from_slice(&n.to_be_bytes()[1..chunk.len()]);
+        }
+        let at = der
+            .windows(17)
+            .position(|w| w == b"teleop session CA")
+            .unwrap();
+        assert_eq!(der[at - 2], 12, "a UTF8String");
+        let len = usize::from(der[at - 1]);
+        String::from_utf8(der[at..at + len].to_vec()).unwrap()
+    }
+
+    #[test]
+    fn each_session_ca_has_a_name_of_its_own() {
+        let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+        for dir in [&a, &b] {
+            run(dir.path(), &["robot".parse().unwrap()], 30).unwrap();
+        }
+        let (a, b) = (ca_common_name(a.path()), ca_common_name(b.path()));
+        assert_ne!(a, b, "two sessions' CAs have one name");
+        assert!(a.len() > "teleop session CA ".len(), "{a}");
     }
 }
