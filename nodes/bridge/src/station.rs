@@ -779,4 +779,88 @@ mod tests {
         assert_eq!(shared.faults(), Faults::default());
         assert!(answer(&shared, "stats").starts_with("ok received 0 gaps 0 superseded 0"));
     }
+
+    /// Two zenoh sessions over TCP on the loopback, as the bridges configure them: the robot's
+    /// listening, the operator's connected.
+    fn sessions(name: &str) -> (zenoh::Session, zenoh::Session) {
+        let robot = format!(
+            "station = \"robot\"\npeer = \"operator\"\nsession = \"{name}\"\n\
+             listen = [\"tcp/127.0.0.1:0\"]\ninsecure = true\n"
+        );
+        let robot = BridgeConfig::parse(&robot, "robot.toml").unwrap();
+        let robot = zenoh::open(robot.zenoh().unwrap()).wait().unwrap();
+        let locator = robot.info().locators().wait()[0].to_string();
+        let operator = format!(
+            "station = \"operator\"\npeer = \"robot\"\nsession = \"{name}\"\n\
+             connect = [\"{locator}\"]\ninsecure = true\n"
+        );
+        let operator = BridgeConfig::parse(&operator, "operator.toml").unwrap();
+        (
+            robot,
+            zenoh::open(operator.zenoh().unwrap()).wait().unwrap(),
+        )
+    }
+
+    #[test]
+    fn a_peer_cannot_queue_frames_without_bound_nor_send_huge_ones() {
+        let (robot, operator) = sessions("inbox");
+        let key = "teleop/inbox/operator/hand/command";
+        let shared = Arc::new(Shared::default());
+        let (tx, rx) = mpsc::sync_channel(INBOX);
+        let _sub = subscribe(&robot, key.into(), Slot::Topic(0), tx, Arc::clone(&shared)).unwrap();
+        let publisher = operator
+            .declare_publisher(key)
+            .congestion_control(CongestionControl::Block)
+            .wait()
+            .unwrap();
+        let start = Instant::now();
+        // Once the subscription is known at the operator's end, frames arrive.
+        while rx.try_recv().is_err() {
+            assert!(start.elapsed() < Duration::from_secs(20), "nothing arrives");
+            publisher.put(vec![1u8; 8]).wait().unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        while rx.try_recv().is_ok() {}
+        // Nobody takes them: the queue fills, the rest are dropped and counted.
+        const FLOOD: usize = 1000;
+        assert!(FLOOD > INBOX);
+        for _ in 0..FLOOD {
+            publisher.put(vec![2u8; 8]).wait().unwrap();
+        }
+        while shared.overflow.load(Ordering::Relaxed) == 0 {
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "no overflow counted"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        std::thread::sleep(Duration::from_millis(200));
+        let queued = rx.try_iter().count();
+        assert_eq!(queued, INBOX);
+        assert_eq!(
+            shared.errors.load(Ordering::Relaxed),
+            shared.overflow.load(Ordering::Relaxed)
+        );
+        // A frame longer than any frame of ours never arrives; the link stays.
+        publisher
+            .put(vec![3u8; frame::MAX_FRAME_LEN + 1])
+            .wait()
+            .unwrap();
+        publisher.put(vec![4u8; 8]).wait().unwrap();
+        let mut got = Vec::new();
+        while !got.contains(&4) {
+            assert!(
+                start.elapsed() < Duration::from_secs(20),
+                "the link is gone"
+            );
+            if let Ok(r) = rx.recv_timeout(Duration::from_millis(100)) {
+                assert!(
+                    r.bytes.len() <= frame::MAX_FRAME_LEN,
+                    "a huge frame arrived"
+                );
+                got.push(r.bytes[0]);
+            }
+        }
+        assert!(!got.contains(&3));
+    }
 }
