@@ -90,6 +90,15 @@ pub enum RecordingError {
         /// What the MCAP library reported.
         detail: String,
     },
+    /// An earlier error stopped the recorder (a full disk, a failed write): everything after
+    /// it is refused with that first error, which is the cause.
+    #[error("{}: recording stopped by an earlier error: {first}", .path.display())]
+    Stopped {
+        /// The file being written when it stopped.
+        path: PathBuf,
+        /// The first error, as text.
+        first: String,
+    },
     /// The API was used in a way that cannot work: a topic registered twice with different
     /// schemas, a topic id from another recorder, repairing a file onto itself.
     #[error("{}: {detail}", .path.display())]
@@ -112,6 +121,7 @@ impl RecordingError {
             | Self::BadMessage { path, .. }
             | Self::Io { path, .. }
             | Self::Mcap { path, .. }
+            | Self::Stopped { path, .. }
             | Self::InvalidUse { path, .. } => path,
         }
     }

@@ -15,7 +15,8 @@
 //!   = false`).
 //! - [`read_messages`] yields payloads in log-time order (finished) or file order (killed),
 //!   checked against the message contract.
-//! - [`repair`] copies what a killed recorder left into a finished file.
+//! - [`repair`] copies what a killed recorder left (or what reads of a damaged file) into a
+//!   finished file, skipping and reporting what does not read.
 //!
 //! Contract versions: every file starts with a [`CONTRACT_METADATA`] record naming the message
 //! contract version it was written with, and each topic's schema text fixes its layout. Readers
@@ -67,8 +68,10 @@ mod repair;
 mod write;
 
 pub use error::RecordingError;
-pub use read::{info, read_messages, Filter, Messages, OwnedMessage, RecordingInfo, TopicInfo};
-pub use repair::{repair, RepairReport};
+pub use read::{
+    head_metadata, info, read_messages, Filter, Messages, OwnedMessage, RecordingInfo, TopicInfo,
+};
+pub use repair::{repair, repair_with, RepairOptions, RepairReport, Skipped};
 pub use write::{
     part_path, RecordedMessage, Recorder, RecordingSummary, TopicCount, TopicId, WriterOptions,
     CONTRACT_METADATA, DROPS_METADATA,

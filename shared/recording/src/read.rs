@@ -864,3 +864,22 @@ impl StreamState {
         }
     }
 }
+
+/// Metadata records: name and fields, in file order.
+pub type Metadata = Vec<(String, BTreeMap<String, String>)>;
+
+/// The metadata records at the start of a file, before its first schema, channel, message or
+/// chunk (where [`crate::Recorder`] writes the records it was created with): cheap to read, for
+/// telling files apart without reading them.
+pub fn head_metadata(path: &Path) -> Result<Metadata, RecordingError> {
+    let mut stream = RecordStream::new(open(path)?)?;
+    let mut metadata = Vec::new();
+    while let Some(record) = stream.next_record() {
+        match record? {
+            Record::Header(_) => {}
+            Record::Metadata(m) => metadata.push((m.name, m.metadata)),
+            _ => break,
+        }
+    }
+    Ok(metadata)
+}

@@ -74,6 +74,10 @@ pub struct WriterOptions {
     pub rotate_after: Option<Duration>,
     /// Compresses chunks with zstd (on the calling thread). Default true.
     pub compression: bool,
+    /// Makes every closed chunk durable (`fdatasync`), and each finished file and its folder
+    /// (`fsync`): a power cut loses at most the open chunk too, as a killed recorder does.
+    /// Default true; see BENCHMARKS.md for what it costs.
+    pub sync: bool,
 }
 
 impl Default for WriterOptions {
@@ -83,6 +87,7 @@ impl Default for WriterOptions {
             rotate_bytes: None,
             rotate_after: None,
             compression: true,
+            sync: true,
         }
     }
 }
@@ -108,8 +113,12 @@ pub struct TopicCount {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RecordingSummary {
     /// Every file written, in order: the path given to [`Recorder::create`], then
-    /// `<stem>_1.mcap`, `<stem>_2.mcap`, ... after rotations.
+    /// `<stem>_1.mcap`, `<stem>_2.mcap`, ... after rotations (a number whose file exists
+    /// already is skipped).
     pub files: Vec<PathBuf>,
+    /// The last file when recording failed: it could not be finished, and holds what its
+    /// closed chunks hold (as a killed recorder's file; `repair` makes it indexable).
+    pub unfinished: Option<PathBuf>,
     /// Per registered topic (and per topic only named in [`Recorder::note_drops`]), in
     /// registration order.
     pub topics: Vec<TopicCount>,
@@ -158,6 +167,15 @@ pub struct Recorder {
     buf: Vec<u8>,
     /// The current file has been finished (or finishing it failed).
     finished: bool,
+    /// The first error that stopped recording: every later call returns it again, because
+    /// the MCAP writer refuses everything after a failed write ("attempted another write
+    /// after a write method failed") and would hide the cause.
+    failed: Option<String>,
+    /// Why the last rotation could not start a new file (recording went on in the current
+    /// one), until [`Recorder::take_rotation_error`] takes it.
+    rotation_error: Option<String>,
+    /// No new rotation attempt before this log time after one failed.
+    rotation_retry_ns: Option<u64>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -175,13 +193,15 @@ fn nanos(d: Duration) -> u64 {
     u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
 }
 
-/// Creates `path` (and its folder) and starts an MCAP file with `metadata` in it.
+/// Creates `path` (and its folder; never an existing file) and starts an MCAP file with
+/// `metadata` in it, on disk when this returns. Returns the writer, a second handle on the
+/// file, and its length. When anything fails after the file was created, the file is removed:
+/// no empty or headless file is left behind (a full disk).
 fn start_file(
     path: &Path,
     options: &WriterOptions,
     metadata: &[(String, BTreeMap<String, String>)],
-    create_new: bool,
-) -> Result<(Writer<BufWriter<File>>, File), RecordingError> {
+) -> Result<(Writer<BufWriter<File>>, File, u64), RecordingError> {
     if let Some(parent) = path.parent() {
         if !parent.as_os_str().is_empty() {
             std::fs::create_dir_all(parent).map_err(|e| RecordingError::io(parent, e))?;
@@ -190,26 +210,51 @@ fn start_file(
     let file = File::options()
         .write(true)
         .read(true)
-        .create(true)
-        .create_new(create_new)
-        .truncate(true)
+        .create_new(true)
         .open(path)
         .map_err(|e| RecordingError::io(path, e))?;
-    let probe = file.try_clone().map_err(|e| RecordingError::io(path, e))?;
-    let mut writer = write_options(options.compression)
-        .create(BufWriter::new(file))
-        .map_err(|e| RecordingError::mcap(path, e))?;
-    for (name, fields) in metadata {
-        writer
-            .write_metadata(&Metadata {
-                name: name.clone(),
-                metadata: fields.clone(),
-            })
+    let started = (|| {
+        let probe = file.try_clone().map_err(|e| RecordingError::io(path, e))?;
+        let mut writer = write_options(options.compression)
+            .create(BufWriter::new(file))
             .map_err(|e| RecordingError::mcap(path, e))?;
+        for (name, fields) in metadata {
+            writer
+                .write_metadata(&Metadata {
+                    name: name.clone(),
+                    metadata: fields.clone(),
+                })
+                .map_err(|e| RecordingError::mcap(path, e))?;
+        }
+        // Header and metadata on disk now: a recorder killed from here on leaves a repairable
+        // file.
+        writer.flush().map_err(|e| RecordingError::mcap(path, e))?;
+        if options.sync {
+            probe.sync_data().map_err(|e| RecordingError::io(path, e))?;
+            sync_folder(path)?;
+        }
+        let len = probe
+            .metadata()
+            .map_err(|e| RecordingError::io(path, e))?
+            .len();
+        Ok((writer, probe, len))
+    })();
+    if started.is_err() {
+        // Ours (created above): a file without its header is of no use to anyone.
+        let _ = std::fs::remove_file(path);
     }
-    // Header and metadata on disk now: a recorder killed from here on leaves a repairable file.
-    writer.flush().map_err(|e| RecordingError::mcap(path, e))?;
-    Ok((writer, probe))
+    started
+}
+
+/// Makes the folder entry of `path` durable (a new or finished file survives a power cut).
+fn sync_folder(path: &Path) -> Result<(), RecordingError> {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    File::open(folder)
+        .and_then(|f| f.sync_all())
+        .map_err(|e| RecordingError::io(folder, e))
 }
 
 /// The MCAP writer settings of every file this crate writes.
@@ -258,7 +303,13 @@ impl Recorder {
                     .cloned(),
             )
             .collect();
-        let (writer, size_probe) = start_file(path, &options, &metadata, true)?;
+        if options.rotate_bytes == Some(0) || options.rotate_after == Some(Duration::ZERO) {
+            return Err(RecordingError::invalid_use(
+                path,
+                "a rotation limit of zero would start a new file for every message",
+            ));
+        }
+        let (writer, size_probe, file_bytes) = start_file(path, &options, &metadata)?;
         Ok(Self {
             base: path.to_path_buf(),
             current: path.to_path_buf(),
@@ -267,7 +318,7 @@ impl Recorder {
             metadata,
             writer,
             size_probe,
-            file_bytes: 0,
+            file_bytes,
             topics: Vec::new(),
             drops_total: BTreeMap::new(),
             drops_file: BTreeMap::new(),
@@ -277,7 +328,40 @@ impl Recorder {
             pending: false,
             buf: Vec::new(),
             finished: false,
+            failed: None,
+            rotation_error: None,
+            rotation_retry_ns: None,
         })
+    }
+
+    /// The first error that stopped this recorder, if one did.
+    pub fn first_error(&self) -> Option<&str> {
+        self.failed.as_deref()
+    }
+
+    /// Why the last rotation failed, once: recording went on in the current file (it is
+    /// tried again a `chunk_flush` of log time later).
+    pub fn take_rotation_error(&mut self) -> Option<String> {
+        self.rotation_error.take()
+    }
+
+    /// Refuses to go on after an earlier failure, naming it.
+    fn check_failed(&self) -> Result<(), RecordingError> {
+        match &self.failed {
+            Some(first) => Err(RecordingError::Stopped {
+                path: self.current.clone(),
+                first: first.clone(),
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Keeps the first error (the later ones are its consequences) and returns it.
+    fn fail(&mut self, error: RecordingError) -> RecordingError {
+        if self.failed.is_none() {
+            self.failed = Some(error.to_string());
+        }
+        error
     }
 
     /// The file being written now.
@@ -391,24 +475,27 @@ impl Recorder {
                 ),
             });
         }
+        self.check_failed()?;
         if self.rotation_due(msg.log_time_ns) {
-            self.rotate()?;
+            self.rotate(msg.log_time_ns)?;
         }
         let topic = &mut self.topics[id.0];
         self.buf.clear();
         self.buf.extend_from_slice(&CDR_LE_HEADER);
         self.buf.extend_from_slice(msg.payload);
-        self.writer
-            .write_to_known_channel(
-                &MessageHeader {
-                    channel_id: topic.channel,
-                    sequence: msg.sequence,
-                    log_time: msg.log_time_ns,
-                    publish_time: msg.publish_time_ns,
-                },
-                &self.buf,
-            )
-            .map_err(|e| RecordingError::mcap(&self.current, e))?;
+        let written = self.writer.write_to_known_channel(
+            &MessageHeader {
+                channel_id: topic.channel,
+                sequence: msg.sequence,
+                log_time: msg.log_time_ns,
+                publish_time: msg.publish_time_ns,
+            },
+            &self.buf,
+        );
+        if let Err(e) = written {
+            let e = RecordingError::mcap(&self.current, e);
+            return Err(self.fail(e));
+        }
         topic.messages += 1;
         self.pending = true;
         self.file_start_ns.get_or_insert(msg.log_time_ns);
@@ -434,18 +521,32 @@ impl Recorder {
         Ok(())
     }
 
-    /// Closes the open chunk now and hands everything written so far to the operating system.
+    /// Closes the open chunk now and hands everything written so far to the operating system
+    /// (and, with `sync`, to the disk).
     pub fn flush(&mut self) -> Result<(), RecordingError> {
-        self.writer
+        self.check_failed()?;
+        let result = self
+            .writer
             .flush()
-            .map_err(|e| RecordingError::mcap(&self.current, e))?;
-        self.pending = false;
-        self.file_bytes = self
-            .size_probe
-            .metadata()
-            .map_err(|e| RecordingError::io(&self.current, e))?
-            .len();
-        Ok(())
+            .map_err(|e| RecordingError::mcap(&self.current, e))
+            .and_then(|()| {
+                if self.options.sync {
+                    self.size_probe
+                        .sync_data()
+                        .map_err(|e| RecordingError::io(&self.current, e))?;
+                }
+                self.size_probe
+                    .metadata()
+                    .map_err(|e| RecordingError::io(&self.current, e))
+            });
+        match result {
+            Ok(meta) => {
+                self.pending = false;
+                self.file_bytes = meta.len();
+                Ok(())
+            }
+            Err(e) => Err(self.fail(e)),
+        }
     }
 
     /// Adds `dropped` samples to the drop count of `topic` (from gaps in the samples' own
@@ -472,21 +573,36 @@ impl Recorder {
                 format!("the `{CONTRACT_METADATA}` record is written by the recorder itself"),
             ));
         }
-        self.writer
-            .write_metadata(&Metadata {
-                name: name.to_string(),
-                metadata: fields.clone(),
-            })
-            .map_err(|e| RecordingError::mcap(&self.current, e))?;
+        self.check_failed()?;
+        let written = self.writer.write_metadata(&Metadata {
+            name: name.to_string(),
+            metadata: fields.clone(),
+        });
+        if let Err(e) = written {
+            let e = RecordingError::mcap(&self.current, e);
+            return Err(self.fail(e));
+        }
         self.metadata.retain(|(n, _)| n != name);
         self.metadata.push((name.to_string(), fields));
         Ok(())
     }
 
     /// Finishes the current file properly (drops record, summary, indexes, footer) and returns
-    /// every path written with per-topic counts and drops.
-    pub fn finish(mut self) -> Result<RecordingSummary, RecordingError> {
-        self.finish_current()?;
+    /// every path written with per-topic counts and drops. After a failure (see
+    /// [`finish_all`](Self::finish_all)) it returns the first error.
+    pub fn finish(self) -> Result<RecordingSummary, RecordingError> {
+        match self.finish_all() {
+            (summary, None) => Ok(summary),
+            (_, Some(e)) => Err(e),
+        }
+    }
+
+    /// Finishes what can be finished and says what could not: the summary (every file, the
+    /// counts, and the file left unfinished if any) and the first error, if recording failed
+    /// or the current file could not be finished. A file that could not be finished is cut
+    /// back to the end of its last closed chunk, so it reads like a killed recorder's file.
+    pub fn finish_all(mut self) -> (RecordingSummary, Option<RecordingError>) {
+        let result = self.finish_current();
         let mut files = std::mem::take(&mut self.files);
         files.push(self.current.clone());
         let mut topics: Vec<TopicCount> = self
@@ -510,17 +626,31 @@ impl Recorder {
             }
         }
         let messages = self.topics.iter().map(|t| t.messages).sum();
-        Ok(RecordingSummary {
+        let error = match (result, &self.failed) {
+            (Err(e), _) => Some(e),
+            (Ok(()), Some(first)) => Some(RecordingError::Stopped {
+                path: self.current.clone(),
+                first: first.clone(),
+            }),
+            (Ok(()), None) => None,
+        };
+        let summary = RecordingSummary {
             files,
+            unfinished: self.failed.is_some().then(|| self.current.clone()),
             topics,
             messages,
-        })
+        };
+        (summary, error)
     }
 
-    /// Writes the drops record and the summary of the current file.
+    /// Writes the drops record and the summary of the current file, and syncs it. After a
+    /// failure the file is cut back to its last closed chunk instead.
     fn finish_current(&mut self) -> Result<(), RecordingError> {
         if std::mem::replace(&mut self.finished, true) {
             return Ok(());
+        }
+        if self.failed.is_some() {
+            return self.cut_back();
         }
         let mut drops: BTreeMap<String, String> = self
             .topics
@@ -530,17 +660,48 @@ impl Recorder {
         for (topic, count) in std::mem::take(&mut self.drops_file) {
             drops.insert(topic, count.to_string());
         }
-        self.writer
+        let result = self
+            .writer
             .write_metadata(&Metadata {
                 name: DROPS_METADATA.to_string(),
                 metadata: drops,
             })
-            .and_then(|()| self.writer.finish())
-            .map_err(|e| RecordingError::mcap(&self.current, e))?;
+            .and_then(|()| self.writer.finish().map(drop))
+            .map_err(|e| RecordingError::mcap(&self.current, e))
+            .and_then(|()| {
+                if self.options.sync {
+                    self.size_probe
+                        .sync_all()
+                        .map_err(|e| RecordingError::io(&self.current, e))?;
+                    sync_folder(&self.current)?;
+                }
+                Ok(())
+            });
+        if let Err(e) = result {
+            let e = self.fail(e);
+            // What the failed finish left after the last closed chunk is of no use.
+            let _ = self.cut_back();
+            return Err(e);
+        }
         Ok(())
     }
 
+    /// Cuts the current file back to the end of its last closed chunk (what a failed write
+    /// left after it is a partial record), so readers see a killed recorder's file.
+    fn cut_back(&mut self) -> Result<(), RecordingError> {
+        self.size_probe
+            .set_len(self.file_bytes)
+            .and_then(|()| self.size_probe.sync_all())
+            .map_err(|e| RecordingError::io(&self.current, e))
+    }
+
     fn rotation_due(&self, log_time_ns: u64) -> bool {
+        if self
+            .rotation_retry_ns
+            .is_some_and(|retry| log_time_ns < retry)
+        {
+            return false;
+        }
         let by_time = match (self.options.rotate_after, self.file_start_ns) {
             (Some(after), Some(start)) => log_time_ns.saturating_sub(start) >= nanos(after),
             _ => false,
@@ -553,38 +714,77 @@ impl Recorder {
     }
 
     /// Finishes the current file and continues in the next part, which repeats the metadata,
-    /// schemas and channels. The new file is made first: if that fails, recording goes on in
-    /// the current one.
-    fn rotate(&mut self) -> Result<(), RecordingError> {
-        let part = self.part + 1;
-        let path = part_path(&self.base, part);
-        let (mut writer, probe) = start_file(&path, &self.options, &self.metadata, false)?;
+    /// schemas and channels. The new file is made first, under the next part number whose file
+    /// does not exist (an existing file is never touched): if that fails, recording goes on in
+    /// the current file, the reason is kept for [`take_rotation_error`](Self::take_rotation_error),
+    /// and rotating is tried again a `chunk_flush` of log time later. Only failing to finish
+    /// the current file stops recording.
+    fn rotate(&mut self, log_time_ns: u64) -> Result<(), RecordingError> {
+        let (part, path, mut writer, probe, file_bytes) = match self.start_part() {
+            Ok(started) => started,
+            Err(e) => {
+                self.rotation_error = Some(e.to_string());
+                self.rotation_retry_ns =
+                    Some(log_time_ns.saturating_add(nanos(self.options.chunk_flush)));
+                return Ok(());
+            }
+        };
+        self.rotation_retry_ns = None;
         let mut channels = Vec::with_capacity(self.topics.len());
         for t in &self.topics {
-            channels.push(register(
-                &mut writer,
-                &path,
-                &t.name,
-                &t.schema_name,
-                &t.schema_text,
-            )?);
+            match register(&mut writer, &path, &t.name, &t.schema_name, &t.schema_text) {
+                Ok(channel) => channels.push(channel),
+                Err(e) => {
+                    drop(writer);
+                    let _ = std::fs::remove_file(&path);
+                    self.rotation_error = Some(e.to_string());
+                    self.rotation_retry_ns =
+                        Some(log_time_ns.saturating_add(nanos(self.options.chunk_flush)));
+                    return Ok(());
+                }
+            }
         }
-        let result = self.finish_current();
-        // Already finished (or failed): dropping it does not write again.
+        if let Err(e) = self.finish_current() {
+            // The current file stays the one that failed; the new one is not needed.
+            drop(writer);
+            let _ = std::fs::remove_file(&path);
+            return Err(e);
+        }
+        // Already finished: dropping it does not write again.
         drop(std::mem::replace(&mut self.writer, writer));
         self.finished = false;
         let old_path = std::mem::replace(&mut self.current, path);
         self.files.push(old_path);
         self.size_probe = probe;
         self.part = part;
-        self.file_bytes = 0;
+        self.file_bytes = file_bytes;
         self.file_start_ns = None;
         self.last_flush_ns = None;
         self.pending = false;
         for (t, channel) in self.topics.iter_mut().zip(channels) {
             t.channel = channel;
         }
-        result
+        Ok(())
+    }
+
+    /// Creates the next part: the first number after the current one whose file does not
+    /// exist (at most 1000 tries).
+    #[allow(clippy::type_complexity)]
+    fn start_part(
+        &self,
+    ) -> Result<(u32, PathBuf, Writer<BufWriter<File>>, File, u64), RecordingError> {
+        let mut part = self.part;
+        loop {
+            part = part.saturating_add(1);
+            let path = part_path(&self.base, part);
+            match start_file(&path, &self.options, &self.metadata) {
+                Ok((writer, probe, len)) => return Ok((part, path, writer, probe, len)),
+                Err(RecordingError::Io { source, .. })
+                    if source.kind() == std::io::ErrorKind::AlreadyExists
+                        && part < self.part.saturating_add(1000) => {}
+                Err(e) => return Err(e),
+            }
+        }
     }
 }
 

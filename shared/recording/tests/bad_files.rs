@@ -370,7 +370,8 @@ fn every_cut_of_a_recording_is_handled() {
     let mut last_recovered = 0;
     for cut in (0..=bytes.len()).step_by(7).chain([bytes.len()]) {
         let path = write_bytes(dir.path(), "cut.mcap", &bytes[..cut]);
-        match repair(&path, &dir.path().join("out.mcap")) {
+        let overwrite = RepairOptions { overwrite: true };
+        match repair_with(&path, &dir.path().join("out.mcap"), overwrite) {
             Ok(report) => {
                 // A longer prefix never recovers fewer messages.
                 assert!(report.messages >= last_recovered, "cut {cut}");

@@ -525,3 +525,61 @@ fn recorder_and_reader_can_move_between_threads() {
     send::<Messages>();
     send::<RecordingError>();
 }
+
+/// Item 16 of issue 20: a part file that exists already is never truncated (the next free
+/// number is used), and a rotation that cannot create its file goes on in the current one.
+#[test]
+fn rotation_keeps_existing_files_and_survives_a_failed_part() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rot.mcap");
+    let precious = dir.path().join("rot_1.mcap");
+    std::fs::write(&precious, "someone else's file").unwrap();
+    let options = WriterOptions {
+        rotate_after: Some(Duration::from_secs(1)),
+        ..WriterOptions::default()
+    };
+    let mut rec = Recorder::create(&path, options.clone(), &metadata()).unwrap();
+    let written = write_glove(&mut rec, 2500);
+    let summary = rec.finish().unwrap();
+    assert_eq!(
+        std::fs::read_to_string(&precious).unwrap(),
+        "someone else's file"
+    );
+    assert!(!summary.files.contains(&precious), "{:?}", summary.files);
+    let got: usize = summary
+        .files
+        .iter()
+        .map(|f| all(f, &Filter::all()).len())
+        .sum();
+    assert_eq!(got, written.len());
+
+    // A part name longer than the file system allows: every rotation fails, nothing is lost.
+    let long = dir.path().join(format!("{}.mcap", "x".repeat(250)));
+    let mut rec = Recorder::create(&long, options, &metadata()).unwrap();
+    let written = write_glove(&mut rec, 2500);
+    let summary = rec.finish().unwrap();
+    assert_eq!(summary.files, std::slice::from_ref(&long));
+    assert_eq!(all(&long, &Filter::all()).len(), written.len());
+    assert!(info(&long).unwrap().complete);
+}
+
+/// Item 16 of issue 20: limits of zero would start a file per message.
+#[test]
+fn rotation_limits_of_zero_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for options in [
+        WriterOptions {
+            rotate_bytes: Some(0),
+            ..WriterOptions::default()
+        },
+        WriterOptions {
+            rotate_after: Some(Duration::ZERO),
+            ..WriterOptions::default()
+        },
+    ] {
+        let path = dir.path().join("zero.mcap");
+        let err = Recorder::create(&path, options, &[]).unwrap_err();
+        assert!(err.to_string().contains("rotat"), "{err}");
+        assert!(!path.exists(), "no file for refused options");
+    }
+}
