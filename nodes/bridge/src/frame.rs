@@ -176,6 +176,9 @@ pub enum Refusal {
 }
 
 /// Accepts a frame's origin only from `peer` speaking this contract (`contract`, `fingerprint`).
+/// The peer is the station the link is bound to: zenoh's access control lets only a link whose
+/// certificate names `peer` put on the peer's keys ([`crate::config::BridgeConfig::access_control`]),
+/// so a frame that names another station came from the authenticated peer and is refused.
 pub fn accept(origin: &Origin, peer: &str, contract: u32, fingerprint: u64) -> Result<(), Refusal> {
     if origin.station() != peer {
         return Err(Refusal::Station {

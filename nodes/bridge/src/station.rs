@@ -643,8 +643,10 @@ fn incoming(
                     } else if beat.echo_send_ns != 0 && stray_echo.first() {
                         tracing::warn!(
                             peer = %config.peer,
-                            "a heartbeat echoes a stamp this bridge never sent (or long ago): \
-                             no clock exchange from it (further ones are ignored silently)"
+                            "a heartbeat echoes a stamp this bridge did not send (or sent before \
+                             it started, or over {} heartbeats ago): no clock exchange from it \
+                             (further ones are ignored silently)",
+                            crate::link::SENT_WINDOW
                         );
                     }
                     shared
