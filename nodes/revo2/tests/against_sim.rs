@@ -16,7 +16,7 @@ use teleop_ecat_sim::{AlState, SubDevice};
 mod common;
 
 use common::{position_command, positions};
-use teleop_msgs::{control_mode, HandCommand, HandState, NodeHealth, Tactile};
+use teleop_msgs::{control_mode, EStop, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
@@ -423,6 +423,78 @@ fn health_keeps_coming_while_the_link_is_down() {
     rig.wait_state(Duration::from_secs(15), "link up again", |s| s.link_up == 1);
 }
 
+/// The fastest motion over any 50 ms of `track` (node stamps, positions), travel/s.
+fn fastest(track: &[(u64, f32)]) -> f32 {
+    let mut fastest = 0.0f32;
+    for (i, &(t0, p0)) in track.iter().enumerate() {
+        if let Some(&(t1, p1)) = track[i..].iter().find(|(t, _)| t - t0 >= 50_000_000) {
+            fastest = fastest.max((p1 - p0).abs() / ((t1 - t0) as f32 * 1e-9));
+        }
+    }
+    fastest
+}
+
+/// Issue 20, item 12: when the e-stop is released, the hand does not jump to the operator's
+/// pose (which moved while it held): it ramps there at the resume speed (1 travel/s), then
+/// tracks.
+#[test]
+fn after_an_estop_release_the_hand_ramps_to_the_operators_pose() {
+    let mut rig = Rig::new("");
+    let runtime = NodeRuntime::new("revo2-estop-test", &rig.ipc).unwrap();
+    let mut doorbell: Publisher<EStop> = runtime.publisher().unwrap();
+    let latch = teleop_runtime::latch_path(&rig.ipc, None);
+    let mut ring = |engaged: bool| {
+        teleop_runtime::set_latch(&latch, engaged).unwrap();
+        doorbell
+            .publish(&EStop {
+                engaged: u8::from(engaged),
+                ..Default::default()
+            })
+            .unwrap();
+    };
+    let a = [0.1; 6];
+    let b = [0.1, 0.9, 0.1, 0.1, 0.1, 0.1];
+    rig.command(a, Duration::from_millis(1000));
+    ring(true);
+    let start = Instant::now();
+    while rig.command(a, Duration::from_millis(50)).holding == 0 {
+        assert!(
+            start.elapsed() < Duration::from_secs(5),
+            "the e-stop does not hold the hand\n{}",
+            rig.log()
+        );
+    }
+    // The operator moves on while the hand holds at A.
+    let s = rig.command(b, Duration::from_millis(600));
+    assert_eq!(s.holding, 1, "held while the e-stop is engaged");
+    assert!((positions(&s)[1] - 0.1).abs() < 0.03, "{:?}", positions(&s));
+    ring(false);
+    let _ = rig.states.drain(|_| {});
+    let mut track: Vec<(u64, f32)> = Vec::new();
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_millis(2000) {
+        rig.commands.publish(&position_command(b)).unwrap();
+        rig.states
+            .drain(|s| track.push((s.header.origin_ns, s.joints[1].position)));
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let last = track.last().unwrap().1;
+    assert!(
+        (last - 0.9).abs() < 0.03,
+        "reached B: {last}\n{}",
+        rig.log()
+    );
+    let fastest = fastest(&track);
+    assert!(
+        fastest < 1.3,
+        "the hand moved at {fastest} travel/s toward B after the release: a jump, not a ramp"
+    );
+    assert!(
+        fastest > 0.7,
+        "it moves at about the resume speed: {fastest}"
+    );
+}
+
 /// Issue 20, item 12: when the command comes back after a stale period, the hand does not jump
 /// to the operator's pose at full speed: the target ramps from the held position at the
 /// configured resume speed (the default: 1 travel per second; the device and these commands
@@ -451,12 +523,7 @@ fn after_a_stale_period_the_hand_ramps_to_the_new_pose() {
     assert!((last - 0.9).abs() < 0.03, "reached B: {last}");
     // The fastest motion over any 50 ms: bounded by the resume speed (with room for the
     // device's own lag), not the full speed.
-    let mut fastest = 0.0f32;
-    for (i, &(t0, p0)) in track.iter().enumerate() {
-        if let Some(&(t1, p1)) = track[i..].iter().find(|(t, _)| t - t0 >= 50_000_000) {
-            fastest = fastest.max((p1 - p0).abs() / ((t1 - t0) as f32 * 1e-9));
-        }
-    }
+    let fastest = fastest(&track);
     assert!(
         fastest < 1.3,
         "the hand moved at {fastest} travel/s toward B: a jump, not a ramp"

@@ -12,6 +12,11 @@
 /// Most joints a [`Resume`] ramps (the contract's `MAX_JOINTS`).
 pub const MAX_JOINTS: usize = teleop_msgs::MAX_JOINTS;
 
+/// The longest time step a [`Resume::follow`] counts, seconds: after a stall of the loop the
+/// ramp goes on from where it was instead of jumping by the whole stall (a loop slower than
+/// 50 Hz ramps more slowly than its speed, never faster).
+pub const MAX_STEP_S: f64 = 0.02;
+
 /// The ramp back to the operator's pose after a hold (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Resume {
@@ -77,9 +82,9 @@ impl Resume {
     }
 
     /// Takes the targets to follow this cycle, `dt` seconds after the previous one, and limits
-    /// them in place: while resuming, each joint moves at most `speed * dt` from the target of
-    /// the previous cycle (or the held one); once every joint has caught up, the targets pass
-    /// unchanged. Returns true while resuming.
+    /// them in place: while resuming, each joint moves at most `speed * dt` (`dt` at most
+    /// [`MAX_STEP_S`]) from the target of the previous cycle (or the held one); once every joint
+    /// has caught up, the targets pass unchanged. Returns true while resuming.
     ///
     /// Targets with a non-finite value are no valid command: they are left as they are (whoever
     /// refuses them holds) and the next valid targets ramp from the held ones. Targets of
@@ -93,7 +98,7 @@ impl Resume {
         }
         if self.resuming && self.len == n {
             let step = if dt.is_finite() && dt > 0.0 {
-                self.speed * dt
+                self.speed * dt.min(MAX_STEP_S)
             } else {
                 0.0
             };
@@ -182,12 +187,12 @@ mod tests {
             "caught up after {cycles} cycles"
         );
         // A hold in the middle of a ramp: the next ramp starts where the last one was.
-        let mut r = Resume::new(1.0);
+        let mut r = Resume::new(10.0);
         r.held_at(&[0.0]);
-        run(&mut r, &[1.0], 0.1, 3);
+        run(&mut r, &[1.0], 0.01, 3);
         r.hold();
-        assert_eq!(r.held(), Some(&[0.30000000000000004][..]));
-        let sent = run(&mut r, &[-1.0], 0.1, 1);
+        assert!((r.held().unwrap()[0] - 0.3).abs() < 1e-12, "{:?}", r.held());
+        let sent = run(&mut r, &[-1.0], 0.01, 1);
         assert!((sent[0][0] - 0.2).abs() < 1e-12, "{sent:?}");
     }
 
@@ -205,10 +210,14 @@ mod tests {
         let mut t = [0.9, 0.9];
         assert!(r.follow(&mut t, 0.01));
         assert_eq!(t, [0.51, 0.51]);
-        // A bad time step moves nothing; another joint count has nothing to ramp from.
+        // A stall counts as MAX_STEP_S; a bad time step moves nothing; another joint count has
+        // nothing to ramp from.
         let mut t = [0.9, 0.9];
-        r.follow(&mut t, f64::NAN);
-        assert_eq!(t, [0.51, 0.51]);
+        r.follow(&mut t, 5.0);
+        assert!(t.iter().all(|t| (t - 0.53).abs() < 1e-12), "{t:?}");
+        let mut bad_dt = [0.9, 0.9];
+        r.follow(&mut bad_dt, f64::NAN);
+        assert_eq!(bad_dt, t);
         let mut t = [0.9; 3];
         assert!(!r.follow(&mut t, 0.01));
         assert_eq!(t, [0.9; 3]);
@@ -216,7 +225,7 @@ mod tests {
 
     #[test]
     fn forget_ramps_from_where_the_hand_is() {
-        let mut r = Resume::new(0.5);
+        let mut r = Resume::new(5.0);
         let mut t = [1.0];
         r.follow(&mut t, 0.01);
         r.forget();
@@ -224,7 +233,7 @@ mod tests {
         r.held_at(&[0.2]);
         r.held_at(&[0.7]); // already known: ignored
         let mut t = [1.0];
-        r.follow(&mut t, 0.1);
+        r.follow(&mut t, 0.01);
         assert!((t[0] - 0.25).abs() < 1e-12, "{t:?}");
         assert_eq!(Resume::new(f64::NAN).speed(), 0.0);
         let mut r = Resume::new(f64::INFINITY);
