@@ -120,6 +120,11 @@ pub struct AllegroConfig {
     pub stale_command_ms: u64,
     /// No finger frame for this long counts one missing cycle.
     pub frame_timeout_ms: u64,
+    /// On a link that stamps frames with their bus time (an slcan adapter taking `Z1`), a wait
+    /// without finger frames is only suspected missing for up to this long: the next frame's
+    /// stamp tells whether the hand was silent or its frames only came late (a loaded host).
+    /// Past it, or without stamps, each `frame_timeout_ms` counts (0: never suspect).
+    pub late_frame_limit_ms: u64,
     /// A run of this many cycles with a missing finger frame or a bus error stops torque, sends
     /// SYSTEM_OFF and brings the hand up again (R1: more than 3 in a row).
     pub missing_frame_limit: u32,
@@ -178,6 +183,7 @@ impl Default for AllegroConfig {
             calibration: CalibrationConfig::default(),
             stale_command_ms: 100,
             frame_timeout_ms: 10,
+            late_frame_limit_ms: 500,
             missing_frame_limit: 4,
             bringup_timeout_ms: 500,
             reconnect_backoff_ms: [100, 2000],
@@ -224,6 +230,8 @@ pub struct Settings {
     pub stale_command: Duration,
     /// Missing-cycle timeout.
     pub frame_timeout: Duration,
+    /// How long a stamped link's silence may be thought late.
+    pub late_frame_limit: Duration,
     /// Run length that brings the hand up again.
     pub missing_frame_limit: u32,
     /// Bring-up timeout.
@@ -307,6 +315,9 @@ impl AllegroConfig {
         if self.info_period_ms > 0 {
             teleop_runtime::check_ms("info_period_ms", self.info_period_ms)?;
         }
+        if self.late_frame_limit_ms > 0 {
+            teleop_runtime::check_ms("late_frame_limit_ms", self.late_frame_limit_ms)?;
+        }
         if !(self.resume_speed > 0.0 && self.resume_speed <= MAX_RESUME_SPEED) {
             return Err(format!(
                 "resume_speed = {}: must be in (0, {MAX_RESUME_SPEED}] rad/s",
@@ -351,6 +362,7 @@ impl AllegroConfig {
             calibration,
             stale_command: Duration::from_millis(self.stale_command_ms),
             frame_timeout: Duration::from_millis(self.frame_timeout_ms),
+            late_frame_limit: Duration::from_millis(self.late_frame_limit_ms),
             missing_frame_limit: self.missing_frame_limit,
             bringup_timeout: Duration::from_millis(self.bringup_timeout_ms),
             backoff: [

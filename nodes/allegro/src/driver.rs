@@ -9,7 +9,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_allegro_protocol::{v4, Generation, Protocol, JOINTS};
+use teleop_allegro_protocol::{v4, Generation, Protocol, FINGERS, JOINTS};
 use teleop_can_link::{BusState, CanLink, LinkError};
 use teleop_runtime::Resume;
 
@@ -17,6 +17,7 @@ use crate::bringup::{self, Hand, Identity};
 use crate::config::Settings;
 use crate::control::{Controller, Limits, VelocityFilter};
 use crate::gather::{Gather, Pushed};
+use crate::pace::{Pace, Timeout};
 use crate::wire::{Incoming, Wire};
 
 /// What the hand should do this cycle.
@@ -312,6 +313,9 @@ fn serve(
     let period = settings.period.as_secs_f64();
     let timeout = settings.frame_timeout;
     let mut deadline = Instant::now() + timeout;
+    // A wait without finger frames on a link that stamps them is only suspected missing until
+    // the next frame's stamp tells (see `pace`).
+    let mut pace = Pace::new(timeout, settings.late_frame_limit);
     let mut next_info = settings.info_period.map(|p| Instant::now() + p);
     let info_query = wire.info_query();
     loop {
@@ -331,6 +335,14 @@ fn serve(
                 Incoming::Position { finger, q } => {
                     finger_frame = true;
                     deadline = Instant::now() + timeout;
+                    // The suspected waits before it that its stamp shows were missed periods.
+                    let missed = pace.frame(link.rx_stamp_ms());
+                    if missed > 0 {
+                        counters.missing_cycles += u64::from(missed);
+                        counters.lost_frames += u64::from(missed) * FINGERS as u64;
+                        missed_since_complete += missed;
+                        run += missed;
+                    }
                     match gather.push(finger, q) {
                         Pushed::Pending => {}
                         Pushed::Missed(n) => {
@@ -418,11 +430,13 @@ fn serve(
             }
         }
         if !finger_frame && Instant::now() >= deadline {
-            let n = gather.timeout();
-            counters.missing_cycles += 1;
-            counters.lost_frames += u64::from(n);
-            missed_since_complete += 1;
-            run += 1;
+            if pace.timeout(timeout) == Timeout::Missed {
+                let n = gather.timeout();
+                counters.missing_cycles += 1;
+                counters.lost_frames += u64::from(n);
+                missed_since_complete += 1;
+                run += 1;
+            }
             deadline = Instant::now() + timeout;
         }
     }

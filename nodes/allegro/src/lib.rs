@@ -5,6 +5,7 @@
 //!   per-joint PWM limits and velocity filter);
 //! - [`control`]: the pure PD controller, its limits and the velocity filter;
 //! - [`gather`]: the pure gathering of one period's four finger frames;
+//! - [`pace`]: telling a late period from a missing one by the link's bus-time stamps (pure);
 //! - [`wire`]: one protocol generation on the wire (start, torque, stop, queries; what received
 //!   frames mean), over `teleop-allegro-protocol`;
 //! - [`bringup`]: bringing the hand up on a link, detecting its generation, naming a hand of the
@@ -24,6 +25,7 @@ pub mod control;
 pub mod driver;
 pub mod gather;
 pub mod node;
+pub mod pace;
 pub mod wire;
 
 pub use config::{AllegroConfig, ProtocolSetting, Settings};

@@ -684,3 +684,54 @@ fn v3_tells_state_answers_from_the_stream_with_either_payload() {
         );
     }
 }
+
+/// A loaded host (CPU hogs beside the node and the simulator: a load average near 10 on two
+/// cores) delays the hand's frames by tens of milliseconds on their way (the simulator's
+/// threads are not scheduled, the pty holds them) while the hand streams without a gap. The
+/// adapter's `Z1` stamps show the frames were sent on time: the node counts no missed-period
+/// run and never brings the hand up again. (Before stamps were used: 1-7 restarts in 12 s.)
+#[test]
+fn v4_rides_out_a_loaded_host() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let rig = Rig::new("v4", "v4", "none");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
+    let before = rig.latest_health();
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let hogs: Vec<_> = (0..10)
+        .map(|_| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let mut x = 0u64;
+                while !stop.load(Ordering::Relaxed) {
+                    x = std::hint::black_box(x.wrapping_mul(6_364_136_223_846_793_005) + 1);
+                }
+            })
+        })
+        .collect();
+    let start = Instant::now();
+    let mut down = 0u64;
+    while start.elapsed() < Duration::from_secs(8) {
+        rig.states.drain(|s| {
+            if s.link_up == 0 {
+                down += 1;
+            }
+        });
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    stop.store(true, Ordering::Relaxed);
+    for h in hogs {
+        h.join().unwrap();
+    }
+    let log = rig.log();
+    assert!(
+        !log.contains("bringing the hand up again"),
+        "the hand was restarted under load\n{log}"
+    );
+    assert_eq!(down, 0, "hand states with the link down under load");
+    let after = rig.latest_health();
+    eprintln!(
+        "under load: health errors {} -> {}",
+        before.errors, after.errors
+    );
+    rig.wait_state(Duration::from_secs(2), "still up", |s| s.link_up == 1);
+}

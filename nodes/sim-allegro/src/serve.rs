@@ -13,6 +13,11 @@
 //!   of the bus (one sends the host's frames, one receives everyone else's), so it never hears
 //!   its own frames back.
 //!
+//! Time: the hand's frames go on the bus at their due time on the hand's clock even when the
+//! firmware's thread runs late (a loaded host), and the adapter's `Z1` timestamps are the bus
+//! time; so frames that wait in this process (its threads not scheduled) reach the host late
+//! but stamped when they were sent, as with a real hand and adapter.
+//!
 //! Faults: frames from (or to) the hand dropped with a probability, the stream stopped, the
 //! bus off for a while (the adapter's status flags show it; nothing passes), the adapter
 //! unplugged for a while, another protocol generation, overheating, injected frames and
@@ -402,14 +407,16 @@ fn send(shared: &Shared, end: &mut LocalEnd, out: &mut Vec<(Duration, CanFrame)>
         return;
     }
     let drop_out = lock(&shared.faults).drop_out;
-    for (_, frame) in out.drain(..) {
+    for (due, frame) in out.drain(..) {
         if dice.roll(drop_out) {
             lock(&shared.stats).dropped_out += 1;
             continue;
         }
         let errors = end.counters().errors;
-        // A local end's send only fails when the end is gone (the thread is ending then).
-        let _ = end.send(&frame);
+        // At its due time on the hand's clock: the hand runs on its own microcontroller, so a
+        // frame this thread sends late (not scheduled in time on a loaded host) was on the
+        // bus when it fell due. A local end's send only fails when the end is gone.
+        let _ = end.send_at(&frame, shared.start + due);
         if end.counters().errors > errors {
             lock(&shared.stats).lost_bus_off += 1;
         }
@@ -582,7 +589,12 @@ fn forward(
             }
         }
         line.clear();
-        let now_ms = born.elapsed().as_millis() as u64;
+        // The adapter stamps a frame when it was on the bus (its own clock), not when this
+        // thread got to write it.
+        let now_ms = rx
+            .rx_at()
+            .map_or_else(|| born.elapsed(), |at| at.saturating_duration_since(born))
+            .as_millis() as u64;
         if !lock(&shared.adapter).deliver(&frame, now_ms, &mut line) {
             continue;
         }

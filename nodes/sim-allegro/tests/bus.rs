@@ -249,3 +249,34 @@ fn unplug_removes_the_pty_and_plugs_a_new_one_in_behind_the_same_link() {
     drop(sim);
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// The node's `SlcanLink` asks for `Z1` timestamps; the simulated adapter stamps each frame
+/// with the time it was on the bus (the hand's due time), so the stream's stamps are 3 ms apart
+/// whenever the frames reach the host (here read in bursts after 40 ms naps).
+#[test]
+fn the_adapter_stamps_frames_with_their_bus_time() {
+    let d = dir("stamps");
+    let link_path = d.join("can");
+    let sim = sim(Generation::V4, Some(&link_path), None, AckStyle::Canable);
+    let mut link = SlcanLink::open(&link_path, 115_200, Bitrate(1_000_000)).unwrap();
+    start_v4(&mut link);
+    collect(&mut link, Duration::from_millis(20));
+    let mut stamps = Vec::new();
+    let end = Instant::now() + Duration::from_millis(300);
+    while Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(40));
+        while let Ok(Some(f)) = link.recv(Duration::ZERO) {
+            if f.raw_id() == 0x080 {
+                stamps.push(link.rx_stamp_ms().expect("a stamped frame"));
+            }
+        }
+    }
+    assert!(stamps.len() > 50, "{}", stamps.len());
+    for w in stamps.windows(2) {
+        let gap = teleop_can_link::stamp_gap_ms(w[0], w[1]);
+        assert!((2..=4).contains(&gap), "finger 0 stamps {w:?}: {stamps:?}");
+    }
+    drop(link);
+    drop(sim);
+    let _ = std::fs::remove_dir_all(&d);
+}

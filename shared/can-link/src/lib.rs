@@ -102,6 +102,23 @@ pub trait CanLink: Send {
     /// What this link is, for logs and errors: `slcan:/dev/ttyACM0`, `socketcan:can0`,
     /// `local:/tmp/allegro.sock`.
     fn describe(&self) -> &str;
+
+    /// When the frame the last [`recv`](Self::recv) returned was on the bus, by the link's own
+    /// clock (an slcan adapter's `Z1` timestamp; the local bus's time): milliseconds modulo
+    /// [`STAMP_WRAP_MS`]. `None` when the link gives none. A loaded host delays when a frame is
+    /// read, not this: a caller tells a late frame from a missing one by it.
+    fn rx_stamp_ms(&self) -> Option<u16> {
+        None
+    }
+}
+
+/// Receive timestamps wrap here (slcan's `Z1`: 0000..EA5F ms).
+pub const STAMP_WRAP_MS: u16 = 60_000;
+
+/// Milliseconds from stamp `from` to stamp `to` (both modulo [`STAMP_WRAP_MS`]).
+pub fn stamp_gap_ms(from: u16, to: u16) -> u16 {
+    let w = u32::from(STAMP_WRAP_MS);
+    ((u32::from(to) % w + w - u32::from(from) % w) % w) as u16
 }
 
 impl<T: CanLink + ?Sized> CanLink for Box<T> {
@@ -123,6 +140,10 @@ impl<T: CanLink + ?Sized> CanLink for Box<T> {
 
     fn describe(&self) -> &str {
         (**self).describe()
+    }
+
+    fn rx_stamp_ms(&self) -> Option<u16> {
+        (**self).rx_stamp_ms()
     }
 }
 

@@ -12,6 +12,12 @@
 //! other, and a sender whose own [`TX_QUEUE`] frames are all still waiting blocks until the
 //! first has gone (as a controller's transmit queue). So bus time is real time.
 //!
+//! Each frame received keeps its bus time (when its transmission ended): [`LocalEnd::rx_at`],
+//! and as [`CanLink::rx_stamp_ms`] milliseconds since the bus was made, as an slcan adapter's
+//! timestamp would give it. [`LocalEnd::send_at`] puts a frame on the bus at a time in the
+//! past (a simulated device that was not scheduled in time sends what fell due, at its due
+//! time).
+//!
 //! Bus-off can be simulated with [`LocalBus::set_bus_state`]: every end's
 //! [`CanLink::bus_state`] follows, [`CanLink::recv`] returns [`LinkError::BusOff`] once when
 //! the bus goes off, and while it is off frames are dropped (a send counts an error).
@@ -71,6 +77,8 @@ struct QueueInner {
 
 struct Hub {
     inner: Mutex<HubInner>,
+    /// The bus's time zero (for receive stamps).
+    epoch: Instant,
 }
 
 struct HubInner {
@@ -105,6 +113,7 @@ impl LocalBus {
                     bus_free_at: Instant::now(),
                     state: BusState::ErrorActive,
                 }),
+                epoch: Instant::now(),
             }),
         }
     }
@@ -153,6 +162,8 @@ impl LocalBus {
             counters: LinkCounters::default(),
             tx_pending: VecDeque::with_capacity(TX_QUEUE),
             bus_off_reported: false,
+            last_rx_at: None,
+            own_free_at: None,
         }
     }
 
@@ -201,11 +212,38 @@ pub struct LocalEnd {
     /// When this end's frames waiting for the bus will have been sent (timing on).
     tx_pending: VecDeque<Instant>,
     bus_off_reported: bool,
+    /// Bus time of the frame `recv` returned last.
+    last_rx_at: Option<Instant>,
+    /// When this end's last frame left the bus (timing on).
+    own_free_at: Option<Instant>,
 }
 
 impl LocalEnd {
+    /// Sends `frame` as if at `at` (no later than now): on a timed bus its transmission starts
+    /// when the bus is free from then on, so frames a late sender sends in a burst keep the
+    /// bus times they were due at. Otherwise as [`CanLink::send`].
+    pub fn send_at(&mut self, frame: &CanFrame, at: Instant) -> Result<(), LinkError> {
+        if self.broadcast_at(frame, Some(at)) {
+            self.counters.tx += 1;
+        } else {
+            self.counters.errors += 1;
+        }
+        Ok(())
+    }
+
+    /// The bus time of the frame [`CanLink::recv`] returned last (when its transmission
+    /// ended).
+    pub fn rx_at(&self) -> Option<Instant> {
+        self.last_rx_at
+    }
+
     /// Puts `frame` on the bus; false when the bus is off (the frame is dropped).
     fn broadcast(&mut self, frame: &CanFrame) -> bool {
+        self.broadcast_at(frame, None)
+    }
+
+    /// Puts `frame` on the bus as if sent at `at` (None: now).
+    fn broadcast_at(&mut self, frame: &CanFrame, at: Option<Instant>) -> bool {
         let timed = lock(&self.hub.inner).timing.is_some();
         if timed {
             // A full transmit queue: wait until its oldest frame has gone.
@@ -223,12 +261,21 @@ impl LocalEnd {
         if hub.state == BusState::BusOff {
             return false;
         }
-        let now = Instant::now();
+        let real_now = Instant::now();
+        let now = at.map_or(real_now, |at| at.min(real_now));
         let at = match hub.timing {
             Some(bitrate) => {
-                let start = hub.bus_free_at.max(now);
+                // A frame sent as if earlier queues behind this end's own frames only: the bus
+                // time others booked since then (in real time) is not taken back from them.
+                let free = if now < real_now {
+                    self.own_free_at.unwrap_or(now)
+                } else {
+                    hub.bus_free_at
+                };
+                let start = free.max(now);
                 let end = start + frame_time_exact(frame, bitrate);
-                hub.bus_free_at = end;
+                hub.bus_free_at = hub.bus_free_at.max(end);
+                self.own_free_at = Some(end);
                 self.tx_pending.push_back(end);
                 end
             }
@@ -253,7 +300,12 @@ impl LocalEnd {
             let now = Instant::now();
             let wake = match q.events.front() {
                 Some(&(at, _)) if at <= now => {
-                    return Ok(q.events.pop_front().map(|(_, e)| e));
+                    return Ok(q.events.pop_front().map(|(at, e)| {
+                        if let Event::Frame(_) = e {
+                            self.last_rx_at = Some(at);
+                        }
+                        e
+                    }));
                 }
                 Some(&(at, _)) => at.min(deadline),
                 None if q.closed => {
@@ -330,6 +382,12 @@ impl CanLink for LocalEnd {
 
     fn describe(&self) -> &str {
         &self.what
+    }
+
+    fn rx_stamp_ms(&self) -> Option<u16> {
+        let at = self.last_rx_at?;
+        let ms = at.saturating_duration_since(self.hub.epoch).as_millis();
+        Some((ms % u128::from(crate::STAMP_WRAP_MS)) as u16)
     }
 }
 
@@ -576,6 +634,8 @@ fn start_client(
                 counters: LinkCounters::default(),
                 tx_pending: VecDeque::with_capacity(TX_QUEUE),
                 bus_off_reported: false,
+                last_rx_at: None,
+                own_free_at: None,
             };
             let mut reader = reader;
             let mut record = [0u8; RECORD];
@@ -850,6 +910,41 @@ mod tests {
         assert_eq!(b.recv(NO_WAIT).expect("recv"), None);
         assert_eq!(b.recv(WAIT).expect("recv"), Some(frames[0]));
         assert!(start.elapsed() >= frame_time_exact(&frames[0], Bitrate::MBIT_1));
+    }
+
+    #[test]
+    fn frames_sent_late_keep_their_bus_time_in_the_receive_stamps() {
+        let bus = LocalBus::with_timing(Bitrate::MBIT_1);
+        let (mut hand, mut host, mut other) = (bus.end(), bus.end(), bus.end());
+        let f = frame(0x3D3, &[0; 8]);
+        std::thread::sleep(Duration::from_millis(50));
+        // A hand that was not scheduled for 40 ms sends its overdue periods at once, while
+        // another end sent in real time meanwhile.
+        let due0 = Instant::now() - Duration::from_millis(40);
+        other.send(&frame(0x18A, &[0; 8])).expect("send");
+        for k in 0..4u32 {
+            hand.send_at(&f, due0 + Duration::from_millis(3) * k)
+                .expect("send");
+        }
+        assert_eq!(host.recv(WAIT).expect("recv"), Some(frame(0x18A, &[0; 8])));
+        let now_stamp = host.rx_stamp_ms().expect("a stamp");
+        let mut stamps = Vec::new();
+        for _ in 0..4 {
+            assert_eq!(host.recv(WAIT).expect("recv"), Some(f));
+            stamps.push(host.rx_stamp_ms().expect("a stamp"));
+        }
+        let gaps: Vec<u16> = stamps
+            .windows(2)
+            .map(|w| crate::stamp_gap_ms(w[0], w[1]))
+            .collect();
+        assert_eq!(gaps, [3, 3, 3], "{stamps:?}");
+        assert!(
+            crate::stamp_gap_ms(stamps[0], now_stamp) >= 38,
+            "the first was due 40 ms ago: {stamps:?} vs {now_stamp}"
+        );
+        assert!(host.rx_at().is_some());
+        // Stamps wrap as slcan's do.
+        assert_eq!(crate::stamp_gap_ms(59_999, 2), 3);
     }
 
     #[test]

@@ -14,6 +14,11 @@
 //! state lines are taken too. Entering bus-off is returned once from [`CanLink::recv`] as
 //! [`LinkError::BusOff`]; reopen to restart the controller.
 //!
+//! Timestamps: `Z1` is asked before `O` (Lawicel: only while closed); an adapter that takes it
+//! stamps each received frame with its own millisecond clock when the frame was on the bus,
+//! which [`CanLink::rx_stamp_ms`] gives back: frames a loaded host reads late keep the time
+//! they were sent. An adapter that refuses or ignores `Z1` just gives none.
+//!
 //! Receiving waits in the serial port's `poll` with the caller's timeout (no busy polling);
 //! sending encodes into a reused buffer (no allocation per frame).
 
@@ -48,11 +53,13 @@ pub struct SlcanLink {
     status_supported: bool,
     status_interval: Option<Duration>,
     next_status: Instant,
+    /// The adapter's timestamp of the frame `recv` returned last.
+    last_stamp: Option<u16>,
 }
 
 /// What the decoder's items change (split from the port so the decoder callback can borrow it).
 struct RxState {
-    frames: VecDeque<CanFrame>,
+    frames: VecDeque<(CanFrame, Option<u16>)>,
     counters: LinkCounters,
     state: BusState,
     bus_off_reported: bool,
@@ -63,12 +70,15 @@ impl RxState {
     /// Takes one item received while the link is in use.
     fn take(&mut self, item: Item) {
         match item {
-            Item::Frame { frame, .. } => {
+            Item::Frame {
+                frame,
+                timestamp_ms,
+            } => {
                 if self.frames.len() >= QUEUE {
                     self.frames.pop_front();
                     self.counters.overruns += 1;
                 }
-                self.frames.push_back(frame);
+                self.frames.push_back((frame, timestamp_ms));
                 self.counters.rx += 1;
             }
             Item::Ok | Item::FrameAck | Item::Version(_) | Item::Serial(_) => {}
@@ -170,6 +180,7 @@ impl SlcanLink {
             status_supported: false,
             status_interval: Some(STATUS_INTERVAL),
             next_status: Instant::now(),
+            last_stamp: None,
         };
         link.start(code)?;
         Ok(link)
@@ -193,6 +204,8 @@ impl SlcanLink {
             }
             _ => tracing::debug!(link = %self.rx.what, "no answer to F: no bus-state reports"),
         }
+        // Timestamps, while closed; refused or unanswered: frames come without them.
+        let _ = self.command(Command::Timestamps(true), COMMAND_TIMEOUT / 4)?;
         match self.command(Command::Open, COMMAND_TIMEOUT)? {
             Answer::Ok | Answer::Status(_) => {}
             Answer::Refused => return Err(self.refused(Command::Open)),
@@ -368,7 +381,8 @@ impl CanLink for SlcanLink {
         let deadline = Instant::now() + timeout;
         let mut first = true;
         loop {
-            if let Some(frame) = self.rx.frames.pop_front() {
+            if let Some((frame, stamp)) = self.rx.frames.pop_front() {
+                self.last_stamp = stamp;
                 return Ok(Some(frame));
             }
             if self.rx.state == BusState::BusOff && !self.rx.bus_off_reported {
@@ -399,6 +413,10 @@ impl CanLink for SlcanLink {
 
     fn describe(&self) -> &str {
         &self.rx.what
+    }
+
+    fn rx_stamp_ms(&self) -> Option<u16> {
+        self.last_stamp
     }
 }
 

@@ -215,7 +215,7 @@ fn recv_frames(link: &mut SlcanLink, n: usize, limit: Duration) -> Vec<CanFrame>
 }
 
 #[test]
-fn open_sequence_is_close_bitrate_status_open() {
+fn open_sequence_is_close_bitrate_status_timestamps_open() {
     let adapter = FakeAdapter::start(Behaviour::default());
     let link = open(&adapter);
     assert_eq!(
@@ -224,12 +224,45 @@ fn open_sequence_is_close_bitrate_status_open() {
             Command::Close,
             Command::Bitrate(8),
             Command::Status,
+            Command::Timestamps(true),
             Command::Open
         ]
     );
     assert!(link.status_supported());
     assert_eq!(link.bus_state(), BusState::ErrorActive);
     assert_eq!(link.describe(), format!("slcan:{}", adapter.path.display()));
+}
+
+/// Frames stamped by the adapter (`Z1`) give their stamp back with `rx_stamp_ms`; an adapter
+/// that refuses `Z1` still opens, and its frames have none.
+#[test]
+fn adapter_timestamps_come_with_the_frames() {
+    let adapter = FakeAdapter::start(Behaviour::default());
+    let mut link = open(&adapter);
+    link.set_status_interval(None);
+    assert_eq!(link.rx_stamp_ms(), None);
+    adapter.write(b"t0803010203EA5F\rt0803010203000B\r");
+    let mut stamps = Vec::new();
+    for _ in 0..2 {
+        let f = link
+            .recv(Duration::from_secs(2))
+            .expect("recv")
+            .expect("frame");
+        assert_eq!(f, frame(0x080, &[1, 2, 3]));
+        stamps.push(link.rx_stamp_ms());
+    }
+    assert_eq!(stamps, [Some(59_999), Some(11)]);
+    assert_eq!(teleop_can_link::stamp_gap_ms(59_999, 11), 12);
+
+    let adapter = FakeAdapter::start(Behaviour {
+        refuse: b"Z",
+        ..Behaviour::default()
+    });
+    let mut link = open(&adapter);
+    adapter.write(b"t0803010203\r");
+    let f = link.recv(Duration::from_secs(2)).expect("recv");
+    assert_eq!(f, Some(frame(0x080, &[1, 2, 3])));
+    assert_eq!(link.rx_stamp_ms(), None);
 }
 
 #[test]
@@ -246,7 +279,7 @@ fn canable_acks_every_line_with_cr() {
     let got = recv_frames(&mut link, 1, Duration::from_secs(2));
     assert_eq!(got, vec![frame(0x080, &[1, 2, 3])]);
     assert_eq!(link.recv(Duration::from_millis(30)).expect("recv"), None);
-    let transmitted: Vec<Command> = adapter.commands().into_iter().skip(4).collect();
+    let transmitted: Vec<Command> = adapter.commands().into_iter().skip(5).collect();
     assert_eq!(transmitted, sent.map(Command::Transmit).to_vec());
     let c = link.counters();
     assert_eq!((c.tx, c.rx, c.errors), (2, 1, 0));
