@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use teleop_msgs::{EStop, CONTRACT_VERSION};
 use teleop_runtime::{
-    control, latch_engaged, latch_holder, now_ns, qualified, set_latch, set_latch_by, EventLoop,
-    Flow, Health, Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
+    control, latch_engaged, latch_holder, now_ns, qualified, release_latch_held_by, set_latch_by,
+    EventLoop, Flow, Health, Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
 };
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
@@ -741,10 +741,14 @@ fn follow_estop(
             tracing::warn!(station = peer_name, "e-stop engaged by the peer station");
         }
         EStopState::Released if holder.is_some_and(|h| h.contains(LATCH_HOLDER)) => {
-            set_latch(latch, false)
+            // Checked again under the latch lock: a `teleop estop` engaged since the read above
+            // is not removed.
+            let released = release_latch_held_by(latch, LATCH_HOLDER)
                 .with_context(|| format!("releasing the e-stop latch {}", latch.display()))?;
-            ring(doorbell, false)?;
-            tracing::info!(station = peer_name, "e-stop released by the peer station");
+            if released {
+                ring(doorbell, false)?;
+                tracing::info!(station = peer_name, "e-stop released by the peer station");
+            }
         }
         _ => {}
     }
