@@ -324,3 +324,33 @@ fn health_keeps_coming_while_the_link_is_down() {
     );
     rig.wait_state(Duration::from_secs(10), "link up again", |s| s.link_up == 1);
 }
+
+/// Issue 20, item 4: a NaN or infinite target is no valid command on every hand: the Shadow
+/// holds where it was, says so, and counts the refusal as an error (it held, but counted it as
+/// a stale command, which it was not).
+#[test]
+fn a_non_finite_target_holds_and_is_counted() {
+    let mut rig = Rig::new();
+    let s = rig.command(&[("FFJ3", 0.8)], Duration::from_millis(1500));
+    let before = position(&s, "FFJ3");
+    assert!((before - 0.8).abs() < 0.05, "{before}");
+    let _ = rig.node_health();
+    for bad in [f32::NAN, f32::INFINITY] {
+        let s = rig.command(&[("FFJ3", 0.2), ("THJ5", bad)], Duration::from_millis(700));
+        assert_eq!(s.holding, 1, "{bad}: the state says the hand holds");
+        let p = position(&s, "FFJ3");
+        assert!(
+            (p - before).abs() < 0.02,
+            "{bad}: FFJ3 moved {before} -> {p}"
+        );
+    }
+    let health = rig.node_health();
+    let last = health.last().unwrap();
+    assert!(last.errors > 0, "refusals counted as errors: {last:?}");
+    assert_eq!(last.timeouts, 0, "not counted as stale commands: {last:?}");
+    assert!(rig.log().contains("refused"), "{}", rig.log());
+    // When the refused commands stop coming, that is a stale command.
+    std::thread::sleep(Duration::from_millis(700));
+    let last = *rig.node_health().last().unwrap();
+    assert_eq!(last.timeouts, 1, "{last:?}");
+}

@@ -325,6 +325,8 @@ fn cycle<D: Driver, H: Host<D>>(
             let mut deadline = Instant::now();
             let mut last_inputs: Option<D::Inputs> = None;
             let mut stale = true;
+            // No fresh command since the last timeout (none before the first command either).
+            let mut timed_out = true;
             let mut refused = false;
             let mut holding = false;
             let mut lost_in_a_row = 0u32;
@@ -342,6 +344,13 @@ fn cycle<D: Driver, H: Host<D>>(
                 // What to send.
                 let command = host.command();
                 let fresh = command.is_some();
+                if fresh {
+                    timed_out = false;
+                } else if !timed_out {
+                    tracing::warn!("hand command stale: the device holds");
+                    host.event(Event::Stale);
+                    timed_out = true;
+                }
                 let packed = command.and_then(|c| driver.pack(&c, &mut outputs));
                 let write = match packed {
                     Some(clamps) => {
@@ -368,13 +377,7 @@ fn cycle<D: Driver, H: Host<D>>(
                         } else {
                             refused = false;
                         }
-                        if !stale {
-                            if !fresh {
-                                tracing::warn!("hand command stale: the device holds");
-                                host.event(Event::Stale);
-                            }
-                            stale = true;
-                        }
+                        stale = true;
                         if holding && !driver.hold_every_cycle() {
                             false // keep sending the hold already in the outputs
                         } else if last_inputs.is_some() || driver.hold_every_cycle() {
