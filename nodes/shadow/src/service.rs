@@ -214,10 +214,21 @@ impl Service {
         )
     }
 
+    /// The first CAN-direct cycle carries an idle bridge message (the shipped flasher's dummy,
+    /// id 0, before MAGIC: sr_edc.cpp `simple_motor_flasher`). The palm reads its bridge
+    /// command sync manager only in CAN direct mode (E11 `this_node.c`), so whatever the host
+    /// wrote there in normal mode is still in it: that cycle takes it, and a message written in
+    /// the same frame would be refused.
+    fn enter_direct(&mut self, direct: &Command) -> anyhow::Result<()> {
+        self.put(direct, &CanBridge::default());
+        self.cycle()
+    }
+
     /// CAN direct mode: sends `message` on its bus once and returns the first message that
     /// comes back within 100 ms.
     pub fn can_send(&mut self, message: &CanBridge) -> anyhow::Result<Option<CanBridge>> {
         let direct = self.direct();
+        self.enter_direct(&direct)?;
         self.put(&direct, message);
         self.cycle()?;
         if let Some(reply) = self.bridge_reply() {
@@ -246,6 +257,10 @@ impl Service {
         let (bus, id) = bus_of_motor(motor).ok_or(FlashOutcome::NoSuchMotor(motor))?;
         let mut flasher = Flasher::new(id, image, Settings::default());
         let direct = self.direct();
+        if let Err(e) = self.enter_direct(&direct) {
+            // Only a stale message is lost; MAGIC is retried on its timeout.
+            tracing::debug!("flashing: the first CAN-direct cycle failed: {e:#}");
+        }
         let start = Instant::now();
         let mut last_good = Instant::now();
         let mut shown = (usize::MAX, 0);

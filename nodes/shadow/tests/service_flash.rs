@@ -15,8 +15,9 @@ use sim_shadow::palm::Palm;
 use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_shadow::service::Service;
 use teleop_shadow::ShadowConfig;
-use teleop_shadow_protocol::can::APP_START;
+use teleop_shadow_protocol::can::{BootMessage, APP_START};
 use teleop_shadow_protocol::hex;
+use teleop_shadow_protocol::layout::CanBridge;
 
 fn application(len: usize, seed: u32) -> Vec<u8> {
     let mut x = seed.wrapping_mul(2_654_435_761).max(1);
@@ -30,11 +31,17 @@ fn application(len: usize, seed: u32) -> Vec<u8> {
         .collect()
 }
 
-#[test]
-fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
+/// The emulated hand served on a socket in `dir`, and the service brought up on it.
+fn hand(
+    dir: &std::path::Path,
+) -> (
+    Arc<Mutex<ShadowBus>>,
+    Service,
+    Arc<AtomicBool>,
+    std::thread::JoinHandle<()>,
+) {
     teleop_runtime::init_logging();
-    let dir = tempfile::tempdir().unwrap();
-    let socket = dir.path().join("shadow.sock");
+    let socket = dir.join("shadow.sock");
     let sim = Arc::new(Mutex::new(ShadowBus::new(
         Palm::new(),
         1178,
@@ -54,7 +61,41 @@ fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
         ..ShadowConfig::default()
     };
     let checked = config.validate().unwrap();
-    let mut service = Service::open(&config, checked).unwrap();
+    let service = Service::open(&config, checked).unwrap();
+    (sim, service, stop, server)
+}
+
+/// After normal mode the palm's bridge command sync manager still holds what the host wrote
+/// then (the firmware reads it in CAN direct mode only): the service's first CAN-direct cycle
+/// carries the shipped flasher's dummy message (id 0), so the message asked for is not refused.
+#[test]
+fn can_send_after_normal_mode_gets_its_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut service, stop, server) = hand(dir.path());
+    let magic = BootMessage::magic(3);
+    let reply = service
+        .can_send(&CanBridge {
+            can_bus: 2,
+            length: magic.len,
+            id: magic.id,
+            data: magic.data,
+        })
+        .unwrap();
+    service.close();
+    stop.store(true, Ordering::SeqCst);
+    server.join().unwrap();
+    let reply = reply.expect("the bootloader's MAGIC answer");
+    assert_eq!((reply.can_bus, reply.id), (2, 0x600 | 3 << 5 | 0x1A));
+    assert_eq!(
+        sim.lock().unwrap().palm().boards[13].mode(),
+        Mode::Bootloader
+    );
+}
+
+#[test]
+fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut service, stop, server) = hand(dir.path());
 
     // From now on one frame in 20 to the palm is lost (seeded: the same frames every run).
     {

@@ -5,11 +5,12 @@
 //! shipped driver does, or the palm refuses SAFE-OP (0x0017).
 //!
 //! The palm's firmware ([`PalmFirmware`]) polls for the command sync manager being written
-//! (E11's AL event 0x220 bit 8) and reads the command (and a written bridge message) out of
-//! its sync managers right away, before its CAN round (E11 `this_node.c`,
-//! `Service_EtherCAT_Packet`: `Read_Commands_From_ET1200` follows the SM0 event; the bridge
-//! command is read before the wait in CAN direct mode), so SM0 is free again for the next
-//! command during the round. It writes the status [`PROCESS_TIME`] later (the bridge status
+//! (E11's AL event 0x220 bit 8) and reads the command out of its sync manager right away,
+//! before its CAN round (E11 `this_node.c`, `Service_EtherCAT_Packet`:
+//! `Read_Commands_From_ET1200` follows the SM0 event), so SM0 is free again for the next
+//! command during the round. The bridge command (SM1) is read only in CAN direct mode, before
+//! the wait, when SM1 was written: in other modes a bridge message stays in SM1 (and a later
+//! one is refused) until the first CAN-direct cycle takes it. It writes the status [`PROCESS_TIME`] later (the bridge status
 //! [`CAN_DIRECT_ROUND`] later), so a status read in a cycle answers the previous cycle's
 //! command. A command written during a round waits in SM0 until the round ends (the firmware
 //! is busy on its CAN buses); a third one meanwhile is refused by the full SM0. A status the
@@ -196,15 +197,23 @@ impl Application for PalmFirmware {
             let Some(command) = pdi.take(SM_COMMAND).and_then(|b| Command::unpack(b).ok()) else {
                 return;
             };
-            let bridge = pdi
-                .written(SM_BRIDGE_COMMAND)
-                .and_then(|_| pdi.take(SM_BRIDGE_COMMAND))
-                .and_then(|b| CanBridge::unpack(b).ok());
+            let command_kind = EdcCommand::from_value(command.edc_command, self.palm.numbering);
+            // E11: the bridge command is read only in CAN direct mode, when the AL event read
+            // with the command says SM1 was written (`ROS_Wants_me_to_send_CAN`). Otherwise SM1
+            // stays full: a message written then waits there, and one written while it waits
+            // is refused by the ESC.
+            let bridge = (command_kind == Some(EdcCommand::CanDirectMode))
+                .then(|| {
+                    pdi.written(SM_BRIDGE_COMMAND)
+                        .and_then(|_| pdi.take(SM_BRIDGE_COMMAND))
+                        .and_then(|b| CanBridge::unpack(b).ok())
+                })
+                .flatten();
             self.stats.cycles += 1;
             if bridge.is_some_and(|b| !b.is_idle()) {
                 self.stats.bridged += 1;
             }
-            let took = match EdcCommand::from_value(command.edc_command, self.palm.numbering) {
+            let took = match command_kind {
                 Some(EdcCommand::CanDirectMode) => CAN_DIRECT_ROUND,
                 Some(EdcCommand::SensorData | EdcCommand::SensorChannelNumbers) => PROCESS_TIME,
                 // Any other command: the error LED, nothing else.

@@ -210,3 +210,61 @@ fn the_boot_status_is_the_firmwares_init_words() {
     assert!(s.tactile.iter().flatten().all(|w| *w == 0xDEAD));
     assert_eq!(s.idle_time_us, 0xDEAD);
 }
+
+/// The firmware reads the bridge command (SM1) only in CAN direct mode, when its AL event says
+/// it was written (`ROS_Wants_me_to_send_CAN`); in SENSOR_DATA mode SM1 stays full. So the
+/// first CAN-direct cycle takes the bridge message written long before (it goes on the bus),
+/// the one written with it is refused by the full SM1, and the next cycle's goes through: why
+/// the shipped flasher sends a dummy message (id 0) before MAGIC.
+#[test]
+fn the_bridge_command_is_read_in_can_direct_mode_only() {
+    use sim_shadow::bootloader::Mode;
+    use teleop_shadow_protocol::can::BootMessage;
+    use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
+
+    let magic = |bus: u8, id: u8| {
+        let m = BootMessage::magic(id);
+        CanBridge {
+            can_bus: bus,
+            length: m.len,
+            id: m.id,
+            data: m.data,
+        }
+    };
+    let lrw = |rig: &mut Rig, command: &Command, bridge: &CanBridge| {
+        let mut data = vec![0u8; OUT_LEN + IN_LEN];
+        data[..Command::SIZE].copy_from_slice(&command.pack());
+        data[Command::SIZE..OUT_LEN].copy_from_slice(&bridge.pack());
+        rig.one(LRW, LOGICAL, &data).1
+    };
+    let direct = Command {
+        edc_command: EdcCommand::CanDirectMode
+            .value(EdcNumbering::Shipped)
+            .unwrap(),
+        ..Command::default()
+    };
+    let mut rig = Rig::new();
+    // Normal mode, with a bridge message for motor 3 (bus 1, id 3): not sent.
+    lrw(&mut rig, &sensor_data(0), &magic(1, 3));
+    rig.after_us(1000);
+    lrw(&mut rig, &sensor_data(1), &magic(1, 3));
+    rig.after_us(1000);
+    assert_eq!(rig.bus.palm().boards[3].mode(), Mode::Application);
+    // The first CAN-direct cycle, with MAGIC for motor 13 (bus 2, id 3).
+    lrw(&mut rig, &direct, &magic(2, 3));
+    rig.after_us(1000);
+    lrw(&mut rig, &direct, &CanBridge::default());
+    rig.after_us(1000);
+    let palm = rig.bus.palm();
+    assert_eq!(
+        (palm.boards[3].mode(), palm.boards[13].mode()),
+        (Mode::Bootloader, Mode::Application),
+        "the stale message went out, the new one was refused"
+    );
+    // Now SM1 is free: the next message goes through.
+    lrw(&mut rig, &direct, &magic(2, 3));
+    rig.after_us(1000);
+    lrw(&mut rig, &direct, &CanBridge::default());
+    rig.after_us(1000);
+    assert_eq!(rig.bus.palm().boards[13].mode(), Mode::Bootloader);
+}
