@@ -423,11 +423,13 @@ fn health_keeps_coming_while_the_link_is_down() {
     rig.wait_state(Duration::from_secs(15), "link up again", |s| s.link_up == 1);
 }
 
-/// The fastest motion over any 50 ms of `track` (node stamps, positions), travel/s.
+/// The fastest motion over any 200 ms of `track` (node stamps, positions), travel/s: long
+/// enough that a late frame, after which the device catches up with its target, does not read
+/// as a jump; short enough to tell 1 from 2 travel/s over a 0.8 travel move.
 fn fastest(track: &[(u64, f32)]) -> f32 {
     let mut fastest = 0.0f32;
     for (i, &(t0, p0)) in track.iter().enumerate() {
-        if let Some(&(t1, p1)) = track[i..].iter().find(|(t, _)| t - t0 >= 50_000_000) {
+        if let Some(&(t1, p1)) = track[i..].iter().find(|(t, _)| t - t0 >= 200_000_000) {
             fastest = fastest.max((p1 - p0).abs() / ((t1 - t0) as f32 * 1e-9));
         }
     }
@@ -521,7 +523,7 @@ fn after_a_stale_period_the_hand_ramps_to_the_new_pose() {
     }
     let last = track.last().unwrap().1;
     assert!((last - 0.9).abs() < 0.03, "reached B: {last}");
-    // The fastest motion over any 50 ms: bounded by the resume speed (with room for the
+    // The fastest motion over any 200 ms: bounded by the resume speed (with room for the
     // device's own lag), not the full speed.
     let fastest = fastest(&track);
     assert!(
