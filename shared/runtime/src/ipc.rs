@@ -681,6 +681,34 @@ fn pubsub_error<M: Message>(
     }
 }
 
+/// Removes the iceoryx2 resources of nodes whose process died (e.g. killed with SIGKILL), so
+/// their ports no longer count (a command topic's one writer) and their restarted successors
+/// start clean. Logs what it removed.
+pub fn clean_dead_nodes(config: &Config) {
+    use iceoryx2::node::{NodeState, NodeView};
+    use iceoryx2::prelude::CallbackProgression;
+    let mut dead = Vec::new();
+    let _ = Node::<Service>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+        CallbackProgression::Continue
+    });
+    for view in dead {
+        let name = view
+            .details()
+            .as_ref()
+            .map(|d| d.name().as_str().to_string())
+            .unwrap_or_default();
+        match view.try_remove_stale_resources() {
+            Ok(_) => {
+                tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node")
+            }
+            Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -775,14 +803,14 @@ mod tests {
         std::fs::create_dir(&root).unwrap();
         std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o777)).unwrap();
         let settings = IpcSettings::isolated(&root);
-        let e = settings.config().err().expect("refused").to_string();
+        let e = settings.config().unwrap_err().to_string();
         assert!(e.contains("writable by every user (mode 777)"), "{e}");
         std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o755)).unwrap();
         settings.config().unwrap();
         if unsafe { libc::geteuid() } == 0 {
             // Owned by another user (root can hand it over).
             std::os::unix::fs::chown(&root, Some(65534), None).unwrap();
-            let e = settings.config().err().expect("refused").to_string();
+            let e = settings.config().unwrap_err().to_string();
             assert!(e.contains("owned by uid 65534, not by this user"), "{e}");
         }
     }
@@ -839,33 +867,5 @@ mod tests {
             ..IpcSettings::default()
         };
         assert_eq!(settings.namespace().unwrap().unwrap().as_str(), "left");
-    }
-}
-
-/// Removes the iceoryx2 resources of nodes whose process died (e.g. killed with SIGKILL), so
-/// their ports no longer count (a command topic's one writer) and their restarted successors
-/// start clean. Logs what it removed.
-pub fn clean_dead_nodes(config: &Config) {
-    use iceoryx2::node::{NodeState, NodeView};
-    use iceoryx2::prelude::CallbackProgression;
-    let mut dead = Vec::new();
-    let _ = Node::<Service>::list(config, |state| {
-        if let NodeState::Dead(view) = state {
-            dead.push(view);
-        }
-        CallbackProgression::Continue
-    });
-    for view in dead {
-        let name = view
-            .details()
-            .as_ref()
-            .map(|d| d.name().as_str().to_string())
-            .unwrap_or_default();
-        match view.try_remove_stale_resources() {
-            Ok(_) => {
-                tracing::info!(node = %name, "cleaned up the resources of a dead iceoryx2 node")
-            }
-            Err(e) => tracing::warn!(node = %name, "cannot clean up dead iceoryx2 node: {e:?}"),
-        }
     }
 }
