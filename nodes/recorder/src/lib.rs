@@ -12,9 +12,20 @@
 //! The recorder never slows a producer down: iceoryx2 overwrites the oldest queued sample when a
 //! subscriber falls behind; those losses show as gaps in the samples' sequence numbers, which are
 //! counted per topic, logged while recording, written into the file and printed at the end.
+//!
+//! Under `teleop launch` each file carries a [`SESSION_METADATA`] record naming the launcher
+//! and the recorder's node. A recorder restarted in the same session (the previous one was
+//! killed or failed) reads the last sequence number per topic and publisher from its
+//! predecessor's newest file in the same folder, and counts the samples published in between
+//! (while no recorder ran) as drops of its first file.
+//!
+//! Every file is announced (`recorded PATH` on stderr) as soon as it is started, so that the
+//! launcher's summary lists a killed recorder's file too. A recorder that cannot go on (a full
+//! disk) keeps the first error, finishes what can be finished, and says `recording stopped:
+//! <first error>` on stderr.
 
 use std::cell::RefCell;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -55,6 +66,105 @@ pub struct RecordOptions {
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     /// Stop after this long (`None`: until SIGINT/SIGTERM).
     pub duration: Option<Duration>,
+    /// Prints `recorded PATH` on stderr as each file is started (for `teleop launch`, which
+    /// lists the files in its summary even when the recorder is killed).
+    pub announce: bool,
+}
+
+/// What [`record`] did.
+#[derive(Debug, Clone)]
+pub struct Recorded {
+    /// The files, counts and drops.
+    pub summary: RecordingSummary,
+    /// The first error when recording stopped before it was asked to (a full disk).
+    pub stopped: Option<String>,
+}
+
+/// Name of the metadata record that says which recorder of which `teleop launch` session wrote
+/// a file: `launcher` (the launcher's pid and start time) and `node` (the recorder's node name).
+pub const SESSION_METADATA: &str = "recorder_session";
+
+/// The [`SESSION_METADATA`] record of a recorder called `node` started by `teleop launch`
+/// (`TELEOP_SUPERVISOR_PID` set), `None` otherwise. The launcher is named by its pid and its
+/// start time since boot, so a later launcher that gets the same pid is another session.
+pub fn launch_session(node: &str) -> Option<BTreeMap<String, String>> {
+    let pid: u32 = std::env::var(teleop_runtime::ENV_SUPERVISOR_PID)
+        .ok()?
+        .parse()
+        .ok()?;
+    let started = process_start_ticks(pid)?;
+    Some(BTreeMap::from([
+        ("launcher".to_string(), format!("{pid}@{started}")),
+        ("node".to_string(), node.to_string()),
+    ]))
+}
+
+/// Field 22 of `/proc/<pid>/stat`: when the process started, in clock ticks since boot.
+fn process_start_ticks(pid: u32) -> Option<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) may hold spaces and parentheses: count after the last ')'.
+    let rest = &stat[stat.rfind(')')? + 1..];
+    rest.split_whitespace().nth(19)?.parse().ok()
+}
+
+/// The newest recordings in `dir` (newest first) whose [`SESSION_METADATA`] record is
+/// `session`: the files of this recorder's predecessors in the same session.
+fn session_files(dir: &Path, session: &BTreeMap<String, String>) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut found: Vec<(SystemTime, PathBuf)> = entries
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .filter_map(|p| {
+            let modified = std::fs::metadata(&p).ok()?.modified().ok()?;
+            let head = teleop_recording::head_metadata(&p).ok()?;
+            head.iter()
+                .any(|(name, fields)| name == SESSION_METADATA && fields == session)
+                .then_some((modified, p))
+        })
+        .collect();
+    found.sort_by_key(|(modified, _)| std::cmp::Reverse(*modified));
+    found.into_iter().map(|(_, p)| p).collect()
+}
+
+/// Per channel, the last sequence number each publisher (source id) reached in the newest of
+/// `files` that holds any message.
+fn last_sequences(files: &[PathBuf]) -> HashMap<String, Vec<(u32, u64)>> {
+    let mut last: HashMap<String, Vec<(u32, u64)>> = HashMap::new();
+    for file in files {
+        let Ok(messages) = teleop_recording::read_messages(file, &teleop_recording::Filter::all())
+        else {
+            continue;
+        };
+        for msg in messages.map_while(Result::ok) {
+            let Some((seq, source)) = header_of(&msg.payload) else {
+                continue;
+            };
+            let sources = last.entry(msg.topic).or_default();
+            match sources.iter_mut().find(|(id, _)| *id == source) {
+                Some(entry) => entry.1 = entry.1.max(seq),
+                None => sources.push((source, seq)),
+            }
+        }
+        if !last.is_empty() {
+            tracing::info!(
+                file = %file.display(),
+                "continuing after the previous recorder of this session: the samples published \
+                 between its last and our first are counted as drops"
+            );
+            break;
+        }
+    }
+    last
+}
+
+/// `seq` and `source_id` of a payload's `SampleHeader` (every contract payload starts with one).
+fn header_of(payload: &[u8]) -> Option<(u64, u32)> {
+    let seq = u64::from_le_bytes(payload.get(0..8)?.try_into().ok()?);
+    let source = u32::from_le_bytes(payload.get(24..28)?.try_into().ok()?);
+    Some((seq, source))
 }
 
 /// The name a recording started at `at` gets: `<UTC date>_<time>.<milliseconds>`, without
@@ -99,6 +209,11 @@ fn create_timestamped(
             created => return Ok(created?),
         }
     }
+}
+
+/// The path from the root (files are announced to a launcher with another working folder).
+fn absolute(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
 }
 
 /// Days since 1970-01-01 to (year, month, day) (Howard Hinnant's algorithm).
@@ -155,6 +270,9 @@ struct TopicTap<M: Message> {
     sub: Subscriber<M>,
     id: TopicId,
     channel: String,
+    /// The previous recorder's last sequence number per publisher, until each publisher's
+    /// first sample here: the gap between them is counted as drops.
+    previous: RefCell<Vec<(u32, u64)>>,
 }
 
 impl<M: Message> Tap for TopicTap<M> {
@@ -166,7 +284,23 @@ impl<M: Message> Tap for TopicTap<M> {
     }
     fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>> {
         let mut result = Ok(());
+        let mut previous = self.previous.borrow_mut();
         let n = self.sub.drain(|m| {
+            let header = m.header();
+            if let Some(i) = previous.iter().position(|(id, _)| *id == header.source_id) {
+                let (_, last) = previous.swap_remove(i);
+                // A publisher that restarted begins at 1 again: not a loss.
+                if header.seq > last + 1 {
+                    let gap = header.seq - last - 1;
+                    tracing::warn!(
+                        topic = %self.channel,
+                        lost = gap,
+                        "samples published while no recorder ran (between the previous \
+                         recorder's last sample and this one's first): counted as drops"
+                    );
+                    rec.note_drops(&self.channel, gap);
+                }
+            }
             if result.is_ok() {
                 let msg = RecordedMessage {
                     topic: &self.channel,
@@ -186,6 +320,7 @@ struct MakeTap<'a> {
     runtime: &'a NodeRuntime,
     rec: &'a mut Recorder,
     namespace: Option<&'a Namespace>,
+    previous: &'a HashMap<String, Vec<(u32, u64)>>,
 }
 
 impl TopicVisitor for MakeTap<'_> {
@@ -193,17 +328,38 @@ impl TopicVisitor for MakeTap<'_> {
     fn visit<M: Message>(self) -> Self::Output {
         let channel = qualified(self.namespace, M::TOPIC);
         let id = self.rec.add_topic(&channel, M::SCHEMA_NAME, &M::schema())?;
+        let previous = self.previous.get(&channel).cloned().unwrap_or_default();
         Ok(Box::new(TopicTap::<M> {
             sub: self.runtime.subscriber_in(self.namespace)?,
             id,
             channel,
+            previous: RefCell::new(previous),
         }))
     }
 }
 
 /// Records until SIGINT/SIGTERM or the end of `options.duration`, then finishes the file
-/// properly and returns what was written (drops included).
-pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<RecordingSummary> {
+/// properly and returns what was written (drops included). An error while recording (a full
+/// disk) ends recording early: what can be finished is finished, and [`Recorded::stopped`]
+/// holds the first error. Errors before recording started (the file cannot be created, an
+/// unknown topic) are returned.
+pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<Recorded> {
+    // A recorder restarted in a `teleop launch` session continues its predecessor's count.
+    let folder = match &options.out {
+        Output::File(path) => path.parent().map(Path::to_path_buf).unwrap_or_default(),
+        Output::Timestamped(dir) => dir.clone(),
+    };
+    let previous = match options.metadata.iter().find(|(n, _)| n == SESSION_METADATA) {
+        Some((_, session)) => {
+            let folder = if folder.as_os_str().is_empty() {
+                PathBuf::from(".")
+            } else {
+                folder
+            };
+            last_sequences(&session_files(&folder, session))
+        }
+        None => HashMap::new(),
+    };
     let mut rec = match &options.out {
         Output::File(path) => Recorder::create(path, options.writer.clone(), &options.metadata)?,
         Output::Timestamped(dir) => {
@@ -228,6 +384,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
                     runtime,
                     rec: &mut rec,
                     namespace,
+                    previous: &previous,
                 },
             )
             .ok_or_else(|| {
@@ -248,6 +405,14 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         });
     }
     tracing::info!(file = %rec.path().display(), topics = taps.len(), "recording");
+    let mut announced = PathBuf::new();
+    let mut announce = |rec: &Recorder| {
+        if options.announce && rec.path() != announced {
+            announced = rec.path().to_path_buf();
+            eprintln!("recorded {}", absolute(&announced).display());
+        }
+    };
+    announce(&rec);
     let start = std::time::Instant::now();
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
@@ -260,6 +425,10 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
             Wake::Input(i) => taps[i].drain(&mut rec).map(|_| ()),
             Wake::Timeout(_) | Wake::Tick => rec.flush_if_due(now_ns()).map_err(Box::new),
         };
+        if let Some(why) = rec.take_rotation_error() {
+            tracing::warn!("cannot start the next file, recording goes on in this one: {why}");
+        }
+        announce(&rec);
         if let Err(e) = result {
             failure = Some(e.into());
             return Flow::Break(());
@@ -285,17 +454,29 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
             Flow::Continue(())
         }
     })?;
-    // What is still queued belongs in the file too.
+    // What is still queued belongs in the file too (unless writing failed: the first error
+    // is the one to report, not the refusals after it).
     for tap in &taps {
-        tap.drain(&mut rec)?;
+        if failure.is_none() {
+            if let Err(e) = tap.drain(&mut rec) {
+                failure = Some((*e).into());
+            }
+        }
         rec.note_drops(tap.channel(), tap.dropped());
     }
-    let summary = rec.finish()?;
-    if let Some(e) = failure {
-        return Err(e.context("recording stopped early (the file was finished and is readable)"));
+    announce(&rec);
+    let (summary, error) = rec.finish_all();
+    // The first error: the one that stopped recording, else the one finishing met.
+    let stopped = failure
+        .map(|e| e.to_string())
+        .or_else(|| error.map(|e| e.to_string()));
+    match &stopped {
+        None => {
+            tracing::info!(reason = ?stop_reason(stop), messages = summary.messages, "recording finished")
+        }
+        Some(why) => tracing::error!(messages = summary.messages, "recording stopped: {why}"),
     }
-    tracing::info!(reason = ?stop_reason(stop), messages = summary.messages, "recording finished");
-    Ok(summary)
+    Ok(Recorded { summary, stopped })
 }
 
 /// The device identities of one namespace, each written once as metadata.
@@ -365,11 +546,19 @@ fn stop_reason(stop: StopReason) -> &'static str {
     }
 }
 
-/// The end-of-recording report: files, then per topic messages and drops.
+/// The end-of-recording report: files (`recorded PATH`, and for a file that could not be
+/// finished a `not finished` line), then per topic messages and drops.
 pub fn report(summary: &RecordingSummary) -> String {
     let mut out = String::new();
     for f in &summary.files {
-        out.push_str(&format!("recorded {}\n", f.display()));
+        out.push_str(&format!("recorded {}\n", absolute(f).display()));
+    }
+    if let Some(f) = &summary.unfinished {
+        out.push_str(&format!(
+            "not finished {}: it holds what its closed chunks hold; `teleop recordings repair` \
+             makes it indexable\n",
+            absolute(f).display()
+        ));
     }
     out.push_str(&format!(
         "{:<28} {:>9} {:>7}\n",

@@ -5,7 +5,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use teleop_recorder::{file_metadata, record, report, standard_metadata, Output, RecordOptions};
+use teleop_recorder::{
+    file_metadata, launch_session, record, report, standard_metadata, Output, RecordOptions,
+    SESSION_METADATA,
+};
 use teleop_recording::WriterOptions;
 use teleop_runtime::{init_logging, IpcSettings, Namespace, NodeRuntime};
 
@@ -26,11 +29,11 @@ struct Args {
     /// without it, the topics without a namespace.
     #[arg(long = "namespace", value_name = "NS")]
     namespaces: Vec<Namespace>,
-    /// Start a new file after this many megabytes.
-    #[arg(long)]
+    /// Start a new file after this many megabytes (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     rotate_mb: Option<u64>,
-    /// Start a new file after this many seconds.
-    #[arg(long)]
+    /// Start a new file after this many seconds (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     rotate_s: Option<u64>,
     /// Embed a file as a metadata record, e.g. `--metadata calibration=config/operator.toml`.
     #[arg(long, value_parser = parse_metadata)]
@@ -51,7 +54,8 @@ fn main() -> ExitCode {
     match run(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("stopping: {e:#}");
+            // The line `teleop launch` looks for to say RECORDING STOPPED in its summary.
+            eprintln!("recording stopped: {e:#}");
             ExitCode::FAILURE
         }
     }
@@ -64,6 +68,11 @@ fn run(args: &Args) -> anyhow::Result<()> {
             anyhow::anyhow!("--metadata {name}={}: cannot read the file", path.display())
         })?;
         metadata.push((name.clone(), m));
+    }
+    // Started by `teleop launch`: which session, so that a restarted recorder finds the files
+    // of the one before it.
+    if let Some(session) = launch_session(&args.name) {
+        metadata.push((SESSION_METADATA.to_string(), session));
     }
     let options = RecordOptions {
         out: args
@@ -79,9 +88,13 @@ fn run(args: &Args) -> anyhow::Result<()> {
         },
         metadata,
         duration: None,
+        announce: true,
     };
     let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-    let summary = record(&runtime, &options)?;
-    eprint!("{}", report(&summary));
-    Ok(())
+    let recorded = record(&runtime, &options)?;
+    eprint!("{}", report(&recorded.summary));
+    match recorded.stopped {
+        None => Ok(()),
+        Some(why) => Err(anyhow::anyhow!(why)),
+    }
 }

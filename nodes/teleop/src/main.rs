@@ -280,6 +280,9 @@ enum RecordingsCommand {
         /// Output file (default: FILE with `.repaired.mcap`).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace the output file if it exists (never the input itself).
+        #[arg(long)]
+        force: bool,
     },
 }
 
@@ -351,7 +354,9 @@ fn main() -> ExitCode {
         ),
         Command::Recordings { command } => match command {
             RecordingsCommand::Info { file } => recordings::info_cmd(&file),
-            RecordingsCommand::Repair { file, out } => recordings::repair_cmd(&file, out),
+            RecordingsCommand::Repair { file, out, force } => {
+                recordings::repair_cmd(&file, out, force)
+            }
         },
         Command::Reprocess {
             file,

@@ -15,8 +15,8 @@ use teleop_msgs::{
 };
 use teleop_recorder::{record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::{
-    info as recording_info, read_messages, repair as repair_file, Filter, OwnedMessage,
-    RecordedMessage, Recorder, WriterOptions,
+    info as recording_info, read_messages, repair_with, Filter, OwnedMessage, RecordedMessage,
+    Recorder, RepairOptions, WriterOptions,
 };
 use teleop_runtime::{now_ns, qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
 
@@ -38,10 +38,17 @@ pub fn record_cmd(
         writer: WriterOptions::default(),
         metadata: standard_metadata(),
         duration,
+        announce: false,
     };
-    let summary = record(&runtime, &options)?;
-    out!("{}", report(&summary).trim_end())?;
-    Ok(ExitCode::SUCCESS)
+    let recorded = record(&runtime, &options)?;
+    out!("{}", report(&recorded.summary).trim_end())?;
+    match recorded.stopped {
+        None => Ok(ExitCode::SUCCESS),
+        Some(why) => {
+            eprintln!("error: recording stopped: {why}");
+            Ok(ExitCode::FAILURE)
+        }
+    }
 }
 
 pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
@@ -99,9 +106,37 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode> {
+/// `teleop recordings repair`: exit status 0 when everything the input holds was copied (a
+/// killed recorder's unfinished last chunk aside), 1 when damaged parts were skipped.
+pub fn repair_cmd(path: &Path, out: Option<PathBuf>, force: bool) -> anyhow::Result<ExitCode> {
     let out = out.unwrap_or_else(|| path.with_extension("repaired.mcap"));
-    let report = repair_file(path, &out)?;
+    if !force && std::fs::symlink_metadata(&out).is_ok() {
+        anyhow::bail!(
+            "{} exists already: pass --force to replace it, or --out to write elsewhere",
+            out.display()
+        );
+    }
+    let report = repair_with(path, &out, RepairOptions { overwrite: force })?;
+    for s in &report.skipped {
+        let lost = if s.messages > 0 {
+            format!(" ({} messages lost)", s.messages)
+        } else {
+            String::new()
+        };
+        if s.length > 0 {
+            out!(
+                "skipped    {} bytes at offset {}: {}{lost}",
+                s.length,
+                s.offset,
+                s.what
+            )?;
+        } else {
+            out!("skipped    {}{lost}", s.what)?;
+        }
+    }
+    if let Some(why) = &report.stopped {
+        out!("ended      {why}")?;
+    }
     out!(
         "recovered {} messages into {}{}",
         report.messages,
@@ -112,7 +147,18 @@ pub fn repair_cmd(path: &Path, out: Option<PathBuf>) -> anyhow::Result<ExitCode>
             ""
         }
     )?;
-    Ok(ExitCode::SUCCESS)
+    if report.skipped.is_empty() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!(
+            "error: {}: {} damaged parts skipped ({} messages known lost); everything else was \
+             recovered",
+            path.display(),
+            report.skipped.len(),
+            report.lost_messages()
+        );
+        Ok(ExitCode::FAILURE)
+    }
 }
 
 /// Republishes recorded samples of one topic.

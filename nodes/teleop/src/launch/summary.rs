@@ -1,7 +1,9 @@
 //! What `teleop launch` prints when a session ends: per-topic rates, latency since the host
 //! received the device sample (`stamp - origin` from the headers, p50/p99/max; the time the
 //! device took the sample is earlier and not known here), drops, the faults the nodes handled,
-//! restarts, and where the recording is. Collected during the session by subscribing to every
+//! restarts, and where the recording is (every file a recorder started, finished or not, and
+//! RECORDING STOPPED when recording did not last to the end: [`recording_lines`]). Collected
+//! during the session by subscribing to every
 //! topic of every namespace the launch file uses, with fixed-size histograms so that a long
 //! session does not grow memory. A namespace none of whose topics carried a sample is left out when the session
 //! has others (the recorder of a two-sided session runs without a namespace, for instance).
@@ -237,16 +239,144 @@ impl SessionWatch {
                 restarted.join(", ")
             }
         ));
-        for r in recordings {
-            out.push_str(&format!("recording: {r}\n"));
-        }
+        out.push_str(&recording_lines(recordings));
         out
+    }
+}
+
+/// The prefix of the line a recorder prints when it cannot go on (its first error follows).
+const STOPPED: &str = "recording stopped: ";
+
+/// What the summary keeps of a recorder's output line: `recorded PATH.mcap` (printed when it
+/// starts a file and again when it finishes) gives the path, `recording stopped: WHY` the line
+/// itself; other lines nothing.
+pub fn recorder_note(line: &str) -> Option<String> {
+    if line.starts_with(STOPPED) {
+        return Some(line.to_string());
+    }
+    line.strip_prefix("recorded ")
+        .filter(|p| p.ends_with(".mcap"))
+        .map(str::to_string)
+}
+
+/// The recording part of the summary, from the recorders' notes ([`recorder_note`]) in the
+/// order they came: a `recording: PATH` line per file (each once), under it the file's state
+/// (complete with its messages and drops, or not finished), then `RECORDING STOPPED` when
+/// recording did not last to the end ([`recording_stopped`]) or a note when it stopped and
+/// started again.
+pub fn recording_lines(notes: &[String]) -> String {
+    let mut out = String::new();
+    let mut files: Vec<&str> = Vec::new();
+    for note in notes {
+        if !note.starts_with(STOPPED) && !files.contains(&note.as_str()) {
+            files.push(note);
+        }
+    }
+    for file in &files {
+        out.push_str(&format!("recording: {file}\n"));
+        match teleop_recording::info(std::path::Path::new(file)) {
+            Ok(info) if info.complete => {
+                let drops: u64 = info.topics.iter().filter_map(|t| t.drops).sum();
+                out.push_str(&format!(
+                    "  complete: {} messages, {drops} drops\n",
+                    info.messages
+                ));
+            }
+            Ok(info) => out.push_str(&format!(
+                "  not finished (its recorder was killed or failed): {} messages in its closed \
+                 chunks; `teleop recordings repair` makes it indexable\n",
+                info.messages
+            )),
+            Err(e) => out.push_str(&format!("  not readable: {e}\n")),
+        }
+    }
+    let stops = notes.iter().filter(|n| n.starts_with(STOPPED)).count();
+    match recording_stopped(notes) {
+        Some(why) => out.push_str(&format!("RECORDING STOPPED: {why}\n")),
+        None if stops > 0 => {
+            let first = notes.iter().find(|n| n.starts_with(STOPPED));
+            out.push_str(&format!(
+                "recording interrupted ({}), then resumed: the samples in between are counted \
+                 as drops\n",
+                first.map_or("", |f| &f[STOPPED.len()..])
+            ));
+        }
+        None => {}
+    }
+    out
+}
+
+/// Why the session's recording did not last to its end, if it did not: a recorder said it
+/// stopped (the first reason given; restarts that stopped again say more of the same) and no
+/// file was started after that, or the last file was left unfinished. `None` when the session
+/// had no recorder or recorded to the end.
+pub fn recording_stopped(notes: &[String]) -> Option<String> {
+    let last_stop = notes.iter().rposition(|n| n.starts_with(STOPPED));
+    let last_file = notes.iter().rposition(|n| !n.starts_with(STOPPED));
+    if let Some(stop) = last_stop {
+        if last_file.is_none_or(|file| file < stop) {
+            let first = notes
+                .iter()
+                .find(|n| n.starts_with(STOPPED))
+                .map_or("", |n| &n[STOPPED.len()..]);
+            let more = notes[..=stop]
+                .iter()
+                .filter(|n| n.starts_with(STOPPED))
+                .count()
+                - 1;
+            return Some(if more > 0 {
+                format!("{first} (and {more} more times after restarts)")
+            } else {
+                first.to_string()
+            });
+        }
+    }
+    let file = &notes[last_file?];
+    match teleop_recording::info(std::path::Path::new(file)) {
+        Ok(info) if info.complete => None,
+        Ok(_) => Some(format!(
+            "{file} was not finished (its recorder was killed?)"
+        )),
+        Err(e) => Some(format!("{file} cannot be read: {e}")),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn recorder_notes() {
+        assert_eq!(
+            recorder_note("recorded /r/a.mcap").as_deref(),
+            Some("/r/a.mcap")
+        );
+        assert_eq!(recorder_note("recorded 12 samples"), None);
+        assert_eq!(
+            recorder_note("recording stopped: /r/b.mcap: No space left on device").as_deref(),
+            Some("recording stopped: /r/b.mcap: No space left on device")
+        );
+        let notes = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(recording_stopped(&[]), None);
+        let stopped = notes(&[
+            "/nonexistent/a.mcap",
+            "recording stopped: disk full",
+            "recording stopped: disk full again",
+        ]);
+        assert_eq!(
+            recording_stopped(&stopped).as_deref(),
+            Some("disk full (and 1 more times after restarts)")
+        );
+        let text = recording_lines(&stopped);
+        assert!(
+            text.starts_with("recording: /nonexistent/a.mcap\n  not readable"),
+            "{text}"
+        );
+        assert!(text.contains("RECORDING STOPPED: disk full"), "{text}");
+        // A missing last file: not finished, whatever was said before.
+        let resumed = notes(&["recording stopped: disk full", "/nonexistent/b.mcap"]);
+        assert!(recording_stopped(&resumed).is_some());
+    }
 
     #[test]
     fn histogram_quantiles_within_five_percent() {

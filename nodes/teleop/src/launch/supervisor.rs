@@ -164,7 +164,13 @@ pub fn run(
     for line in &missing {
         println!("{line}");
     }
-    Ok(outcome)
+    // Recording that stopped before the session did fails the session.
+    match (outcome, super::summary::recording_stopped(&recorded)) {
+        (Outcome::Stopped(_), Some(why)) => {
+            Ok(Outcome::Failed(format!("RECORDING STOPPED: {why}")))
+        }
+        (outcome, _) => Ok(outcome),
+    }
 }
 
 /// Stops every running process, in reverse start order.
@@ -369,7 +375,7 @@ fn spawn(
 }
 
 /// Copies a child's output line by line to our stderr, tagged with the process name, and notes
-/// the files a recorder reports (`recorded PATH`) for the session summary.
+/// what a recorder says for the session summary (the files it records, `recording stopped`).
 fn forward(
     name: &str,
     stream: impl Read + Send + 'static,
@@ -381,12 +387,9 @@ fn forward(
         .spawn(move || {
             for line in BufReader::new(stream).lines() {
                 let Ok(line) = line else { break };
-                if let Some(path) = line
-                    .strip_prefix("recorded ")
-                    .filter(|p| p.ends_with(".mcap"))
-                {
+                if let Some(note) = super::summary::recorder_note(&line) {
                     if let Ok(mut r) = recordings.lock() {
-                        r.push(path.to_string());
+                        r.push(note);
                     }
                 }
                 let mut err = std::io::stderr().lock();
