@@ -137,6 +137,8 @@ struct Loop<'a> {
     /// The connected device, published with every health report (a late subscriber such as the
     /// recorder gets it within one period).
     connected: Option<DeviceInfo>,
+    /// `glove/force_command`'s writer changes at the last health report.
+    writer_changes: u64,
 }
 
 /// Runs until SIGINT/SIGTERM.
@@ -165,6 +167,7 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
         errors_before: 0,
         reported: LinkStats::default(),
         connected: None,
+        writer_changes: 0,
     };
     teleop_runtime::install_stop_handlers();
     let port = config.port.display().to_string();
@@ -472,6 +475,15 @@ impl Loop<'_> {
         }
         let age = self.ports.forces.age(Instant::now());
         self.ports.health.set_dropped(self.ports.forces.dropped());
+        let changes = self.ports.forces.writer_changes();
+        if changes > self.writer_changes {
+            tracing::warn!(
+                changes = changes - self.writer_changes,
+                "glove/force_command came from more than one writer"
+            );
+            self.ports.health.count_error();
+            self.writer_changes = changes;
+        }
         self.ports.health.publish(&[age])?;
         Ok(())
     }

@@ -22,6 +22,8 @@ pub struct HandPorts {
     stale_after: Duration,
     health_period: Duration,
     last_health: Instant,
+    /// [`Subscriber::writer_changes`] of the commands at the last health report.
+    writer_changes: u64,
     resume: Resume,
     last_command: Instant,
     /// The latest measured positions (the first `measured_len`, in `measured_units`), where the
@@ -53,6 +55,7 @@ impl HandPorts {
             stale_after,
             health_period,
             last_health: Instant::now(),
+            writer_changes: 0,
             resume: Resume::new(resume_speed),
             last_command: Instant::now(),
             measured: [0.0; MAX_JOINTS],
@@ -174,6 +177,17 @@ impl HandPorts {
         if self.last_health.elapsed() >= self.health_period {
             self.last_health = Instant::now();
             self.health.set_dropped(self.commands.dropped());
+            let changes = self.commands.writer_changes();
+            if changes > self.writer_changes {
+                // Refused at publisher creation; seen here when a writer got past that (a
+                // `teleop replay --allow-live`) or wrote with a forged source.
+                tracing::warn!(
+                    changes = changes - self.writer_changes,
+                    "hand/command came from more than one writer"
+                );
+                self.health.count_error();
+                self.writer_changes = changes;
+            }
             self.health.publish(&[self.commands.age(Instant::now())])?;
             if let Some(d) = &self.connected {
                 self.device.publish(d)?;

@@ -93,6 +93,9 @@ pub struct Subscriber<M: Message> {
     received: Cell<u64>,
     dropped: Cell<u64>,
     errors: Cell<u64>,
+    /// The source of the newest sample, and how often it changed from one sample to the next.
+    last_source: Cell<Option<u32>>,
+    writer_changes: Cell<u64>,
     last_seq: RefCell<[(u32, u64); TRACKED_SOURCES]>,
 }
 
@@ -110,6 +113,8 @@ impl<M: Message> Subscriber<M> {
             received: Cell::new(0),
             dropped: Cell::new(0),
             errors: Cell::new(0),
+            last_source: Cell::new(None),
+            writer_changes: Cell::new(0),
             last_seq: RefCell::new([(0, 0); TRACKED_SOURCES]),
         }
     }
@@ -195,12 +200,25 @@ impl<M: Message> Subscriber<M> {
         self.errors.get()
     }
 
+    /// How often a sample came from another source (`header.source_id`) than the one before:
+    /// on a topic with one writer, zero; more than one writer interleaving shows here.
+    pub fn writer_changes(&self) -> u64 {
+        self.writer_changes.get()
+    }
+
     fn account(&self, msg: &M) {
         let header = msg.header();
         self.latest.set(Some(*msg));
         self.received_at.set(Some(Instant::now()));
         self.received_ns.set(now_ns());
         self.received.set(self.received.get() + 1);
+        if self
+            .last_source
+            .replace(Some(header.source_id))
+            .is_some_and(|before| before != header.source_id)
+        {
+            self.writer_changes.set(self.writer_changes.get() + 1);
+        }
         let mut table = self.last_seq.borrow_mut();
         let slot = table
             .iter()
@@ -223,6 +241,25 @@ impl<M: Message> Subscriber<M> {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use teleop_msgs::HandCommand;
+
+    #[test]
+    fn samples_from_another_writer_are_counted() {
+        let dir = tempfile::tempdir().unwrap();
+        let settings = crate::IpcSettings::isolated(dir.path());
+        let node = crate::NodeRuntime::new("writers", &settings).unwrap();
+        let mut publisher = node.publisher::<HandCommand>().unwrap();
+        let subscriber = node.subscriber::<HandCommand>().unwrap();
+        let mut msg = HandCommand::default();
+        for (seq, source) in [(1, 7), (2, 7), (1, 8), (3, 7), (4, 7)] {
+            msg.header.seq = seq;
+            msg.header.source_id = source;
+            publisher.send_as_is(&msg).unwrap();
+        }
+        subscriber.drain(|_| {});
+        assert_eq!(subscriber.writer_changes(), 2);
+        drop((publisher, subscriber, node));
+        settings.remove_shared_memory();
+    }
 
     #[test]
     fn sequence_numbers_near_the_end_of_u64_do_not_overflow_the_drop_count() {
