@@ -32,6 +32,16 @@ restart_backoff_max_ms = 1500
     )
 }
 
+/// The feedback node alone in the sandbox (`launch_one`): writes its files, returns the launch
+/// file.
+fn feedback_launch(sandbox: &Sandbox) -> std::path::PathBuf {
+    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
+    sandbox.write(
+        "launch.toml",
+        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
+    )
+}
+
 /// The test plays the hand: state and tactile with the thumb pressing (10 N: the glove's thumb
 /// saturates at 800).
 struct Hand {
@@ -113,18 +123,9 @@ fn restarted(sandbox: &Sandbox, name: &str, old: u32) -> u32 {
 #[test]
 fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release() {
     let sandbox = Sandbox::new();
-    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
-    );
+    let launch = feedback_launch(&sandbox);
     let _session = sandbox.launch(&launch);
-    let node = NodeRuntime::new("e2e-hand", &sandbox.ipc).unwrap();
-    let mut hand = Hand {
-        state: node.publisher().unwrap(),
-        tactile: node.publisher().unwrap(),
-        forces: node.subscriber().unwrap(),
-    };
+    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
     hand.until(Duration::from_secs(20), "glove force from contact", pushing);
 
     // Engaged: the CLI names the node that acknowledged; forces zero.
@@ -479,11 +480,7 @@ fn estop_with_a_full_ipc_root_still_stops_the_running_nodes() {
     let mut sandbox = Sandbox::new();
     let mount = Tmpfs::mount(sandbox.dir.path().join("ipcfs"), "16m");
     sandbox.ipc = teleop_runtime::IpcSettings::isolated(&mount.0);
-    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
-    );
+    let launch = feedback_launch(&sandbox);
     let session = sandbox.launch(&launch);
     let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
     hand.until(Duration::from_secs(20), "glove force from contact", pushing);
@@ -517,11 +514,7 @@ fn estop_with_an_unwritable_latch_still_rings_every_doorbell() {
         return;
     }
     let sandbox = Sandbox::new();
-    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
-    );
+    let launch = feedback_launch(&sandbox);
     let _session = sandbox.launch(&launch);
     let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
     hand.until(Duration::from_secs(20), "glove force from contact", pushing);
@@ -681,11 +674,7 @@ fn the_glove_node_obeys_the_estop_itself() {
 #[test]
 fn a_second_session_on_one_prefix_is_refused_with_the_first_ones_pid() {
     let sandbox = Sandbox::new();
-    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
-    );
+    let launch = feedback_launch(&sandbox);
     let first = sandbox.launch(&launch);
     wait_for(Duration::from_secs(20), "the first session", || {
         sandbox.pid_of("feedback")
