@@ -349,18 +349,7 @@ fn rogue_is_refused(
     let config = std::fs::read_to_string(Sandbox::repo().join("config/bridge/operator.toml"))
         .unwrap()
         .replace("../../certs/", "certs/");
-    let config = rogue.write("bridge.toml", &config);
-    let log = std::fs::File::create(rogue.dir.path().join("bridge.log")).unwrap();
-    let mut cmd = ns.command(bin("teleop-bridge"));
-    cmd.arg("--config")
-        .arg(&config)
-        .envs(rogue.ipc.to_env())
-        .env("TELEOP_LOG", "info")
-        .current_dir(rogue.dir.path())
-        .stdout(log.try_clone().unwrap())
-        .stderr(log);
-    teleop_e2e::netns::die_with_parent(&mut cmd);
-    let mut child = cmd.spawn().unwrap();
+    let mut child = spawn_bridge(ns, &rogue, &config);
     let node = NodeRuntime::new("rogue-cmd", &rogue.ipc).unwrap();
     let mut publisher: Publisher<HandCommand> = node.publisher().unwrap();
     let rogue_id = source_id("rogue-cmd");
@@ -410,19 +399,26 @@ fn third_bridge(
         // fs::copy keeps the mode: keys stay readable by their owner only.
         std::fs::copy(certs.join(f), to.join(f)).unwrap();
     }
-    let config = third.write("bridge.toml", config);
-    let log = std::fs::File::create(third.dir.path().join("bridge.log")).unwrap();
+    let child = spawn_bridge(ns, &third, config);
+    (third, child)
+}
+
+/// Starts `teleop-bridge` in `ns` with the configuration text `config` (written to
+/// `bridge.toml` in `sandbox`), its IPC settings the sandbox's; its log goes to `bridge.log`
+/// there.
+fn spawn_bridge(ns: &Netns, sandbox: &Sandbox, config: &str) -> std::process::Child {
+    let config = sandbox.write("bridge.toml", config);
+    let log = std::fs::File::create(sandbox.dir.path().join("bridge.log")).unwrap();
     let mut cmd = ns.command(bin("teleop-bridge"));
     cmd.arg("--config")
         .arg(&config)
-        .envs(third.ipc.to_env())
+        .envs(sandbox.ipc.to_env())
         .env("TELEOP_LOG", "info")
-        .current_dir(third.dir.path())
+        .current_dir(sandbox.dir.path())
         .stdout(log.try_clone().unwrap())
         .stderr(log);
     teleop_e2e::netns::die_with_parent(&mut cmd);
-    let child = cmd.spawn().unwrap();
-    (third, child)
+    cmd.spawn().unwrap()
 }
 
 /// A certificate from the session's own CA made for another station (`viewer`), in a bridge
@@ -451,18 +447,7 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
 
     // The real operator's e-stop engages the robot's latch.
     let robot_latch = latch_path(&robot.sandbox.ipc, None);
-    let out = operator.sandbox.run_teleop(&["estop"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    until(
-        both,
-        Duration::from_secs(5),
-        "the robot's latch engaged",
-        || robot_latch.exists(),
-    );
+    operator_estop(both, true);
 
     // The robot bridge's error count so far.
     let mut before = None;
@@ -533,18 +518,7 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
     );
 
     // The real operator still works: its release crosses and its commands go on crossing.
-    let out = operator.sandbox.run_teleop(&["estop", "--release"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    until(
-        both,
-        Duration::from_secs(5),
-        "the robot's latch released by the operator",
-        || !robot_latch.exists(),
-    );
+    operator_estop(both, false);
     let mut crossed = 0;
     until(
         both,
@@ -558,6 +532,34 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
     let (mut operator, mut robot) = (operator, robot);
     assert!(operator.session.stop().success(), "{}", operator.logs());
     assert!(robot.session.stop().success(), "{}", robot.logs());
+}
+
+/// `teleop estop` (or `--release`) at the operator of `stations` (operator, robot), and the
+/// robot's latch following it.
+fn operator_estop(stations: (&Station, &Station), engage: bool) {
+    let (operator, robot) = stations;
+    let args: &[&str] = if engage {
+        &["estop"]
+    } else {
+        &["estop", "--release"]
+    };
+    let out = operator.sandbox.run_teleop(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let robot_latch = latch_path(&robot.sandbox.ipc, None);
+    until(
+        stations,
+        Duration::from_secs(5),
+        if engage {
+            "the robot's latch engaged"
+        } else {
+            "the robot's latch released by the operator"
+        },
+        || robot_latch.exists() == engage,
+    );
 }
 
 /// The Allegro's and the Shadow Hand's stations close their loops across the bridges too: the
