@@ -366,6 +366,15 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
             create_timestamped(dir, SystemTime::now(), &options.writer, &options.metadata)?
         }
     };
+    // Each file is announced as soon as it exists: a recorder killed later still has it listed.
+    let mut announced = PathBuf::new();
+    let mut announce = |rec: &Recorder| {
+        if options.announce && rec.path() != announced {
+            announced = rec.path().to_path_buf();
+            eprintln!("recorded {}", absolute(&announced).display());
+        }
+    };
+    announce(&rec);
     let names: Vec<&str> = match &options.topics {
         Some(list) => list.iter().map(String::as_str).collect(),
         None => topics().iter().map(|t| t.name).collect(),
@@ -405,14 +414,6 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         });
     }
     tracing::info!(file = %rec.path().display(), topics = taps.len(), "recording");
-    let mut announced = PathBuf::new();
-    let mut announce = |rec: &Recorder| {
-        if options.announce && rec.path() != announced {
-            announced = rec.path().to_path_buf();
-            eprintln!("recorded {}", absolute(&announced).display());
-        }
-    };
-    announce(&rec);
     let start = std::time::Instant::now();
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
@@ -584,6 +585,42 @@ mod tests {
         assert_eq!(civil_from_days(11_016), (2000, 2, 29));
         let at = UNIX_EPOCH + Duration::from_millis(20_778 * 86_400_000 + 8 * 3_600_000 + 7);
         assert_eq!(timestamped_stem(at), "2026-11-21_08-00-00.007");
+    }
+
+    #[test]
+    fn a_restarted_recorder_finds_its_predecessors_last_samples() {
+        use teleop_msgs::GloveState;
+        let dir = tempfile::tempdir().unwrap();
+        let session = |node: &str| {
+            BTreeMap::from([
+                ("launcher".to_string(), "42@1000".to_string()),
+                ("node".to_string(), node.to_string()),
+            ])
+        };
+        // Our predecessor's file (two publishers), and another recorder's of the same session.
+        for (name, node, seqs) in [("ours", "recorder", 1..=5u64), ("theirs", "other", 1..=9)] {
+            let path = dir.path().join(format!("{name}.mcap"));
+            let metadata = [(SESSION_METADATA.to_string(), session(node))];
+            let mut rec = Recorder::create(&path, WriterOptions::default(), &metadata).unwrap();
+            let id = rec.add_message_type::<GloveState>().unwrap();
+            for seq in seqs {
+                for source in [7u32, 8] {
+                    let mut s = GloveState::default();
+                    s.header.seq = seq * u64::from(source);
+                    s.header.source_id = source;
+                    rec.write(id, &RecordedMessage::from_sample(&s, seq))
+                        .unwrap();
+                }
+            }
+            rec.finish().unwrap();
+        }
+        let files = session_files(dir.path(), &session("recorder"));
+        assert_eq!(files, [dir.path().join("ours.mcap")]);
+        let mut last = last_sequences(&files).remove("glove/state").unwrap();
+        last.sort_unstable();
+        assert_eq!(last, [(7, 35), (8, 40)]);
+        assert!(session_files(dir.path(), &session("nobody")).is_empty());
+        assert!(process_start_ticks(std::process::id()).is_some());
     }
 
     #[test]
