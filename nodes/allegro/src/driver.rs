@@ -50,6 +50,9 @@ pub struct Counters {
     pub limited: u64,
     /// Times the hand was brought up again after a fault.
     pub reconnects: u64,
+    /// Waits without a finger frame that the next frame's stamp showed were the host's: the
+    /// frames came late (a loaded host), none was missing.
+    pub late_periods: u64,
 }
 
 impl Counters {
@@ -335,8 +338,11 @@ fn serve(
                 Incoming::Position { finger, q } => {
                     finger_frame = true;
                     deadline = Instant::now() + timeout;
-                    // The suspected waits before it that its stamp shows were missed periods.
+                    // The suspected waits before it that its stamp shows were missed periods;
+                    // the others were late.
+                    let suspected = pace.suspected();
                     let missed = pace.frame(link.rx_stamp_ms());
+                    counters.late_periods += u64::from(suspected.saturating_sub(missed));
                     if missed > 0 {
                         counters.missing_cycles += u64::from(missed);
                         counters.lost_frames += u64::from(missed) * FINGERS as u64;

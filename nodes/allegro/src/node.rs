@@ -175,6 +175,8 @@ impl Ports {
         self.detail[2] = u8::try_from(counters.unknown_frames).unwrap_or(u8::MAX);
         self.detail[3] = u8::try_from(counters.bad_frames).unwrap_or(u8::MAX);
         self.detail[4] = u8::try_from(counters.reconnects).unwrap_or(u8::MAX);
+        // Waits the frames' stamps showed were a loaded host's, not the hand's (saturating).
+        self.detail[6] = u8::try_from(counters.late_periods).unwrap_or(u8::MAX);
         self.health.set_detail(self.detail);
         self.health.publish(&[self.commands.age(Instant::now())])?;
         if let Some(d) = &self.connected {

@@ -55,6 +55,11 @@ impl Pace {
         self.late_limit
     }
 
+    /// Timeouts suspected since the last finger frame, not settled yet.
+    pub fn suspected(&self) -> u32 {
+        self.suspected
+    }
+
     /// The wait of `frame_timeout` ran out without a finger frame.
     pub fn timeout(&mut self, frame_timeout: Duration) -> Timeout {
         self.silent += frame_timeout;

@@ -141,8 +141,10 @@ fn frames_delayed_on_the_way_but_stamped_on_time_are_not_missed_periods() {
         (0, 0, 0),
         "{c:?}"
     );
-    // Every period of the hand made a cycle, the late ones included.
+    // Every period of the hand made a cycle, the late ones included, and the waits for them
+    // were counted as late.
     assert!(host.cycles > 350, "{} cycles in 1.5 s", host.cycles);
+    assert!(c.late_periods >= 5, "{c:?}");
     assert_eq!(JOINTS, 16);
 }
 
@@ -162,5 +164,7 @@ fn a_hand_that_really_went_silent_is_still_missed_and_restarted() {
     let host = run(Stall::Silent, 500);
     assert!(!host.downs.is_empty(), "the hand's silence is a fault");
     assert!(host.downs[0].contains("in a row"), "{:?}", host.downs);
-    assert!(host.last.unwrap().missing_cycles >= 4);
+    let c = host.last.unwrap();
+    assert!(c.missing_cycles >= 4);
+    assert_eq!(c.late_periods, 0, "a real silence is not late: {c:?}");
 }
