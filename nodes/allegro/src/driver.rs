@@ -344,8 +344,11 @@ fn serve(
                     let missed = pace.frame(link.rx_stamp_ms());
                     counters.late_periods += u64::from(suspected.saturating_sub(missed));
                     if missed > 0 {
+                        // As if each had timed out: the set under way ends with the first.
+                        let n = gather.timeout();
                         counters.missing_cycles += u64::from(missed);
-                        counters.lost_frames += u64::from(missed) * FINGERS as u64;
+                        counters.lost_frames +=
+                            u64::from(n) + u64::from(missed - 1) * FINGERS as u64;
                         missed_since_complete += missed;
                         run += missed;
                     }
