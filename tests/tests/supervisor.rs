@@ -85,7 +85,7 @@ max_restarts = 4
     }
     assert!(
         log.contains(
-            "required process crasher failed (exit status 3) after 4 restarts within 60 s"
+            "required process crasher exited (exit status 3) after 4 restarts within 60 s"
         ),
         "{log}"
     );
