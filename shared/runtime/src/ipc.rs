@@ -282,6 +282,9 @@ impl IpcSettings {
                 reason: format!("{e:?}"),
             })?;
             config.global.set_root_path(&path);
+        } else if std::path::Path::new(DEFAULT_ROOT).exists() {
+            // iceoryx2's default root, shared by every user of the machine: checked the same.
+            check_root(std::path::Path::new(DEFAULT_ROOT))?;
         }
         Ok(config)
     }
