@@ -319,7 +319,10 @@ restart_delay_ms = 50
         "the node names the file:\n{log}"
     );
     assert!(log.contains("restart 1/1"), "{log}");
-    assert!(log.contains("required process broken exited (exit status 1)"), "{log}");
+    assert!(
+        log.contains("required process broken exited (exit status 1)"),
+        "{log}"
+    );
 }
 
 #[test]
