@@ -369,6 +369,7 @@ pub fn estop(
     let mut rung_count = 0;
     // 2. The doorbells, whatever happened to the latches.
     let mut sides = Vec::new();
+    let mut doorbells = Vec::new();
     let runtime = match NodeRuntime::new(CLI_NODE, ipc) {
         Ok(runtime) => Some(runtime),
         Err(e) => {
@@ -403,14 +404,17 @@ pub fn estop(
                     ))
                 })
                 .ok();
+            // The publisher stays until the end: iceoryx2 takes back the samples of a
+            // publisher that is gone before its subscribers read them.
             let rung = runtime
                 .publisher_in::<EStop>(ns.as_ref())
                 .and_then(|mut p| {
                     p.publish(&EStop {
                         engaged: 1,
                         ..Default::default()
-                    })
-                    .map(|_| ())
+                    })?;
+                    doorbells.push(p);
+                    Ok(())
                 });
             match rung {
                 Ok(()) => rung_count += 1,
