@@ -514,13 +514,20 @@ fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCo
 type Side = (Option<Namespace>, Option<Subscriber<EStopAck>>, Vec<String>);
 
 /// Waits until every node that obeys the e-stop (each has one `estop/ack` publisher) answered
-/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`].
+/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`] (the whole time for a side
+/// whose acknowledgements cannot be read). The doorbells' publishers must live until then:
+/// iceoryx2 takes back the samples of a publisher that is gone.
 fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engage: bool) {
     let deadline = Instant::now() + ESTOP_ACK_WAIT;
     loop {
         let mut all = true;
         for (ns, acks, answered) in sides.iter_mut() {
-            let Some(acks) = acks else { continue };
+            let Some(acks) = acks else {
+                // Who answered cannot be seen: wait the whole time, so that the doorbell's
+                // publisher (and with it the sample) outlives the nodes' reading it.
+                all = false;
+                continue;
+            };
             acks.drain(|a| {
                 let name = text_of(&a.node_name);
                 if a.header.stamp_ns >= asked_at
