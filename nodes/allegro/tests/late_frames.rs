@@ -11,8 +11,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use teleop_allegro::driver::{self, Connected, Counters, Cycle, Down, Host, Target};
-use teleop_allegro::{AllegroConfig, ProtocolSetting};
+mod common;
+
+use common::{run_v3, Recorder};
+use teleop_allegro::AllegroConfig;
 use teleop_allegro_protocol::{doc, Generation, JointCalibration, JOINTS};
 use teleop_can_link::local::LocalBus;
 use teleop_can_link::{Bitrate, CanFrame, CanLink};
@@ -77,56 +79,16 @@ fn hand(bus: &LocalBus, stall: Stall, stop: Arc<AtomicBool>) {
     });
 }
 
-#[derive(Default)]
-struct Recorder {
-    started: Option<Instant>,
-    last: Option<Counters>,
-    cycles: u64,
-    downs: Vec<String>,
-}
-
-impl Host for Recorder {
-    fn stop_requested(&self) -> bool {
-        self.started
-            .is_some_and(|s| s.elapsed() >= Duration::from_millis(1500))
-    }
-    fn target(&mut self) -> Target {
-        Target::Hold
-    }
-    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
-        self.cycles += 1;
-        self.last = Some(cycle.counters);
-        Ok(())
-    }
-    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
-        self.downs.push(down.why.to_string());
-        Ok(())
-    }
-}
-
 fn run(stall: Stall, late_frame_limit_ms: u64) -> Recorder {
     let bus = LocalBus::with_timing(Bitrate(1_000_000));
     let stop = Arc::new(AtomicBool::new(false));
     hand(&bus, stall, stop.clone());
-    let settings = AllegroConfig {
-        link: "local:/unused".into(),
-        protocol: ProtocolSetting::Fixed(Generation::V3),
-        bringup_timeout_ms: 500,
+    let config = AllegroConfig {
         reconnect_backoff_ms: [20, 100],
         late_frame_limit_ms,
         ..Default::default()
-    }
-    .validate()
-    .unwrap();
-    let mut host = Recorder {
-        started: Some(Instant::now()),
-        ..Recorder::default()
     };
-    let mut open = || Ok(Box::new(bus.end()) as Box<dyn CanLink>);
-    driver::run(&settings, &mut host, &mut open).unwrap();
+    let host = run_v3(&bus, config, Duration::from_millis(1500));
     stop.store(true, Ordering::SeqCst);
     host
 }
@@ -134,7 +96,7 @@ fn run(stall: Stall, late_frame_limit_ms: u64) -> Recorder {
 #[test]
 fn frames_delayed_on_the_way_but_stamped_on_time_are_not_missed_periods() {
     let host = run(Stall::Late, 500);
-    let c = host.last.unwrap();
+    let c = host.cycles.last().unwrap().counters;
     assert!(host.downs.is_empty(), "no restart: {:?}", host.downs);
     assert_eq!(
         (c.missing_cycles, c.lost_frames, c.reconnects),
@@ -143,7 +105,11 @@ fn frames_delayed_on_the_way_but_stamped_on_time_are_not_missed_periods() {
     );
     // Every period of the hand made a cycle, the late ones included, and the waits for them
     // were counted as late.
-    assert!(host.cycles > 350, "{} cycles in 1.5 s", host.cycles);
+    assert!(
+        host.cycles.len() > 350,
+        "{} cycles in 1.5 s",
+        host.cycles.len()
+    );
     assert!(c.late_periods >= 5, "{c:?}");
     assert_eq!(JOINTS, 16);
 }
@@ -164,7 +130,7 @@ fn a_hand_that_really_went_silent_is_still_missed_and_restarted() {
     let host = run(Stall::Silent, 500);
     assert!(!host.downs.is_empty(), "the hand's silence is a fault");
     assert!(host.downs[0].contains("in a row"), "{:?}", host.downs);
-    let c = host.last.unwrap();
+    let c = host.cycles.last().unwrap().counters;
     assert!(c.missing_cycles >= 4);
     assert_eq!(c.late_periods, 0, "a real silence is not late: {c:?}");
 }

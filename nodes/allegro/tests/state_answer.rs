@@ -10,8 +10,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use teleop_allegro::driver::{self, Connected, Cycle, Down, Host, Target};
-use teleop_allegro::{AllegroConfig, ProtocolSetting};
+mod common;
+
+use common::run_v3;
+use teleop_allegro::AllegroConfig;
 use teleop_allegro_protocol::{doc, Generation, JointCalibration, JOINTS};
 use teleop_can_link::local::LocalBus;
 use teleop_can_link::{CanFrame, CanLink};
@@ -85,34 +87,6 @@ fn scripted_hand(bus: &LocalBus, payload: Payload, stop: Arc<AtomicBool>, q0: [f
     });
 }
 
-#[derive(Default)]
-struct Recorder {
-    started: Option<Instant>,
-    cycles: Vec<Cycle>,
-    downs: Vec<String>,
-}
-
-impl Host for Recorder {
-    fn stop_requested(&self) -> bool {
-        self.started
-            .is_some_and(|s| s.elapsed() >= Duration::from_millis(900))
-    }
-    fn target(&mut self) -> Target {
-        Target::Hold
-    }
-    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
-        Ok(())
-    }
-    fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
-        self.cycles.push(*cycle);
-        Ok(())
-    }
-    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
-        self.downs.push(down.why.to_string());
-        Ok(())
-    }
-}
-
 fn run_against(payload: Payload) {
     let bus = LocalBus::new();
     let stop = Arc::new(AtomicBool::new(false));
@@ -121,22 +95,12 @@ fn run_against(payload: Payload) {
         *q = 0.04 * j as f64 - 0.2;
     }
     scripted_hand(&bus, payload, stop.clone(), q0);
-    let settings = AllegroConfig {
-        link: "local:/unused".into(),
-        protocol: ProtocolSetting::Fixed(Generation::V3),
-        bringup_timeout_ms: 500,
+    let config = AllegroConfig {
         // A generous timeout: this test is about what the frames are, not their timing.
         frame_timeout_ms: 200,
         ..Default::default()
-    }
-    .validate()
-    .unwrap();
-    let mut host = Recorder {
-        started: Some(Instant::now()),
-        ..Recorder::default()
     };
-    let mut open = || Ok(Box::new(bus.end()) as Box<dyn CanLink>);
-    driver::run(&settings, &mut host, &mut open).unwrap();
+    let host = run_v3(&bus, config, Duration::from_millis(900));
     stop.store(true, Ordering::SeqCst);
 
     assert!(host.downs.is_empty(), "{:?}", host.downs);
