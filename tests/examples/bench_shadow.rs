@@ -50,7 +50,7 @@ const WARM_UP: Duration = Duration::from_secs(2);
 const SECONDS: u64 = 20;
 /// The glove's middle channel (little, ring, middle, index, thumb, thumb rotation).
 const MIDDLE: usize = 2;
-/// The size of the released motor firmware (notes/shadow.md).
+/// The size of the released motor firmware (docs/devices/shadow.md).
 const IMAGE_BYTES: usize = 30_859;
 
 /// One frame at the emulator: its arrival (ns, CLOCK_MONOTONIC), whether it was the LRW, and

@@ -1,4 +1,4 @@
-//! From the palm's sensor words to the 24 joint angles of `hand/state` (notes/shadow.md,
+//! From the palm's sensor words to the 24 joint angles of `hand/state` (docs/devices/shadow.md,
 //! "Sensors"): each joint's ADC channel (THJ5 and WRJ1: the mean of their A and B sensors),
 //! calibrated per joint by a piecewise-linear table of (raw, rad) points, as Shadow's per-hand
 //! calibration files give them. A finger's J1 and J2 are calibrated separately; the motor that

@@ -2,11 +2,11 @@
 //! name, whether a serious flag stops its demand, whether it still answers, and whether it has
 //! answered every slow type (the end of the start requests).
 //!
-//! A status answers the previous cycle's command and carries the replies of one parity of
-//! motors (`which_motors`), each with its arrival and error bit. The error bit is read at bit
-//! `motor`, where the firmware sets it; the shipped host reads bit `motor / 2`, a bug (notes)
-//! that this node does not copy. Replies are decoded by the status's own type, as the shipped
-//! host does. Nothing here allocates per cycle.
+//! A status answers the previous cycle's command and carries the replies of one parity of motors
+//! (`which_motors`), each with its arrival and error bit. The error bit is read at bit `motor`,
+//! where the firmware sets it; the shipped host reads bit `motor / 2`, a bug
+//! (docs/devices/shadow.md, "One 1 kHz cycle") that this node does not copy. Replies are decoded by
+//! the status's own type, as the shipped host does. Nothing here allocates per cycle.
 
 use teleop_shadow_protocol::data::{flags, FromMotor, SlowData};
 use teleop_shadow_protocol::layout::{Status, MOTORS};

@@ -1,5 +1,5 @@
 //! What each cycle's command asks of the motors, as the shipped driver schedules it
-//! (notes/shadow.md, "One 1 kHz cycle": E `sr06.cpp`, `sr_robot_lib`; C's
+//! (docs/devices/shadow.md, "One 1 kHz cycle": E `sr06.cpp`, `sr_robot_lib`; C's
 //! `motor_data_polling.yaml`, the same for every hand):
 //!
 //! - `which_motors` flips every cycle; the requested type advances when it flips to 1, so each

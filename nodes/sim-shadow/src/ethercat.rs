@@ -28,7 +28,7 @@ use teleop_shadow_protocol::layout::{CanBridge, Command, Protocol, PRODUCT_BRIDG
 use crate::palm::{Palm, CAN_DIRECT_ROUND, SENSOR_DATA_ROUND};
 
 /// Vendor ID both SubDevices carry: Shadow's entry in the ETG vendor list (ethercrab's
-/// `vendors.rs`); no Shadow source names it (notes/shadow.md, "Open").
+/// `vendors.rs`); no Shadow source names it (docs/devices/shadow.md, "Open").
 pub const VENDOR_ID: u32 = 0x0000_0530;
 /// From the command being seen to the status being written in SENSOR_DATA mode: the
 /// firmware's CAN round ([`SENSOR_DATA_ROUND`]).
@@ -43,8 +43,8 @@ pub const SM_STATUS: usize = 2;
 /// The bridge status's sync manager.
 pub const SM_BRIDGE_STATUS: usize = 3;
 
-/// The palm's four sync managers for `protocol` (notes/shadow.md, "Sync managers and FMMUs"):
-/// one buffer each, AL event enabled on the two the MainDevice writes.
+/// The palm's four sync managers for `protocol` (docs/devices/shadow.md, "Sync managers and
+/// FMMUs"): one buffer each, AL event enabled on the two the MainDevice writes.
 pub fn palm_sync_managers(protocol: Protocol) -> Vec<SmSetting> {
     let a = protocol.area();
     let bridge = CanBridge::SIZE as u16;

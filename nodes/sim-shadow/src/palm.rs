@@ -1,5 +1,5 @@
-//! The palm's PIC32 firmware, one EtherCAT cycle at a time (notes/shadow.md, "One 1 kHz cycle":
-//! E11 `this_node.c`), over the 20 motor boards on its two CAN buses.
+//! The palm's PIC32 firmware, one EtherCAT cycle at a time (docs/devices/shadow.md, "One 1 kHz
+//! cycle": E11 `this_node.c`), over the 20 motor boards on its two CAN buses.
 //!
 //! - Booting: until [`Palm::BOOT_MS`] the status is what the firmware writes on entering INIT
 //!   (E11 `this_node.c`, `Platform_Init_Callback`): EDC_command 0xCC, then every 16-bit word

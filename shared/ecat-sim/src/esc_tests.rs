@@ -1181,7 +1181,7 @@ fn a_firmware_loop_reads_al_control_once_per_loop() {
     }
 }
 
-/// The Shadow palm's layout (notes/shadow.md): command and bridge command written by the
+/// The Shadow palm's layout (docs/devices/shadow.md): command and bridge command written by the
 /// MainDevice, status and bridge status read, all one-buffer.
 fn palm_sms() -> Vec<SmSetting> {
     vec![

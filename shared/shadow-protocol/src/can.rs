@@ -1,5 +1,6 @@
 //! The CAN side: the 11-bit SID of motor and bootloader messages, and the PIC18F bootloader's
-//! commands (document, "CAN SID bit mapping" and "CAN bootloader commands"; notes/shadow.md).
+//! commands (document, "CAN SID bit mapping" and "CAN bootloader commands";
+//! docs/devices/shadow.md, "CAN SIDs and the PIC18F bootloader").
 //!
 //! SID: bits 10-9 direction, 8-5 the motor's id on its bus (0..9), 4 ACK (bootloader replies), 3-0
 //! the data type or bootloader command. Motors 0-9 are on bus 1, 10-19 on bus 2 as id n - 10.

@@ -1,5 +1,5 @@
 //! EDC commands, the motor data types and their units, slow data, motor flags and the config
-//! CRC (notes/shadow.md, "Enums and flags": E's headers, HEAD generation).
+//! CRC (docs/devices/shadow.md, "Enums and flags": E's headers, HEAD generation).
 
 /// What the palm is asked to do (the command's first word; also the status's).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -3,9 +3,9 @@
 //! mode), hands every bootloader message it receives to [`Flasher::receive`], and calls `poll`
 //! again on each message and when the wait it was given runs out.
 //!
-//! The sequence is the shipped flasher's (notes/shadow.md, "Flashing": E `sr_edc.cpp`): MAGIC
-//! (100 ms, one retry), ERASE (3 s), then per 32-byte row ADDRESS and four DATA (100 ms each; a
-//! DATA without its acknowledgement redoes the row), then a READ of every 8 bytes compared with
+//! The sequence is the shipped flasher's (docs/devices/shadow.md, "Flashing": E `sr_edc.cpp`):
+//! MAGIC (100 ms, one retry), ERASE (3 s), then per 32-byte row ADDRESS and four DATA (100 ms each;
+//! a DATA without its acknowledgement redoes the row), then a READ of every 8 bytes compared with
 //! the image (100 ms, at most 20 tries), then RESET (1 s). Where the shipped flasher retries
 //! forever (ERASE, ADDRESS, RESET), this one gives up after [`Settings::tries`] and says which
 //! step, address and reply; the board stays in its bootloader and can be flashed again.

@@ -1,5 +1,5 @@
 //! Motor-board firmware images: Intel HEX text checked against the PIC18F bootloader's address
-//! rules and cut into the 32-byte rows it programs (notes/shadow.md, "Flashing").
+//! rules and cut into the 32-byte rows it programs (docs/devices/shadow.md, "Flashing").
 //!
 //! Records `:LLAAAATT<data>CC`: the byte sum including the checksum is 0 mod 256; types 00 data,
 //! 01 end of file, 02 extended segment address (x16), 04 extended linear address (upper 16

@@ -1,13 +1,13 @@
 //! Process-data layouts: the palm's command and status, the CAN bridge message after each, and
-//! where each protocol puts them in the palm's memory (notes/shadow.md, "Layouts" and "Sync
+//! where each protocol puts them in the palm's memory (docs/devices/shadow.md, "Layouts" and "Sync
 //! managers and FMMUs"; packed, little-endian, enums as u32).
 //!
-//! Protocol 0220 (the SR06 palm, product code 6) is what shipped Hand E palms speak and is
-//! complete here. 0230 (SR08) and 0240 (SR09) are given by their areas only: the notes give
-//! their field offsets (0230's tactile and aux data, 0240's IMU command) but no palm of theirs
-//! is emulated or driven here. The document's structures ([`DocumentCommand`],
-//! [`DocumentStatus`]) are older than any shipped palm; its `TACTILE_SENSOR_OUT` is not defined
-//! in the document, so its status is decoded up to the motors.
+//! Protocol 0220 (the SR06 palm, product code 6) is what shipped Hand E palms speak and is complete
+//! here. 0230 (SR08) and 0240 (SR09) are given by their areas only: docs/devices/shadow.md gives
+//! their field offsets (0230's tactile and aux data, 0240's IMU command) but no palm of theirs is
+//! emulated or driven here. The document's structures ([`DocumentCommand`], [`DocumentStatus`]) are
+//! older than any shipped palm; its `TACTILE_SENSOR_OUT` is not defined in the document, so its
+//! status is decoded up to the motors.
 
 use crate::{i16_at, need, u16_at, u32_at, DecodeError};
 
@@ -300,9 +300,9 @@ impl Status {
         })
     }
 
-    /// Motor `motor`'s reply, if it is one of this status's motors (its parity is
-    /// `which_motors`), arrived and had no error. The error bit is read at bit `motor`, as the
-    /// firmware sets it; the shipped host reads bit `motor / 2` (a host bug, notes).
+    /// Motor `motor`'s reply, if it is one of this status's motors (its parity is `which_motors`),
+    /// arrived and had no error. The error bit is read at bit `motor`, as the firmware sets it; the
+    /// shipped host reads bit `motor / 2` (a host bug: docs/devices/shadow.md, "One 1 kHz cycle").
     pub fn reply(&self, motor: usize) -> Option<MotorPacket> {
         if motor >= MOTORS || motor % 2 != usize::from(self.which_motors & 1 != 0) {
             return None;

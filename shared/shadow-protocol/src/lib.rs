@@ -19,7 +19,7 @@
 //! disagree, the choice is a value the caller passes ([`data::EdcNumbering`],
 //! [`can::SidDirections`], [`can::EraseLength`]) and the default is the shipped one, because
 //! that is what palms in the field speak. Facts beyond the document come from
-//! `../shared/notes/shadow.md`, whose sources are cited by their letters there (E: the vendor's
+//! `docs/devices/shadow.md`, whose sources are cited by their letters there (E: the vendor's
 //! EtherCAT driver and headers, E11: its 2011 palm and bootloader sources, M: the eml master, C:
 //! the hand configurations).
 //!

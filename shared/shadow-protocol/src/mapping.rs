@@ -1,5 +1,5 @@
-//! The Hand E's joints and the motors that drive them (notes/shadow.md, "Motors, units,
-//! limits": E's `mappings/default_mappings`; C's `general_info.yaml` picks one per hand).
+//! The Hand E's joints and the motors that drive them (docs/devices/shadow.md, "Motors,
+//! units, limits": E's `mappings/default_mappings`; C's `general_info.yaml` picks one per hand).
 //!
 //! Joint order FFJ0-4, MFJ0-4, RFJ0-4, LFJ0-5, THJ1-5, WRJ1-2 (26 entries; J0 is the coupled
 //! distal pair J1 + J2 of a finger, driven by one motor, so J1 and J2 have none).
@@ -62,9 +62,9 @@ pub const HAND_LIMITS: [(f64, f64); 24] = {
     ]
 };
 
-/// The palm's ADC channels of each joint of [`HAND_JOINTS`] (notes/shadow.md, "Sensors": FFJ1-4
-/// 0-3, MFJ1-4 4-7, RFJ1-4 8-11, LFJ1-5 12-16, THJ1-4 17-20, THJ5A/B 21-22, WRJ1A/B 23-24, WRJ2
-/// 25); THJ5 and WRJ1 have two sensors, read as their mean.
+/// The palm's ADC channels of each joint of [`HAND_JOINTS`] (docs/devices/shadow.md, "Sensors":
+/// FFJ1-4 0-3, MFJ1-4 4-7, RFJ1-4 8-11, LFJ1-5 12-16, THJ1-4 17-20, THJ5A/B 21-22, WRJ1A/B
+/// 23-24, WRJ2 25); THJ5 and WRJ1 have two sensors, read as their mean.
 pub const HAND_CHANNELS: [(usize, Option<usize>); 24] = {
     let mut c = [(0, None); 24];
     let mut j = 0;
@@ -78,7 +78,7 @@ pub const HAND_CHANNELS: [(usize, Option<usize>); 24] = {
     c
 };
 
-/// The palm's sensor words by index (notes/shadow.md, "Sensors"); the rest up to 37 unused.
+/// The palm's sensor words by index (docs/devices/shadow.md, "Sensors"); the rest up to 37 unused.
 pub const SENSOR_NAMES: [&str; 36] = [
     "FFJ1", "FFJ2", "FFJ3", "FFJ4", "MFJ1", "MFJ2", "MFJ3", "MFJ4", "RFJ1", "RFJ2", "RFJ3", "RFJ4",
     "LFJ1", "LFJ2", "LFJ3", "LFJ4", "LFJ5", "THJ1", "THJ2", "THJ3", "THJ4", "THJ5A", "THJ5B",
