@@ -158,14 +158,7 @@ fn main() {
     );
 
     // Flashing motor 13 through the same emulator.
-    let mut image = vec![0u8; IMAGE_BYTES];
-    let mut x = 0x9E37_79B9u32;
-    for b in &mut image {
-        x ^= x << 13;
-        x ^= x >> 17;
-        x ^= x << 5;
-        *b = x as u8;
-    }
+    let image = sim_shadow::bootloader::generated_application(IMAGE_BYTES, 0x9E37_79B9);
     let file = sandbox.write("motor.hex", &hex::write(APP_START, &image));
     let rows = hex::parse(&std::fs::read_to_string(&file).unwrap())
         .unwrap()

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use sim_shadow::bootloader::Mode;
+use sim_shadow::bootloader::{generated_application, Mode};
 use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::palm::Palm;
 use teleop_ecat_link::{serve_socket, StreamServer};
@@ -18,18 +18,6 @@ use teleop_shadow::ShadowConfig;
 use teleop_shadow_protocol::can::{BootMessage, APP_START};
 use teleop_shadow_protocol::hex;
 use teleop_shadow_protocol::layout::CanBridge;
-
-fn application(len: usize, seed: u32) -> Vec<u8> {
-    let mut x = seed.wrapping_mul(2_654_435_761).max(1);
-    (0..len)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            x as u8
-        })
-        .collect()
-}
 
 /// The emulated hand served on a socket in `dir`, and the service brought up on it.
 fn hand(
@@ -119,7 +107,7 @@ fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
             sim.lock().unwrap().palm.faults().link_down = false;
         })
     };
-    let app = application(600, 5);
+    let app = generated_application(600, 5);
     let image = hex::parse(&hex::write(APP_START, &app)).unwrap();
     let result = service.flash(13, image, &mut |_, _| {});
     cable.join().unwrap();

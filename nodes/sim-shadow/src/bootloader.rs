@@ -212,6 +212,20 @@ impl Board {
     }
 }
 
+/// A pseudo-random application image of `len` bytes (xorshift from `seed`), to flash in tests
+/// and benchmarks: the emulated board reports its first word as its firmware revision.
+pub fn generated_application(len: usize, seed: u32) -> Vec<u8> {
+    let mut x = seed.wrapping_mul(2_654_435_761).max(1);
+    (0..len)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as u8
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]

@@ -4,23 +4,10 @@
 //! and address, and both can be flashed again.
 #![allow(clippy::unwrap_used)]
 
-use sim_shadow::bootloader::{Board, Mode};
+use sim_shadow::bootloader::{generated_application, Board, Mode};
 use teleop_shadow_protocol::can::{APP_START, ROW};
 use teleop_shadow_protocol::flash::{FlashError, Flasher, Poll, Settings, Step};
 use teleop_shadow_protocol::hex::{self, Image};
-
-/// A pseudo-random application of `len` bytes.
-fn application(len: usize, seed: u32) -> Vec<u8> {
-    let mut x = seed.wrapping_mul(2_654_435_761).max(1);
-    (0..len)
-        .map(|_| {
-            x ^= x << 13;
-            x ^= x >> 17;
-            x ^= x << 5;
-            x as u8
-        })
-        .collect()
-}
 
 fn image(bytes: &[u8]) -> Image {
     hex::parse(&hex::write(APP_START, bytes)).unwrap()
@@ -49,10 +36,10 @@ fn run(flasher: &mut Flasher, board: &mut Board) -> (Result<(), FlashError>, u64
 
 #[test]
 fn an_image_is_written_read_back_and_started() {
-    let app = application(3000, 7);
+    let app = generated_application(3000, 7);
     let img = image(&app);
     // A board running an older application: MAGIC sends it to its bootloader first.
-    let mut board = Board::new(4, &application(2000, 1));
+    let mut board = Board::new(4, &generated_application(2000, 1));
     assert_eq!(board.mode(), Mode::Application);
     board.take_sent(0);
     let mut flasher = Flasher::new(4, img.clone(), Settings::default());
@@ -75,7 +62,7 @@ fn an_image_is_written_read_back_and_started() {
 
 #[test]
 fn a_board_that_does_not_answer_magic_is_named_and_can_be_flashed_later() {
-    let img = image(&application(500, 3));
+    let img = image(&generated_application(500, 3));
     let mut board = Board::new(2, &[]);
     board.take_sent(0);
     board.silent = true;
@@ -104,7 +91,7 @@ fn a_board_that_does_not_answer_magic_is_named_and_can_be_flashed_later() {
 
 #[test]
 fn a_board_that_stops_mid_transfer_is_named_with_the_address_and_stays_in_its_bootloader() {
-    let app = application(2000, 5);
+    let app = generated_application(2000, 5);
     let img = image(&app);
     let mut board = Board::new(0, &[]);
     board.take_sent(0);
@@ -133,7 +120,7 @@ fn a_board_that_stops_mid_transfer_is_named_with_the_address_and_stays_in_its_bo
 
 #[test]
 fn a_read_back_that_differs_is_a_mismatch_naming_the_address() {
-    let img = image(&application(64, 9));
+    let img = image(&generated_application(64, 9));
     let mut board = Board::new(1, &[]);
     board.take_sent(0);
     let mut flasher = Flasher::new(1, img, Settings::default());
@@ -179,7 +166,7 @@ fn flashing_motor_13_through_the_palm_in_can_direct_mode() {
     use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
     use teleop_shadow_protocol::layout::{CanBridge, Command};
 
-    let app = application(700, 11);
+    let app = generated_application(700, 11);
     let img = image(&app);
     let mut palm = Palm::new();
     let direct = Command {
