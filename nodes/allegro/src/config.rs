@@ -1,6 +1,6 @@
 //! The Allegro node's configuration file (`config/allegro.toml`) and its checked form.
 //!
-//! Defaults follow `../shared/notes/allegro.md`: gains, per-joint PWM limits and the velocity
+//! Defaults follow `docs/devices/allegro.md`: gains, per-joint PWM limits and the velocity
 //! filter of R4 (allegro_hand_ros_v4), the 3 ms period of the device document.
 
 use std::path::PathBuf;
@@ -101,7 +101,7 @@ pub struct AllegroConfig {
     /// else the generation's (v1, v2: 800 as the document says; v3: 1200).
     pub pwm_per_nm: Option<f64>,
     /// PWM limit per joint (R4/W2: fingers 375 675 450 285, thumb 525 405 270 270), each also
-    /// capped at `pwm_per_nm` (the notes' global limit).
+    /// capped at `pwm_per_nm` (the global limit in docs/devices/allegro.md).
     pub pwm_limit: [i16; JOINTS],
     /// Absolute torque limit per joint, N m.
     pub max_torque_nm: f64,
@@ -147,7 +147,7 @@ pub struct AllegroConfig {
 
 impl Default for AllegroConfig {
     fn default() -> Self {
-        // notes/allegro.md, "Joints, limits, gains": R4's defaults, index middle ring thumb.
+        // docs/devices/allegro.md, "Joints, limits, gains": R4's defaults, index middle ring thumb.
         let finger = |f: [f64; 4], t: [f64; 4]| -> [f64; JOINTS] {
             let mut out = [0.0; JOINTS];
             for (i, v) in out.iter_mut().enumerate() {
@@ -157,7 +157,7 @@ impl Default for AllegroConfig {
         };
         let mut pwm_limit = [0i16; JOINTS];
         for (i, v) in pwm_limit.iter_mut().enumerate() {
-            // notes/allegro.md: per-joint PWM limits of R4 and W2.
+            // docs/devices/allegro.md: per-joint PWM limits of R4 and W2.
             *v = if i < 12 {
                 [375, 675, 450, 285][i % 4]
             } else {

@@ -1,9 +1,9 @@
 //! The host's joint controller, pure: the velocity filter and the PD law with its limits.
 //!
 //! `PWM = kp (target - q) - kd q̇_f` (R4, gains in PWM counts per rad and per rad/s), limited to
-//! the joint's PWM limit (itself capped at the hand's PWM per N m, the notes' global limit) and
-//! to the absolute torque limit; the torque sent is that PWM over the PWM per N m. NaN or
-//! infinite inputs give zero torque, never a saturated one.
+//! the joint's PWM limit (itself capped at the hand's PWM per N m, the global limit in
+//! docs/devices/allegro.md) and to the absolute torque limit; the torque sent is that PWM over the
+//! PWM per N m. NaN or infinite inputs give zero torque, never a saturated one.
 
 use teleop_allegro_protocol::JOINTS;
 
@@ -103,7 +103,8 @@ impl VelocityFilter {
         }
         match self.kind {
             VelocityFilterKind::R4 => {
-                // notes/allegro.md: R4's q_f = 0.6 q_f + 0.198 (q_prev + q), same on velocity.
+                // docs/devices/allegro.md: R4's q_f = 0.6 q_f + 0.198 (q_prev + q), same on
+                // velocity.
                 for (j, &qj) in q.iter().enumerate() {
                     let q_f = 0.6 * self.q_f[j] + 0.198 * (self.q_prev[j] + qj);
                     let v = (q_f - self.q_f[j]) / dt;

@@ -1,8 +1,8 @@
 //! The Allegro Hand node: bring-up, the 333 Hz torque loop with a host PD controller, hand state
 //! out.
 //!
-//! - [`config`]: `config/allegro.toml` and its checked form (defaults from the notes: R4's gains,
-//!   per-joint PWM limits and velocity filter);
+//! - [`config`]: `config/allegro.toml` and its checked form (defaults from docs/devices/allegro.md:
+//!   R4's gains, per-joint PWM limits and velocity filter);
 //! - [`control`]: the pure PD controller, its limits and the velocity filter;
 //! - [`gather`]: the pure gathering of one period's four finger frames;
 //! - [`pace`]: telling a late period from a missing one by the link's bus-time stamps (pure);

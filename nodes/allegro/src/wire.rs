@@ -196,7 +196,7 @@ impl Wire {
         self.torque_frames(&[0.0; JOINTS], 1.0, &[0; JOINTS])
     }
 
-    /// The start sequence (notes/allegro.md, "Sequences" and "Init R4"), after the link was
+    /// The start sequence (docs/devices/allegro.md, "Sequences" and "Init R4"), after the link was
     /// drained. Document protocol: SYSTEM_OFF, SET_PERIOD, MODE_TASK, QUERY_ID, QUERY_STATE,
     /// SYSTEM_ON (the document's 10 ms pauses). v4: SYSTEM_OFF, info and serial queries,
     /// SET_PERIOD{period, no IMU, temperature}, SYSTEM_ON.

@@ -499,9 +499,9 @@ fn v4_against_the_simulator() {
     generation("v4");
 }
 
-/// What real v4 hands do is not published on two points (notes, "Open"): whether they zero
-/// torque when torque frames stop, and whether SET_PERIOD alone starts the stream. The node
-/// works with a hand that does both: it sends torque every period (holding included), and its
+/// What real v4 hands do is not published on two points (docs/devices/allegro.md, "Open"): whether
+/// they zero torque when torque frames stop, and whether SET_PERIOD alone starts the stream. The
+/// node works with a hand that does both: it sends torque every period (holding included), and its
 /// bring-up sends SYSTEM_ON either way.
 #[test]
 fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {

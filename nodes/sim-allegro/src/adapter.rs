@@ -2,7 +2,7 @@
 //! host command lines in, answer bytes and frames for the bus out. The pty and the bus around
 //! it are in [`crate::serve`].
 //!
-//! Behaviour (notes/allegro.md, "slcan"): `Sn`/`sxxyy` set the bit rate only while closed
+//! Behaviour (docs/devices/allegro.md, "slcan"): `Sn`/`sxxyy` set the bit rate only while closed
 //! (else BEL); `O`/`L` open (BEL when already open or no bit rate was set), `C` closes (BEL
 //! when already closed); frames are refused with BEL while closed, listen-only or bus-off;
 //! a frame sent at another bit rate than the bus's is taken by the adapter but never

@@ -2,7 +2,7 @@
 //! time in, frames out and motor torques. Pure: no I/O, no clock of its own (time is the
 //! simulation's, a [`Duration`] since power-on).
 //!
-//! Document protocol (generations v1-v3; the device document and notes/allegro.md):
+//! Document protocol (generations v1-v3; the device document and docs/devices/allegro.md):
 //! - `SET_PERIOD` sets the stream period (u8 ms; 0 stops the stream); `SET_MODE_JOINT` /
 //!   `SET_MODE_TASK` are accepted and remembered (they change nothing here);
 //! - `SYSTEM_ON` starts the stream: the four position frames (`0x0F`, src 3..6, dest
@@ -11,8 +11,8 @@
 //! - `QUERY_STATE_DATA` is answered as the document's command table says: one
 //!   `ID_CMD_QUERY_STATE_DATA` (0x0E) frame from each finger (`ID_DEVICE_SUB_01..04`) to
 //!   `ID_DEVICE_MAIN`, not with the stream's 0x0F frames. Its payload is not documented
-//!   (notes "Open"): [`FirmwareOptions::state_answer`] chooses the four raw counts laid out as a
-//!   position frame, or none;
+//!   (docs/devices/allegro.md, "Open"): [`FirmwareOptions::state_answer`] chooses the four raw
+//!   counts laid out as a position frame, or none;
 //! - `QUERY_ID` (R1/L, not in the document) is answered with revision, firmware and hardware
 //!   type;
 //! - torque frames (`0x06`..`0x09`, i16 big-endian PWM) are read in the generation's joint
@@ -21,12 +21,12 @@
 //! - positions are reported through the hand's own encoder offsets and directions
 //!   ([`JointCalibration`]), so the driver's calibration is what recovers radians.
 //!
-//! v4 protocol: `SYSTEM_ON` / `SYSTEM_OFF`; `SET_PERIOD` with position, IMU and temperature
-//! periods (0 stops that stream); the position stream needs `SYSTEM_ON` unless
-//! [`FirmwareOptions::v4_stream_on_period`] (unknown on real hands: notes "Open"); remote frames
-//! for `HAND_INFO` and `SERIAL` are answered whether streaming or not; torque frames are four
-//! i16 little-endian PWM values j0..j3; temperatures are streamed as four u8 deg C per finger
-//! (W2's layout). Frames for another device id are ignored.
+//! v4 protocol: `SYSTEM_ON` / `SYSTEM_OFF`; `SET_PERIOD` with position, IMU and temperature periods
+//! (0 stops that stream); the position stream needs `SYSTEM_ON` unless
+//! [`FirmwareOptions::v4_stream_on_period`] (unknown on real hands: docs/devices/allegro.md,
+//! "Open"); remote frames for `HAND_INFO` and `SERIAL` are answered whether streaming or not;
+//! torque frames are four i16 little-endian PWM values j0..j3; temperatures are streamed as four u8
+//! deg C per finger (W2's layout). Frames for another device id are ignored.
 //!
 //! Both: unknown ids are ignored (and counted), as firmware does; with
 //! [`FirmwareOptions::torque_timeout`] a finger whose torque frames stop for that long gets

@@ -59,7 +59,7 @@ pub enum AllegroCommand {
     },
 }
 
-/// The home pose, degrees (notes/allegro.md, "Joints, limits, gains").
+/// The home pose, degrees (docs/devices/allegro.md, "Joints, limits, gains").
 const HOME_DEG: [f64; JOINTS] = [
     0.0, -10.0, 45.0, 45.0, 0.0, -10.0, 45.0, 45.0, 5.0, -5.0, 50.0, 45.0, 60.0, 25.0, 15.0, 45.0,
 ];

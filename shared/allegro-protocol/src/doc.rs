@@ -3,12 +3,12 @@
 //! Ids. The document's text says the 32-bit id splits into a 26-bit command and 3-bit
 //! destination and source ids, but its sample code builds an 11-bit standard id
 //! `cmd << 6 | dest << 3 | src` and decodes `cmd = (id >> 6) & 0x1F`: the code is what hands and
-//! every driver use (notes: R1, L), so this module does the same.
+//! every driver use (docs/devices/allegro.md: R1, L), so this module does the same.
 //!
 //! Direction. The host always sends destination `ID_COMMON` (1) and source `ID_DEVICE_MAIN` (2),
 //! so a host command's id is `cmd << 6 | 0x0A`. The hand's position reports come from the finger
 //! (`src` 3..6). Their destination is not checked: the document's table says `ID_DEVICE_MAIN`,
-//! no driver checks it (notes).
+//! no driver checks it (docs/devices/allegro.md).
 //!
 //! Joint state. The document's command table lists `ID_CMD_QUERY_STATE_DATA` (0x0E) twice: as
 //! the host's request (`ID_COMMON` <- `ID_DEVICE_MAIN`, [`Request::QueryState`]) and as the

@@ -11,7 +11,7 @@
 //! [`embedded_can::Frame`], so they work with any transport's frame type; every decoder takes
 //! any frame and returns a value or a [`DecodeError`], never panics.
 //!
-//! Facts beyond the document come from `../shared/notes/allegro.md`, whose sources are cited by
+//! Facts beyond the document come from `docs/devices/allegro.md`, whose sources are cited by
 //! their letters there: R1 (allegro_hand_ros, v1-v3), L (allegro_hand_linux), R4
 //! (allegro_hand_ros_v4), W2 (Wonik's allegro_hand_ros2), fairo (facebookresearch/fairo).
 //!
@@ -133,8 +133,8 @@ impl Generation {
         }
     }
 
-    /// The largest PWM magnitude the motors take: the global cap of the supply voltage (notes:
-    /// 800 at 8 V, 1200 at 12 V).
+    /// The largest PWM magnitude the motors take: the global cap of the supply voltage
+    /// (docs/devices/allegro.md: 800 at 8 V, 1200 at 12 V).
     pub fn default_pwm_limit(self) -> i16 {
         match self {
             Generation::V1 | Generation::V2 => 800,
@@ -245,8 +245,8 @@ pub(crate) fn remote_frame<F: Frame>(id: u16) -> F {
 /// Which protocol a streamed frame belongs to, from its id: the document's position reports
 /// (cmd 0x0F from a finger, src 3..6: ids 0x3C3..0x3FE) or v4's (messages 0x20..0x23 of any device:
 /// ids 0x080..0x08F). Anything else says nothing (None). The two id ranges do not overlap, so
-/// a hand of the other generation is named instead of misread (notes: "Two incompatible
-/// protocols").
+/// a hand of the other generation is named instead of misread (docs/devices/allegro.md,
+/// "Two incompatible protocols").
 pub fn detect<F: Frame>(frame: &F) -> Option<Protocol> {
     let id = standard_id(frame).ok()?;
     if frame.is_remote_frame() {

@@ -1,5 +1,5 @@
-//! The v4 protocol (hands sold as v4, SAH040...; v5 keeps its core), from the notes: Wonik's v4
-//! protocol page as R4, W2 and fairo implement it. Not in the device document.
+//! The v4 protocol (hands sold as v4, SAH040...; v5 keeps its core), from docs/devices/allegro.md:
+//! Wonik's v4 protocol page as R4, W2 and fairo implement it. Not in the device document.
 //!
 //! Wire id = `msg << 2 | device` (device 0..3, kept in the hand's non-volatile memory, default
 //! 0); every payload little-endian. A remote frame (DLC 0) with a query's id is answered by a
@@ -379,8 +379,8 @@ mod tests {
 
     #[test]
     fn requests_known_answers() {
-        // The notes' slcan examples: SYSTEM_ON `t1000`, SET_PERIOD 3 ms `t2046030000000000`,
-        // RTR info `r2000`.
+        // The slcan examples of docs/devices/allegro.md: SYSTEM_ON `t1000`, SET_PERIOD 3 ms
+        // `t2046030000000000`, RTR info `r2000`.
         assert_eq!(
             bytes(&Request::SystemOn.encode::<TestFrame>(0)),
             (0x100, false, vec![])

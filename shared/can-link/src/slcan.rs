@@ -6,7 +6,7 @@
 //! [`Item::encode`] write the lines. Every decoder takes any bytes and gives items or typed
 //! errors, never a panic (proptested).
 //!
-//! Facts (notes/allegro.md, "slcan (Lawicel ASCII)"): lines end in CR; OK = CR, error = BEL
+//! Facts (docs/devices/allegro.md, "slcan (Lawicel ASCII)"): lines end in CR; OK = CR, error = BEL
 //! (0x07); CAN232/CANUSB answer `t` with `z\r` and `T` with `Z\r`, CANable answers every line
 //! with a bare CR or BEL and accepts either hex case; the Linux slcan driver writes upper-case
 //! hex, ends a line at CR or BEL, and adds `e`/`s` error and state lines. So the decoder skips

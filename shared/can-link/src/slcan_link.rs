@@ -1,6 +1,6 @@
 //! [`SlcanLink`]: an slcan adapter (CANable, CANtact, USBtin, CAN232/CANUSB) on a serial port.
 //!
-//! Opening follows the Linux slcan driver (notes/allegro.md): an empty line to end whatever
+//! Opening follows the Linux slcan driver (docs/devices/allegro.md): an empty line to end whatever
 //! the adapter half-received, `C` (close; a refusal is fine, it may be closed already), `Sn`
 //! (bit rate), `F` (status; adapters without it just lose bus-state reports), `O` (open). Each
 //! setup command waits for its answer; a BEL is an [`LinkError::Adapter`] naming the command.

@@ -1,6 +1,6 @@
 //! [`SocketCanLink`]: a Linux SocketCAN interface (`can0`) through the `socketcan` crate.
 //!
-//! A raw socket (notes/allegro.md, "Adapters": W2, W5, fairo): data and remote frames are
+//! A raw socket (docs/devices/allegro.md, "Adapters": W2, W5, fairo): data and remote frames are
 //! passed on, error frames are not; they only update the bus state (controller warning and
 //! passive reports, bus-off, restarted) and the error counters. The bit rate is set outside
 //! (`ip link set can0 type can bitrate 1000000`, then `ip link set can0 up`). Receiving blocks

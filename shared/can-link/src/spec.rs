@@ -8,7 +8,7 @@ use crate::LinkError;
 
 /// Serial line speed of an slcan adapter when the spec gives none. USB-CDC adapters
 /// (CANable, CANtact) ignore it; a real UART needs 500000 or more for the Allegro's traffic
-/// (notes/allegro.md, "Bus timing").
+/// (docs/devices/allegro.md, "Bus timing").
 pub const DEFAULT_SERIAL_BAUD: u32 = 115_200;
 
 /// Where the CAN bus is: `slcan:PATH[@SERIAL_BAUD]`, `socketcan:IFACE`, `local:SOCKET_PATH`.

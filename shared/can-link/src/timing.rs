@@ -1,11 +1,11 @@
 //! Frame-level bus timing: how many bits a frame occupies on the wire and how long that takes.
 //!
-//! First principles (notes/allegro.md, "Bus timing at 1 Mbit/s"): a standard data frame with n
-//! bytes is 44 + 8n bits plus 3 bits of intermission = 47 + 8n; bit stuffing covers the 34 + 8n
+//! First principles (docs/devices/allegro.md, "Bus timing at 1 Mbit/s"): a standard data frame with
+//! n bytes is 44 + 8n bits plus 3 bits of intermission = 47 + 8n; bit stuffing covers the 34 + 8n
 //! bits from SOF to the end of the CRC and adds at most floor((33 + 8n) / 4) bits. An extended
 //! frame has 20 more bits (SRR, IDE, 18 id bits), all inside the stuffed part. A remote frame
-//! carries no data bytes whatever its DLC. [`frame_bits_exact`] builds the actual bit stream
-//! (with the CRC-15) and counts the stuff bits the frame really needs.
+//! carries no data bytes whatever its DLC. [`frame_bits_exact`] builds the actual bit stream (with
+//! the CRC-15) and counts the stuff bits the frame really needs.
 
 use std::time::Duration;
 
@@ -197,7 +197,7 @@ mod tests {
 
     #[test]
     fn notes_numbers() {
-        // notes/allegro.md: 8 bytes 111..135 bits; DLC 0 or RTR 47..55.
+        // docs/devices/allegro.md: 8 bytes 111..135 bits; DLC 0 or RTR 47..55.
         assert_eq!(frame_bits(&std8()), (111, 135));
         let empty = CanFrame::standard(0x04A, &[]).expect("valid");
         assert_eq!(frame_bits(&empty), (47, 55));

@@ -125,8 +125,8 @@ pub struct EstimateConfig {
     /// Effort counts as contact only while the joint moves slower than this (rad/s): a joint
     /// that pushes and does not move is stopped by something, while the effort of a joint in
     /// motion is what moving it takes (Drake's Allegro example calls a joint in contact below
-    /// 0.07 rad/s, notes/allegro.md). 0 (the default) counts effort at any speed; a joint whose
-    /// speed is unknown counts too.
+    /// 0.07 rad/s, docs/devices/allegro.md). 0 (the default) counts effort at any speed; a
+    /// joint whose speed is unknown counts too.
     pub effort_stall_speed_rad_s: f32,
 }
 
