@@ -4,21 +4,21 @@
 //! runs in this test process so the test can inject faults and look at the hand.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use common::{serve, Sim};
 use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::hand::{Hand, Object};
 use sim_shadow::palm::{Palm, CUT_OUT_C};
-use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 use teleop_shadow::joints::JOINTS;
 use teleop_shadow_protocol::mapping::Mapping;
-
-type Sim = Arc<Mutex<ShadowBus>>;
 
 fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, ShadowBus> {
     sim.lock().unwrap_or_else(|e| e.into_inner())
@@ -49,20 +49,7 @@ impl Rig {
         let ipc = IpcSettings::isolated(&dir.path().join("iox"));
         let socket = dir.path().join("shadow.sock");
         let hand = Hand::new(Mapping::EV3, Some(Object::ball()));
-        let sim: Sim = Arc::new(Mutex::new(ShadowBus::new(
-            Palm::with_hand(hand),
-            1178,
-            Duration::from_millis(1),
-        )));
-        let stop = Arc::new(AtomicBool::new(false));
-        let server = {
-            let (sim, stop) = (sim.clone(), stop.clone());
-            let listener = StreamServer::bind(&socket).unwrap();
-            std::thread::spawn(move || {
-                let stopping = || stop.load(Ordering::SeqCst);
-                serve_socket(&listener, &*sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
-            })
-        };
+        let (sim, stop, server) = serve(&socket, Palm::with_hand(hand));
         let config = dir.path().join("shadow.toml");
         std::fs::write(
             &config,

@@ -5,14 +5,15 @@
 //! the board runs the new image.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use common::{serve, Sim};
 use sim_shadow::bootloader::{generated_application, Mode};
-use sim_shadow::ethercat::ShadowBus;
 use sim_shadow::palm::Palm;
-use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_shadow::service::Service;
 use teleop_shadow::ShadowConfig;
 use teleop_shadow_protocol::can::{BootMessage, APP_START};
@@ -20,30 +21,10 @@ use teleop_shadow_protocol::hex;
 use teleop_shadow_protocol::layout::CanBridge;
 
 /// The emulated hand served on a socket in `dir`, and the service brought up on it.
-fn hand(
-    dir: &std::path::Path,
-) -> (
-    Arc<Mutex<ShadowBus>>,
-    Service,
-    Arc<AtomicBool>,
-    std::thread::JoinHandle<()>,
-) {
+fn hand(dir: &std::path::Path) -> (Sim, Service, Arc<AtomicBool>, std::thread::JoinHandle<()>) {
     teleop_runtime::init_logging();
     let socket = dir.join("shadow.sock");
-    let sim = Arc::new(Mutex::new(ShadowBus::new(
-        Palm::new(),
-        1178,
-        Duration::from_millis(1),
-    )));
-    let stop = Arc::new(AtomicBool::new(false));
-    let server = {
-        let (sim, stop) = (sim.clone(), stop.clone());
-        let listener = StreamServer::bind(&socket).unwrap();
-        std::thread::spawn(move || {
-            let stopping = || stop.load(Ordering::SeqCst);
-            serve_socket(&listener, &*sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
-        })
-    };
+    let (sim, stop, server) = serve(&socket, Palm::new());
     let config = ShadowConfig {
         transport: format!("sim:{}", socket.display()),
         ..ShadowConfig::default()
