@@ -38,8 +38,8 @@ pub struct Target {
 pub enum AllegroCommand {
     /// Protocol generation, versions, serial number, temperatures, joint positions.
     Info,
-    /// Drive the hand to the home pose (notes: index and middle 0 -10 45 45, ring 5 -5 50 45,
-    /// thumb 60 25 15 45 degrees) with the PD loop, then release it.
+    /// Drive the hand to the home pose (docs/devices/allegro.md: index and middle 0 -10 45 45,
+    /// ring 5 -5 50 45, thumb 60 25 15 45 degrees) with the PD loop, then release it.
     Home {
         /// Seconds to hold the pose before releasing.
         #[arg(long, default_value = "3", value_parser = crate::parse_seconds, allow_hyphen_values = true)]
