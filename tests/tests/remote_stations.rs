@@ -244,26 +244,15 @@ fn two_stations_across_a_veth_pair() {
     let robot_latch = latch_path(&robot.sandbox.ipc, None);
     let revo2_name = fixed_text("revo2");
     for engage in [true, false] {
-        let args: &[&str] = if engage {
-            &["estop"]
-        } else {
-            &["estop", "--release"]
-        };
-        let out = operator.sandbox.run_teleop(args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
         let what = if engage {
             "the robot's hand node holds the operator's e-stop"
         } else {
             "the e-stop released at the robot by the restarted bridge"
         };
-        until(both, Duration::from_secs(5), what, || {
+        operator_estop(both, engage, what, || {
             let mut acked = false;
             acks.drain(|a| acked |= a.node_name == revo2_name && a.engaged == u8::from(engage));
-            acked && robot_latch.exists() == engage
+            acked
         });
         if engage {
             forces_zero_because(both, &forces, force_flags::ESTOP, "under the e-stop");
@@ -447,7 +436,7 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
 
     // The real operator's e-stop engages the robot's latch.
     let robot_latch = latch_path(&robot.sandbox.ipc, None);
-    operator_estop(both, true);
+    operator_estop(both, true, "the robot's latch engaged", || true);
 
     // The robot bridge's error count so far.
     let mut before = None;
@@ -518,7 +507,12 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
     );
 
     // The real operator still works: its release crosses and its commands go on crossing.
-    operator_estop(both, false);
+    operator_estop(
+        both,
+        false,
+        "the robot's latch released by the operator",
+        || true,
+    );
     let mut crossed = 0;
     until(
         both,
@@ -534,9 +528,14 @@ fn a_certificate_of_another_station_cannot_act_as_the_operator() {
     assert!(robot.session.stop().success(), "{}", robot.logs());
 }
 
-/// `teleop estop` (or `--release`) at the operator of `stations` (operator, robot), and the
-/// robot's latch following it.
-fn operator_estop(stations: (&Station, &Station), engage: bool) {
+/// `teleop estop` (or `--release`) at the operator of `stations` (operator, robot); waits for
+/// `what`: the robot's latch following it and `also`.
+fn operator_estop(
+    stations: (&Station, &Station),
+    engage: bool,
+    what: &str,
+    mut also: impl FnMut() -> bool,
+) {
     let (operator, robot) = stations;
     let args: &[&str] = if engage {
         &["estop"]
@@ -550,16 +549,9 @@ fn operator_estop(stations: (&Station, &Station), engage: bool) {
         String::from_utf8_lossy(&out.stderr)
     );
     let robot_latch = latch_path(&robot.sandbox.ipc, None);
-    until(
-        stations,
-        Duration::from_secs(5),
-        if engage {
-            "the robot's latch engaged"
-        } else {
-            "the robot's latch released by the operator"
-        },
-        || robot_latch.exists() == engage,
-    );
+    until(stations, Duration::from_secs(5), what, || {
+        robot_latch.exists() == engage && also()
+    });
 }
 
 /// The Allegro's and the Shadow Hand's stations close their loops across the bridges too: the
