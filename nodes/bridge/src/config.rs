@@ -556,16 +556,19 @@ max_age_ms = 100
         assert!(e.contains("neither is set"), "{e}");
     }
 
-    #[test]
-    fn insecure_is_plain_tcp_only() {
-        let text = GOOD
-            .replace("quic/192", "tcp/192")
+    /// [`GOOD`] over plain TCP without `[tls]`, `insecure = true`.
+    fn insecure_text() -> String {
+        GOOD.replace("quic/192", "tcp/192")
             .split("[tls]")
             .next()
             .unwrap()
             .to_string()
-            + "insecure = true\n";
-        let config = BridgeConfig::parse(&text, "bridge.toml").unwrap();
+            + "insecure = true\n"
+    }
+
+    #[test]
+    fn insecure_is_plain_tcp_only() {
+        let config = BridgeConfig::parse(&insecure_text(), "bridge.toml").unwrap();
         assert!(config.insecure && config.tls.is_none());
         assert!(config.missing_files().is_empty());
         config.zenoh().unwrap();
@@ -655,14 +658,7 @@ max_age_ms = 100
             "{rules}"
         );
         // Plain TCP has no certificate: no access control to bind it to.
-        let text = GOOD
-            .replace("quic/192", "tcp/192")
-            .split("[tls]")
-            .next()
-            .unwrap()
-            .to_string()
-            + "insecure = true\n";
-        let insecure = BridgeConfig::parse(&text, "bridge.toml")
+        let insecure = BridgeConfig::parse(&insecure_text(), "bridge.toml")
             .unwrap()
             .zenoh()
             .unwrap();
