@@ -1,7 +1,7 @@
 //! Benchmark: the Allegro node's loop on the hand's 333 Hz stream as the CAN bus sees it, the
 //! bus load, the glove sample -> torque frame latency and the hand sample -> glove force latency.
 //!
-//! Method: the simulated Allegro (`sim_allegro::Sim`, v4, the ball) runs in this process behind
+//! Method: the simulated Allegro (`teleop_sim_allegro::Sim`, v4, the ball) runs in this process behind
 //! its simulated slcan adapter on a pseudo-terminal, as `teleop-sim-allegro` does; the real
 //! `teleop-allegro` process (release, `config/allegro.toml`: slcan, 3 ms period) drives it
 //! through `SlcanLink`, `teleop-retarget` (`config/allegro/retarget.toml` with the One Euro filter
@@ -32,16 +32,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use sim_allegro::adapter::AckStyle;
-use sim_allegro::firmware::{Firmware, FirmwareOptions};
-use sim_allegro::hand::{Ball, Hand, HandParams};
-use sim_allegro::{Sim, SimOptions};
 use teleop_allegro_protocol::{v4, Generation};
 use teleop_can_link::{timing, CanLink};
 use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
 use teleop_e2e::Sandbox;
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_sim_allegro::adapter::AckStyle;
+use teleop_sim_allegro::firmware::{Firmware, FirmwareOptions};
+use teleop_sim_allegro::hand::{Ball, Hand, HandParams};
+use teleop_sim_allegro::{Sim, SimOptions};
 
 const WARM_UP: Duration = Duration::from_secs(2);
 const SECONDS: u64 = 20;

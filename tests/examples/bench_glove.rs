@@ -16,13 +16,13 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use sim_glove::hand::{Hand, HandModel, Script};
-use sim_glove::{Faults, SimGlove, SimOptions};
 use teleop_e2e::bench::percentiles;
 use teleop_e2e::{bin, Sandbox};
 use teleop_glove_protocol::BaudRate;
 use teleop_msgs::GloveState;
 use teleop_runtime::{NodeRuntime, Subscriber};
+use teleop_sim_glove::hand::{Hand, HandModel, Script};
+use teleop_sim_glove::{Faults, SimGlove, SimOptions};
 
 const SECONDS: f64 = 5.0;
 

@@ -42,10 +42,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use sim_glove::hand::{Hand as GloveHand, HandModel, Script};
-use sim_glove::{Faults, SimGlove, SimOptions};
-use sim_revo2::hand::{Drive, VirtualObject};
-use sim_revo2::{revo2_subdevice, Revo2};
 use teleop_e2e::Sandbox;
 use teleop_ecat_link::serve_socket;
 use teleop_ecat_link::StreamServer;
@@ -56,6 +52,10 @@ use teleop_runtime::realtime::{
     enter_realtime_with, leave_realtime, Outcome, Realtime, SchedPolicy,
 };
 use teleop_runtime::{now_ns, NodeRuntime, Subscriber};
+use teleop_sim_glove::hand::{Hand as GloveHand, HandModel, Script};
+use teleop_sim_glove::{Faults, SimGlove, SimOptions};
+use teleop_sim_revo2::hand::{Drive, VirtualObject};
+use teleop_sim_revo2::{revo2_subdevice, Revo2};
 
 const SECONDS: u64 = 20;
 
@@ -129,8 +129,8 @@ struct Summary {
 const NODE_PRIORITIES: [(&str, u8); 4] = [
     ("config/revo2.toml", 70),
     ("config/glove.toml", 60),
-    ("config/retarget.toml", 50),
-    ("config/feedback.toml", 50),
+    ("config/revo2/retarget.toml", 50),
+    ("config/revo2/feedback.toml", 50),
 ];
 /// The simulators' priority (they stand in for devices).
 const SIM_PRIORITY: u8 = 80;

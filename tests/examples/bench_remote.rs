@@ -2,7 +2,7 @@
 //! zenoh (QUIC, mutual TLS), on a veth pair between two network namespaces, beside the local
 //! iceoryx2 hop, with 0, 5 and 20 ms of one-way delay injected in each direction.
 //!
-//! Method: `teleop_e2e::stations` starts `launch/operator.toml` and `launch/robot.toml` (release
+//! Method: `teleop_e2e::stations` starts `launch/revo2-operator.toml` and `launch/revo2-robot.toml` (release
 //! builds, the simulated Revo2 closing on the ball, both bridges with `clock = "shared"`: the
 //! namespaces share CLOCK_MONOTONIC, so one-way times are measured directly). This process
 //! subscribes at both stations, polling every 200 us (the same for the local and the remote

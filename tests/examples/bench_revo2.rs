@@ -2,8 +2,8 @@
 //! latency from a `hand/command` publication to the first cycle that carries it, idle and under
 //! CPU stress.
 //!
-//! Method: the emulated Revo2 (`sim_revo2`) is served on a Unix socket by a thread of this
-//! process, exactly as `nodes/revo2/tests/against_sim.rs` does; the real `teleop-revo2` process
+//! Method: the emulated Revo2 (`teleop_sim_revo2`) is served on a Unix socket by a thread of this
+//! process, exactly as `nodes/devices/revo2/node/tests/against_sim.rs` does; the real `teleop-revo2` process
 //! (release build, default config: 1 kHz, tactile in the process data) brings it to OP through
 //! ethercrab. The serve thread stamps every frame with CLOCK_MONOTONIC (`now_ns`) as soon as it
 //! has been read from the socket, runs it through the emulator and keeps the process-data frames
@@ -30,14 +30,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use sim_revo2::hand::Drive;
-use sim_revo2::{revo2_subdevice, Revo2};
 use teleop_e2e::bench::{loadavg, percentiles};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
 use teleop_ecat_sim::SubDevice;
 use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_sim_revo2::hand::Drive;
+use teleop_sim_revo2::{revo2_subdevice, Revo2};
 
 const SECONDS: u64 = 20;
 const WARM_UP: Duration = Duration::from_secs(1);

@@ -2,7 +2,7 @@
 //! the glove sample -> motor demand latency, the PST sample -> glove force latency, and the time
 //! to flash one motor board through the palm's CAN bridge.
 //!
-//! Method: the emulated hand (`sim_shadow::ethercat::ShadowBus`: bridge and palm, E v3 mapping,
+//! Method: the emulated hand (`teleop_sim_shadow::ethercat::ShadowBus`: bridge and palm, E v3 mapping,
 //! the ball) is served in this process on a local socket as `teleop-sim-shadow` serves it,
 //! recording every frame's arrival (CLOCK_MONOTONIC) and what the palm holds after it. The real
 //! `teleop-shadow` (release, `config/shadow.toml`), `teleop-retarget`
@@ -34,9 +34,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use sim_shadow::ethercat::ShadowBus;
-use sim_shadow::hand::{Hand, Object};
-use sim_shadow::palm::Palm;
 use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{serve_socket, StreamServer};
@@ -45,6 +42,9 @@ use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 use teleop_shadow_protocol::can::APP_START;
 use teleop_shadow_protocol::hex;
 use teleop_shadow_protocol::mapping::Mapping;
+use teleop_sim_shadow::ethercat::ShadowBus;
+use teleop_sim_shadow::hand::{Hand, Object};
+use teleop_sim_shadow::palm::Palm;
 
 const WARM_UP: Duration = Duration::from_secs(2);
 const SECONDS: u64 = 20;
@@ -158,7 +158,7 @@ fn main() {
     );
 
     // Flashing motor 13 through the same emulator.
-    let image = sim_shadow::bootloader::generated_application(IMAGE_BYTES, 0x9E37_79B9);
+    let image = teleop_sim_shadow::bootloader::generated_application(IMAGE_BYTES, 0x9E37_79B9);
     let file = sandbox.write("motor.hex", &hex::write(APP_START, &image));
     let rows = hex::parse(&std::fs::read_to_string(&file).unwrap())
         .unwrap()

@@ -92,8 +92,8 @@ impl Sandbox {
         for name in [
             "glove.toml",
             "revo2.toml",
-            "retarget.toml",
-            "feedback.toml",
+            "revo2/retarget.toml",
+            "revo2/feedback.toml",
             "hands/revo2.toml",
             "hands/allegro.toml",
             "hands/shadow.toml",

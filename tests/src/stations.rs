@@ -1,5 +1,5 @@
 //! Two stations as two machines for the tests and benchmarks of the link between them: the
-//! operator station (`launch/operator.toml`) and the robot station (`launch/robot.toml`), each in
+//! operator station (`launch/revo2-operator.toml`) and the robot station (`launch/revo2-robot.toml`), each in
 //! its own network namespace and sandbox (own iceoryx2 root and prefix), joined by a veth pair
 //! with addresses from 192.0.2.0/24 (RFC 5737) and by their bridges, with certificates from one
 //! session CA made by `teleop certs` and a fault-injection control socket on each bridge.
@@ -55,7 +55,7 @@ impl Station {
     }
 }
 
-/// Both namespaces and the Revo2's stations (`launch/operator.toml`, `launch/robot.toml`),
+/// Both namespaces and the Revo2's stations (`launch/revo2-operator.toml`, `launch/revo2-robot.toml`),
 /// started (robot first); `patch` changes a bridge configuration's text (`true` for the
 /// operator's).
 pub fn start(

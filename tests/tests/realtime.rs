@@ -53,16 +53,16 @@ fn launched_nodes_run_their_time_critical_threads_at_the_configured_priority() {
             "args = [\"--config\", \"config/glove.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 31\ncpu_affinity = [0]\n",
         )
         .replace(
-            "args = [\"--config\", \"config/retarget.toml\"]\n",
-            "args = [\"--config\", \"config/retarget.toml\"]\nnice = 5\n",
+            "args = [\"--config\", \"config/revo2/retarget.toml\"]\n",
+            "args = [\"--config\", \"config/revo2/retarget.toml\"]\nnice = 5\n",
         )
         .replace(
             "args = [\"--config\", \"config/revo2.toml\"]\n",
             "args = [\"--config\", \"config/revo2.toml\"]\nsched_policy = \"rr\"\nsched_priority = 42\nlock_memory = true\n",
         )
         .replace(
-            "args = [\"--config\", \"config/feedback.toml\"]\n",
-            "args = [\"--config\", \"config/feedback.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 20\n",
+            "args = [\"--config\", \"config/revo2/feedback.toml\"]\n",
+            "args = [\"--config\", \"config/revo2/feedback.toml\"]\nsched_policy = \"fifo\"\nsched_priority = 20\n",
         )
     });
     let mut session = sandbox.launch(&launch);

@@ -193,8 +193,8 @@ fn reprocess_is_deterministic_and_detects_a_changed_gain() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let sample = root.join("recordings/grasp.sample.mcap");
     assert!(sample.is_file(), "{} is missing", sample.display());
-    let retarget = root.join("config/retarget.toml");
-    let feedback = root.join("config/feedback.toml");
+    let retarget = root.join("config/revo2/retarget.toml");
+    let feedback = root.join("config/revo2/feedback.toml");
     let run = |out: &str, feedback: &std::path::Path, retarget: &std::path::Path| {
         let out = sandbox.dir.path().join(out);
         let r = sandbox.run_teleop(&[

@@ -1,5 +1,5 @@
-//! Two stations as two machines: the operator station (`launch/operator.toml`) and the robot
-//! station (`launch/robot.toml`) in two network namespaces joined by a veth pair (192.0.2.0/24,
+//! Two stations as two machines: the operator station (`launch/revo2-operator.toml`) and the robot
+//! station (`launch/revo2-robot.toml`) in two network namespaces joined by a veth pair (192.0.2.0/24,
 //! RFC 5737, on the veth only), each with its own iceoryx2 root and prefix, joined only by their
 //! `teleop-bridge`s over zenoh with mutual TLS. The simulated Revo2 session closes its loop
 //! across them; then the faults: injected delay and loss, the link cut and restored, the

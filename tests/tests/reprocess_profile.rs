@@ -82,7 +82,7 @@ fn the_profile_embedded_in_a_recording_drives_reprocessing() {
         sandbox.dir.path().join("refused.mcap").to_str().unwrap(),
         "--retarget-config",
         Sandbox::repo()
-            .join("config/retarget.toml")
+            .join("config/revo2/retarget.toml")
             .to_str()
             .unwrap(),
     ]);

@@ -446,8 +446,8 @@ fn a_grasp_survives_a_lost_glove_and_a_lost_operator() {
             &format!("\"--script\", \"{}\"", squeeze.display()),
         )
         .replace(
-            "args = [\"--config\", \"config/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 500",
-            "args = [\"--config\", \"config/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 2000",
+            "args = [\"--config\", \"config/revo2/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 500",
+            "args = [\"--config\", \"config/revo2/retarget.toml\"]\nrestart = \"on-failure\"\nmax_restarts = 5\nrestart_delay_ms = 2000",
         )
     });
     assert!(std::fs::read_to_string(&launch)

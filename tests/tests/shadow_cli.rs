@@ -75,7 +75,7 @@ fn shadow(sandbox: &Sandbox, transport: &str, args: &[&str]) -> (bool, String) {
 
 /// A pseudo-random application whose first word (the emulator's revision word) is `revision`.
 fn application(len: usize, revision: u16) -> Vec<u8> {
-    let mut app = sim_shadow::bootloader::generated_application(len, 0x2545_F491);
+    let mut app = teleop_sim_shadow::bootloader::generated_application(len, 0x2545_F491);
     app[..2].copy_from_slice(&revision.to_le_bytes());
     app
 }

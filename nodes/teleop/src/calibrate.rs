@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use teleop_msgs::GloveState;
-use teleop_retarget::Calibration;
+use teleop_retargeting::Calibration;
 use teleop_runtime::{IpcSettings, NodeRuntime, Subscriber};
 
 const POSES: [(&str, &str); 4] = [

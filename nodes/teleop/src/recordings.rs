@@ -6,8 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use node_feedback::{Event, FeedbackEngine};
-use node_retarget::RetargetEngine;
+use teleop_feedback::{Event, FeedbackEngine};
 use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_msgs::{
     source_id, visit_topic, DeviceInfo, EStop, GloveDiagnostics, GloveForceCommand, GloveState,
@@ -18,6 +17,7 @@ use teleop_recording::{
     info as recording_info, read_messages, repair_with, Filter, OwnedMessage, RecordedMessage,
     Recorder, RepairOptions, WriterOptions,
 };
+use teleop_retarget::RetargetEngine;
 use teleop_runtime::{now_ns, qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
 
 pub fn record_cmd(
@@ -546,13 +546,13 @@ pub fn reprocess_cmd(
         );
     }
     let profile = recording_profile(input, opts.profile.as_deref(), &messages)?;
-    let loaded = node_retarget::load(
+    let loaded = teleop_retarget::load(
         opts.retarget_config.as_deref(),
         opts.calibration.as_deref(),
         Some(profile.clone()),
     )?;
     let rcfg = loaded.config;
-    let (fcfg, _) = node_feedback::load(opts.feedback_config.as_deref(), Some(profile.clone()))?;
+    let (fcfg, _) = teleop_feedback::load(opts.feedback_config.as_deref(), Some(profile.clone()))?;
     let mut retarget = RetargetEngine::new(&rcfg, loaded.calibration, &profile)?;
     let mut feedback = FeedbackEngine::new(&fcfg, &profile)?;
     let glove_timeout = rcfg.glove_timeout_ms.max(1) * 1_000_000;

@@ -1,0 +1,48 @@
+//! `teleop-bridge`: one station's end of the link between stations (see the library's docs).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use teleop_bridge::config::BridgeConfig;
+use teleop_bridge::station::{run, Options};
+use teleop_runtime::init_logging;
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "Forwards topics between this station and its peer over zenoh"
+)]
+struct Args {
+    /// The bridge configuration (TOML).
+    #[arg(long)]
+    config: PathBuf,
+    /// iceoryx2 node name.
+    #[arg(long, default_value = "bridge")]
+    name: String,
+    /// A control socket for fault injection in tests and benchmarks (`delay MS`,
+    /// `loss PERCENT`, `clear`, `stats`).
+    #[arg(long)]
+    control: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let args = Args::parse();
+    let result = BridgeConfig::load(&args.config)
+        .map_err(anyhow::Error::from)
+        .and_then(|config| {
+            run(Options {
+                config,
+                name: args.name,
+                control: args.control,
+            })
+        });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("stopping: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

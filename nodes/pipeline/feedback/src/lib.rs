@@ -1,0 +1,458 @@
+//! The force-feedback process's logic without its plumbing: its configuration file and the
+//! [`FeedbackEngine`] that turns tactile, hand-state, hand-command and e-stop samples (each with
+//! its receive time) into glove force commands. The `teleop-feedback` executable feeds it from the
+//! live topics; `teleop reprocess` feeds it from a recording, so both run the same code.
+
+use std::path::{Path, PathBuf};
+
+use teleop_force_feedback::{
+    FeedbackConfig, ForceFeedback, HandInput, Inputs, PstConfig, Tactile, TactileInput,
+};
+use teleop_hand_profile::HandProfile;
+use teleop_msgs::{
+    fingertip_sensor, force_flags, units, EStop, GloveForceCommand, HandCommand, HandState,
+    Tactile as TactileMsg,
+};
+use teleop_runtime::sample_time;
+
+/// The node's configuration file.
+#[derive(Debug, Clone, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NodeConfig {
+    /// The hand profile (`config/hands/<hand>.toml`), relative to the configuration file.
+    pub hand_profile: Option<PathBuf>,
+    /// Tactile data older than this is stale (forces ramp to zero).
+    pub tactile_timeout_ms: u64,
+    /// Hand state older than this is stale.
+    pub hand_timeout_ms: u64,
+    /// Longest time between two published force commands.
+    pub tick_ms: u64,
+    /// Health report period.
+    pub health_period_ms: u64,
+    /// The force-feedback law.
+    pub feedback: FeedbackConfig,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        Self {
+            hand_profile: None,
+            tactile_timeout_ms: 100,
+            hand_timeout_ms: 100,
+            tick_ms: 10,
+            health_period_ms: 500,
+            feedback: FeedbackConfig::default(),
+        }
+    }
+}
+
+impl NodeConfig {
+    /// Checks the node's timeouts and periods; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        use teleop_runtime::check_ms;
+        check_ms("tactile_timeout_ms", self.tactile_timeout_ms)?;
+        check_ms("hand_timeout_ms", self.hand_timeout_ms)?;
+        check_ms("tick_ms", self.tick_ms)?;
+        check_ms("health_period_ms", self.health_period_ms)
+    }
+}
+
+/// Loads and checks the configuration (defaults without a file) and the hand profile (`profile`
+/// when given, else the file the configuration names); errors name the file.
+pub fn load(
+    path: Option<&Path>,
+    profile: Option<HandProfile>,
+) -> anyhow::Result<(NodeConfig, HandProfile)> {
+    let (config, origin, base) = match path {
+        Some(path) => {
+            let config: NodeConfig = teleop_runtime::load_toml(path)?;
+            config
+                .feedback
+                .validate()
+                .map_err(|e| e.with_origin(&path.display().to_string()))?;
+            config
+                .validate()
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            let base = path.parent().map(PathBuf::from).unwrap_or_default();
+            (config, path.display().to_string(), base)
+        }
+        None => (
+            NodeConfig::default(),
+            "defaults".to_string(),
+            PathBuf::new(),
+        ),
+    };
+    let profile = match (profile, &config.hand_profile) {
+        (Some(p), _) => p,
+        (None, Some(file)) => HandProfile::load(&base.join(file))?,
+        (None, None) => anyhow::bail!(
+            "{origin}: no hand profile: set `hand_profile` (e.g. \"hands/revo2.toml\") or pass --profile"
+        ),
+    };
+    Ok((config, profile))
+}
+
+/// One input of the engine.
+// The variants are the samples themselves, handled by value on the stack; boxing the large
+// ones would allocate per sample.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// A tactile sample.
+    Tactile(TactileMsg),
+    /// A hand state sample.
+    State(HandState),
+    /// A hand command sample (remembered for the position-error estimate).
+    Command(HandCommand),
+    /// An e-stop sample.
+    EStop(EStop),
+    /// The periodic tick (stale inputs ramp down even when nothing arrives).
+    Tick,
+}
+
+/// What one event did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Output {
+    /// The force command to publish, if the event stepped the law.
+    pub command: Option<GloveForceCommand>,
+    /// Inputs just went stale (log it, count a timeout).
+    pub became_stale: bool,
+    /// Inputs are fresh again.
+    pub became_fresh: bool,
+    /// The e-stop was just engaged (`Some(true)`) or released (`Some(false)`).
+    pub estop_changed: Option<bool>,
+    /// Fingers saturated at `max_force`.
+    pub clamped: u8,
+}
+
+/// Force feedback with its input state.
+pub struct FeedbackEngine {
+    config: NodeConfig,
+    profile: HandProfile,
+    law: ForceFeedback,
+    /// The newest tactile sample and when it was made.
+    tactile: Option<(TactileMsg, u64)>,
+    /// The newest hand state and when it was made.
+    state: Option<(HandState, u64)>,
+    command: Option<HandCommand>,
+    estop: bool,
+    stale: bool,
+}
+
+impl FeedbackEngine {
+    /// An engine for the hand `profile` with this configuration.
+    pub fn new(config: &NodeConfig, profile: &HandProfile) -> anyhow::Result<Self> {
+        Ok(Self {
+            config: config.clone(),
+            profile: profile.clone(),
+            law: ForceFeedback::new(config.feedback.clone(), profile)?,
+            tactile: None,
+            state: None,
+            command: None,
+            estop: false,
+            stale: false,
+        })
+    }
+
+    /// True while the e-stop is engaged.
+    pub fn estop(&self) -> bool {
+        self.estop
+    }
+
+    /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
+    /// Tactile and hand-state samples are as old as their stamps say (never newer than their
+    /// receipt, see [`sample_time`]): a sample from a topic's history, made before a restart, is
+    /// stale when it arrives.
+    /// Steps the law on tactile samples, on hand state when the hand has no tactile data, on
+    /// e-stop changes and on ticks.
+    pub fn handle(&mut self, event: &Event, now_ns: u64) -> Output {
+        let mut out = Output::default();
+        let step = match *event {
+            Event::Tactile(t) => {
+                self.tactile = Some((t, sample_time(t.header.stamp_ns, now_ns)));
+                true
+            }
+            Event::State(s) => {
+                self.state = Some((s, sample_time(s.header.stamp_ns, now_ns)));
+                self.tactile.is_none()
+            }
+            Event::Command(c) => {
+                self.command = Some(c);
+                false
+            }
+            Event::EStop(e) => {
+                let engaged = e.engaged != 0;
+                if engaged != self.estop {
+                    out.estop_changed = Some(engaged);
+                    self.estop = engaged;
+                }
+                true
+            }
+            Event::Tick => true,
+        };
+        if step {
+            let (inputs, origin) = self.inputs(now_ns);
+            let law = self.law.step(&inputs);
+            out.became_stale = law.stale && !self.stale;
+            out.became_fresh = !law.stale && self.stale;
+            self.stale = law.stale;
+            out.clamped = law.clamped;
+            let mut msg = GloveForceCommand {
+                force: law.force,
+                ..Default::default()
+            };
+            msg.header.origin_ns = origin;
+            for (slot, source) in msg.source.iter_mut().zip(law.source) {
+                *slot = source as u8;
+            }
+            if law.stale {
+                msg.flags |= force_flags::STALE;
+            }
+            if self.estop {
+                msg.flags |= force_flags::ESTOP;
+            }
+            if law.clamped > 0 {
+                msg.flags |= force_flags::CLAMPED;
+            }
+            out.command = Some(msg);
+        }
+        out
+    }
+
+    /// The law's inputs at `now_ns`, and the origin stamp of the newest device sample used.
+    fn inputs(&self, now_ns: u64) -> (Inputs, u64) {
+        let fresh = |at: u64, timeout_ms: u64| now_ns.saturating_sub(at) <= timeout_ms * 1_000_000;
+        let mut origin = 0;
+        let tactile = match &self.tactile {
+            None => Tactile::Absent,
+            Some((_, at)) if !fresh(*at, self.config.tactile_timeout_ms) => Tactile::Stale,
+            Some((msg, _)) => {
+                origin = msg.header.origin_ns;
+                Tactile::Fresh(tactile_from_msg(msg, &self.law.config().pst))
+            }
+        };
+        let hand = match &self.state {
+            Some((msg, at)) if fresh(*at, self.config.hand_timeout_ms) && msg.link_up != 0 => {
+                if origin == 0 {
+                    origin = msg.header.origin_ns;
+                }
+                Some(hand_from_msgs(msg, self.command.as_ref(), &self.profile))
+            }
+            _ => None,
+        };
+        (
+            Inputs {
+                t_ns: now_ns,
+                tactile,
+                hand,
+                estop: self.estop,
+            },
+            origin,
+        )
+    }
+}
+
+/// The law's tactile input: normal force and validity per fingertip (a PST fingertip's raw
+/// pressure converted by `pst`).
+pub fn tactile_from_msg(msg: &TactileMsg, pst: &PstConfig) -> TactileInput {
+    let mut input = TactileInput::default();
+    for (i, tip) in msg
+        .active_fingertips()
+        .iter()
+        .enumerate()
+        .take(input.valid.len())
+    {
+        input.normal_n[i] = if tip.sensor_kind == fingertip_sensor::PST_PRESSURE {
+            pst.force_n(tip.pressure)
+        } else {
+            tip.normal_n
+        };
+        input.valid[i] = tip.is_valid();
+    }
+    input
+}
+
+/// Joint state plus the commanded positions, normalised with the profile's open and closed
+/// angles when they come in radians; without a usable command the measured positions stand in
+/// (no position error). Joints the profile does not have are left out.
+pub fn hand_from_msgs(
+    state: &HandState,
+    command: Option<&HandCommand>,
+    profile: &HandProfile,
+) -> HandInput {
+    let mut input = HandInput::default();
+    let normalise = |value: f32, unit: u8, joint: usize| match unit {
+        units::NORMALISED => value,
+        _ => profile.joints[joint].normalised(value),
+    };
+    let count = profile.joints.len().min(input.measured.len());
+    for (i, joint) in state.active_joints().iter().enumerate().take(count) {
+        input.measured[i] = normalise(joint.position, state.units, i);
+        input.commanded[i] = input.measured[i];
+        input.current_ma[i] = joint.current_ma;
+        input.effort_nm[i] = joint.effort;
+        input.speed_rad_s[i] = match state.units {
+            // Travel per second: the joint's open..closed span per second.
+            units::NORMALISED => {
+                let j = &profile.joints[i];
+                joint.speed * (j.closed - j.open)
+            }
+            _ => joint.speed,
+        };
+    }
+    if let Some(cmd) = command.filter(|c| c.hand_model == state.hand_model) {
+        for (i, joint) in cmd.active_joints().iter().enumerate().take(count) {
+            input.commanded[i] = normalise(joint.target, cmd.units, i);
+        }
+    }
+    input
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use teleop_force_feedback::ContactSource;
+
+    fn revo2() -> HandProfile {
+        HandProfile::builtin("revo2").unwrap()
+    }
+    use teleop_msgs::contact_source;
+
+    #[test]
+    fn contact_source_codes_match_the_contract() {
+        assert_eq!(ContactSource::None as u8, contact_source::NONE);
+        assert_eq!(ContactSource::Tactile as u8, contact_source::TACTILE);
+        assert_eq!(
+            ContactSource::PositionError as u8,
+            contact_source::POSITION_ERROR
+        );
+        assert_eq!(ContactSource::Current as u8, contact_source::CURRENT);
+        assert_eq!(ContactSource::Ramping as u8, contact_source::RAMPING);
+        assert_eq!(ContactSource::EStop as u8, contact_source::ESTOP);
+        assert_eq!(ContactSource::Effort as u8, contact_source::EFFORT);
+    }
+
+    #[test]
+    fn tactile_validity_follows_status_bits_and_count() {
+        let mut msg = TactileMsg {
+            fingertip_count: 4,
+            ..Default::default()
+        };
+        msg.fingertips[0].normal_n = 2.0;
+        msg.fingertips[1].status = teleop_msgs::touch_status::INVALID;
+        let t = tactile_from_msg(&msg, &PstConfig::default());
+        assert_eq!(t.valid, [true, false, true, true, false]);
+        assert_eq!(t.normal_n[0], 2.0);
+    }
+
+    #[test]
+    fn pst_pressure_becomes_a_normal_force() {
+        let mut msg = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        for (tip, pressure) in msg.fingertips.iter_mut().zip([10, 310, 0, 510, 9]) {
+            tip.sensor_kind = fingertip_sensor::PST_PRESSURE;
+            tip.normal_n = f32::NAN;
+            tip.pressure = pressure;
+        }
+        let pst = PstConfig {
+            zero: 10.0,
+            counts_per_n: 100.0,
+        };
+        let t = tactile_from_msg(&msg, &pst);
+        assert_eq!(t.normal_n, [0.0, 3.0, 0.0, 5.0, 0.0]);
+        assert_eq!(t.valid, [true; 5]);
+    }
+
+    #[test]
+    fn hand_input_uses_command_targets_when_units_match() {
+        let mut state = HandState {
+            joint_count: 6,
+            units: units::NORMALISED,
+            ..Default::default()
+        };
+        state.joints[2].position = 0.4;
+        state.joints[2].current_ma = 350.0;
+        let mut cmd = HandCommand {
+            joint_count: 6,
+            units: units::NORMALISED,
+            ..Default::default()
+        };
+        cmd.joints[2].target = 0.9;
+        let h = hand_from_msgs(&state, Some(&cmd), &revo2());
+        assert_eq!(
+            (h.measured[2], h.commanded[2], h.current_ma[2]),
+            (0.4, 0.9, 350.0)
+        );
+        let h = hand_from_msgs(&state, None, &revo2());
+        assert_eq!(h.commanded[2], 0.4, "no command: no position error");
+    }
+
+    #[test]
+    fn engine_steps_on_tactile_and_ticks_and_goes_stale_by_sample_time() {
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 2.3;
+        let ms = 1_000_000;
+        assert!(e
+            .handle(&Event::Command(HandCommand::default()), 0)
+            .command
+            .is_none());
+        for i in 0..200 {
+            t.header.stamp_ns = i * ms;
+            let out = e.handle(&Event::Tactile(t), i * ms);
+            assert!(out.command.is_some());
+        }
+        let out = e.handle(&Event::Tick, 200 * ms);
+        assert!(
+            out.command.unwrap().force[3] > 400,
+            "index force {:?}",
+            out.command
+        );
+        let out = e.handle(&Event::Tick, 400 * ms);
+        assert!(out.became_stale, "200 ms without tactile");
+        let engaged = e.handle(
+            &Event::EStop(EStop {
+                engaged: 1,
+                ..Default::default()
+            }),
+            401 * ms,
+        );
+        assert_eq!(engaged.estop_changed, Some(true));
+        assert_eq!(engaged.command.unwrap().force, [0; 5]);
+    }
+
+    #[test]
+    fn samples_made_before_the_timeout_are_stale_when_they_arrive() {
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        let ms = 1_000_000;
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 2.3;
+        let mut s = HandState {
+            joint_count: 6,
+            link_up: 1,
+            ..Default::default()
+        };
+        s.joints[2].current_ma = 900.0;
+        // Made 1 s ago (a topic's history after a restart), received now: no force.
+        t.header.stamp_ns = 1000 * ms;
+        s.header.stamp_ns = 1000 * ms;
+        e.handle(&Event::State(s), 2000 * ms);
+        let out = e.handle(&Event::Tactile(t), 2000 * ms);
+        let cmd = out.command.unwrap();
+        assert_eq!(cmd.force, [0; 5]);
+        assert_ne!(cmd.flags & force_flags::STALE, 0, "{cmd:?}");
+        // The same sample made just now drives the glove.
+        t.header.stamp_ns = 2001 * ms;
+        let out = e.handle(&Event::Tactile(t), 2001 * ms);
+        assert_eq!(out.command.unwrap().flags & force_flags::STALE, 0);
+        assert!(out.became_fresh);
+    }
+}

@@ -1,0 +1,183 @@
+//! `teleop-feedback`: the force-feedback process. Subscribes to `hand/tactile`, `hand/state`,
+//! `hand/command` and `estop`, runs the [`FeedbackEngine`] on every sample and on a tick every
+//! `tick_ms` (so stale inputs ramp the force to zero even when nothing arrives), and publishes
+//! `glove/force_command`. An engaged e-stop zeroes every force at once until it is released; it
+//! is latched outside the process (`teleop_runtime::EStopInput`), so a restart keeps it.
+//!
+//! Owns only the plumbing between the topics and the engine.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use teleop_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
+use teleop_hand_profile::HandProfile;
+use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
+use teleop_runtime::{
+    init_logging, now_ns, EStopInput, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime,
+    Publisher, Wake,
+};
+
+#[derive(Parser)]
+#[command(version, about = "Tactile + hand state -> glove force command")]
+struct Args {
+    /// Node configuration (TOML); defaults are used without it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
+    #[arg(long)]
+    profile: Option<PathBuf>,
+    /// iceoryx2 node name.
+    #[arg(long, default_value = "feedback")]
+    name: String,
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let args = Args::parse();
+    match start(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("stopping: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Logs, counts and publishes what one event did.
+fn emit(
+    out: Output,
+    forces: &mut Publisher<GloveForceCommand>,
+    health: &mut Health,
+) -> anyhow::Result<()> {
+    match out.estop_changed {
+        Some(true) => tracing::warn!("e-stop engaged: all glove forces zero"),
+        Some(false) => tracing::info!("e-stop released"),
+        None => {}
+    }
+    if out.became_stale {
+        tracing::warn!("no fresh tactile/hand input: glove forces ramp to zero");
+        health.count_timeout();
+    }
+    if out.became_fresh {
+        tracing::info!("inputs fresh again");
+    }
+    health.count_clamps(u64::from(out.clamped));
+    if let Some(cmd) = out.command {
+        health.count_loop();
+        forces.publish(&cmd)?;
+        let mut detail = [0u8; 7];
+        detail[..5].copy_from_slice(&cmd.source);
+        health.set_detail(detail);
+    }
+    Ok(())
+}
+
+/// The engine's e-stop event for the latched state.
+fn estop_sample(engaged: bool) -> EStop {
+    EStop {
+        engaged: u8::from(engaged),
+        ..Default::default()
+    }
+}
+
+/// Loads everything the arguments name, then runs.
+fn start(args: &Args) -> anyhow::Result<()> {
+    let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
+    let (config, profile) = load(args.config.as_deref(), profile)?;
+    tracing::info!(hand = %profile.name, "hand profile loaded");
+    let engine = FeedbackEngine::new(&config, &profile)?;
+    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+    run(&runtime, &config, engine)
+}
+
+fn run(
+    runtime: &NodeRuntime,
+    config: &NodeConfig,
+    mut engine: FeedbackEngine,
+) -> anyhow::Result<()> {
+    let tactile = runtime.subscriber::<Tactile>()?;
+    let state = runtime.subscriber::<HandState>()?;
+    let command = runtime.subscriber::<HandCommand>()?;
+    let mut forces = runtime.publisher::<GloveForceCommand>()?;
+    // The latched e-stop: engaged before this node started (or while it restarted) is in the
+    // latch file.
+    let estop = EStopInput::new(runtime)?;
+    let mut health = Health::new(runtime)?;
+    let health_period = Duration::from_millis(config.health_period_ms.max(10));
+    let mut last_health = Instant::now();
+    if estop.engaged() {
+        emit(
+            engine.handle(&Event::EStop(estop_sample(true)), now_ns()),
+            &mut forces,
+            &mut health,
+        )?;
+    }
+    tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
+
+    let mut failure: Option<anyhow::Error> = None;
+    let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
+        let mut events = Vec::new();
+        // The e-stop on every wake: its doorbell, or its latch read every LATCH_POLL when the
+        // doorbell could not be rung.
+        if let Some(engaged) = estop.update()? {
+            events.push(Event::EStop(estop_sample(engaged)));
+        }
+        let _taken = match wake {
+            Wake::Input(0) => tactile.drain(|t| events.push(Event::Tactile(*t))),
+            Wake::Input(1) => state.drain(|s| events.push(Event::State(*s))),
+            Wake::Input(2) => command.drain(|c| events.push(Event::Command(*c))),
+            Wake::Input(_) => 1,
+            Wake::Timeout(_) | Wake::Tick => {
+                events.push(Event::Tick);
+                1
+            }
+        };
+        for event in &events {
+            emit(engine.handle(event, now_ns()), &mut forces, &mut health)?;
+        }
+        if last_health.elapsed() >= health_period {
+            last_health = Instant::now();
+            health.set_dropped(tactile.dropped() + state.dropped());
+            let now = Instant::now();
+            health.publish(&[tactile.age(now), state.age(now)])?;
+        }
+        Ok(())
+    };
+    let stop = EventLoop::new(Duration::from_millis(config.tick_ms.max(1))).run(
+        &[
+            Input::with_deadline(
+                tactile.listener(),
+                Duration::from_millis(config.tactile_timeout_ms.max(1)),
+            ),
+            Input::with_deadline(
+                state.listener(),
+                Duration::from_millis(config.hand_timeout_ms.max(1)),
+            ),
+            Input::new(command.listener()),
+            Input::new(estop.listener()),
+        ],
+        |wake| match on_wake(wake) {
+            Ok(()) => Flow::Continue(()),
+            Err(e) => {
+                failure = Some(e);
+                Flow::Break(())
+            }
+        },
+    )?;
+    // Leave the glove unloaded.
+    forces.publish(&GloveForceCommand {
+        flags: force_flags::STALE,
+        ..Default::default()
+    })?;
+    match failure {
+        // An error in the loop is a failure: the process exits non-zero and its supervisor
+        // restarts it.
+        Some(e) => Err(e.context("force feedback loop failed; published zero force")),
+        None => {
+            tracing::info!(?stop, "stopped; published zero force");
+            Ok(())
+        }
+    }
+}

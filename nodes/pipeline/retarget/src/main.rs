@@ -1,0 +1,147 @@
+//! `teleop-retarget`: the retargeting process. Subscribes to `glove/state`, runs the
+//! [`RetargetEngine`] on every sample and publishes `hand/command` for the hand its profile
+//! describes (position targets, normalised or in radians as the profile says, with the slew limit
+//! as speed limit). A stale glove (no sample within
+//! `glove_timeout_ms`, or the glove reports its link down) makes it repeat the last command
+//! flagged as held: the hand holds, never drifts.
+//!
+//! Owns only the plumbing between the topics and the engine.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use teleop_hand_profile::HandProfile;
+use teleop_msgs::{GloveState, HandCommand};
+use teleop_retarget::{load, Loaded, NodeConfig, Output, RetargetEngine};
+use teleop_runtime::{
+    init_logging, now_ns, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
+};
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "Glove state -> hand command, for the hand a profile describes"
+)]
+struct Args {
+    /// Node configuration (TOML); defaults are used without it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Operator calibration profile (TOML); overrides the one named in the configuration.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
+    /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
+    #[arg(long)]
+    profile: Option<PathBuf>,
+    /// iceoryx2 node name.
+    #[arg(long, default_value = "retarget")]
+    name: String,
+}
+
+fn main() -> ExitCode {
+    init_logging();
+    let args = Args::parse();
+    match start(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("stopping: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Loads everything the arguments name, then runs.
+fn start(args: &Args) -> anyhow::Result<()> {
+    let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
+    let Loaded {
+        config,
+        calibration,
+        calibration_path,
+        profile,
+    } = load(args.config.as_deref(), args.calibration.as_deref(), profile)?;
+    match &calibration_path {
+        Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
+        None => tracing::info!("no calibration profile: using the full 0..1000 range"),
+    }
+    tracing::info!(hand = %profile.name, joints = profile.joints.len(), "hand profile loaded");
+    let engine = RetargetEngine::new(&config, calibration, &profile)?;
+    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
+    run(&runtime, &config, engine)
+}
+
+fn run(
+    runtime: &NodeRuntime,
+    config: &NodeConfig,
+    mut engine: RetargetEngine,
+) -> anyhow::Result<()> {
+    let glove = runtime.subscriber::<GloveState>()?;
+    let mut commands = runtime.publisher::<HandCommand>()?;
+    let mut health = Health::new(runtime)?;
+    let timeout = Duration::from_millis(config.glove_timeout_ms.max(1));
+    let health_period = Duration::from_millis(config.health_period_ms.max(10));
+    let mut last_health = Instant::now();
+    tracing::info!(
+        timeout_ms = config.glove_timeout_ms,
+        "retargeting glove/state -> hand/command"
+    );
+
+    let emit = |out: Output,
+                commands: &mut Publisher<HandCommand>,
+                health: &mut Health|
+     -> anyhow::Result<()> {
+        if out.became_fresh {
+            tracing::info!("glove input fresh: following the operator");
+        }
+        if out.became_stale {
+            tracing::warn!(
+                timeout_ms = config.glove_timeout_ms,
+                "glove input stale or link down: holding the hand"
+            );
+            health.count_timeout();
+        }
+        health.count_clamps(u64::from(out.clamped));
+        if let Some(cmd) = out.command {
+            commands.publish(&cmd)?;
+        }
+        Ok(())
+    };
+    let mut failure: Option<anyhow::Error> = None;
+    let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
+        match wake {
+            Wake::Input(_) => {
+                let mut outs = Vec::new();
+                glove.drain(|s| outs.push(engine.on_glove(s, now_ns())));
+                for out in outs {
+                    health.count_loop();
+                    emit(out, &mut commands, &mut health)?;
+                }
+            }
+            Wake::Timeout(_) => emit(engine.on_timeout(), &mut commands, &mut health)?,
+            Wake::Tick => {}
+        }
+        if last_health.elapsed() >= health_period {
+            last_health = Instant::now();
+            health.set_dropped(glove.dropped());
+            health.publish(&[glove.age(Instant::now())])?;
+        }
+        Ok(())
+    };
+    let stop = EventLoop::new(health_period).run(
+        &[Input::with_deadline(glove.listener(), timeout)],
+        |wake| match on_wake(wake) {
+            Ok(()) => Flow::Continue(()),
+            Err(e) => {
+                failure = Some(e);
+                Flow::Break(())
+            }
+        },
+    )?;
+    // An error in the loop is a failure: the process exits non-zero and its supervisor
+    // restarts it.
+    if let Some(e) = failure {
+        return Err(e.context("retargeting loop failed"));
+    }
+    tracing::info!(?stop, "stopped");
+    Ok(())
+}
