@@ -494,7 +494,7 @@ fn run_viewer(ipc: &IpcSettings, args: &[String]) -> anyhow::Result<ExitCode> {
         .envs(ipc.to_env())
         .exec();
     anyhow::bail!(
-        "could not run {}: {err} (build it with `cargo build -p node-viewer`; it is looked \
+        "could not run {}: {err} (build it with `cargo build -p teleop-viewer`; it is looked \
          for next to `teleop`, then in PATH)",
         program.display()
     )

@@ -6,7 +6,7 @@
 //! generation named; `teleop allegro info` against the simulator and its error for a missing
 //! adapter.
 //!
-//! Both executables must be built (`cargo build -p sim-allegro -p teleop` besides this crate):
+//! Both executables must be built (`cargo build -p teleop-sim-allegro -p teleop` besides this crate):
 //! they are looked for next to this test's target folder.
 #![allow(clippy::unwrap_used)]
 
