@@ -22,6 +22,7 @@
 //!   deadlines (`clock_nanosleep`, `TIMER_ABSTIME`); [`init_logging`]: `tracing` through a
 //!   bounded queue that drops (and counts) instead of blocking a loop;
 //! - [`control`]: a simulator's line-based control socket;
+//! - [`args`]: command-line value parsers (`teleop` and the device service commands);
 //! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
 //!   `launch.toml` gives a process, for its time-critical threads.
 //!
@@ -29,6 +30,7 @@
 //!
 //! [`NodeHealth`]: teleop_msgs::NodeHealth
 
+pub mod args;
 mod clock;
 mod config_file;
 pub mod control;
