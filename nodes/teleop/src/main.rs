@@ -3,11 +3,16 @@
 //! steer a running pipeline (every side of it, or the namespaces given with `--namespace`);
 //! `calibrate` records an operator calibration profile.
 //!
-//! Owns the command line and the supervisor; it runs no control loop itself. Must not contain
-//! device protocols or control logic (those live in `shared/`).
+//! `glove`, `revo2`, `allegro` and `shadow` are the devices' service commands: their arguments
+//! and their I/O live with the device (`service` in each device node's library), and `teleop`
+//! only dispatches to them.
 //!
-//! No argument makes it panic: times and speeds are checked when parsed ([`parse_seconds`],
-//! [`parse_speed`]) and refused naming the argument, and a closed standard output (`teleop echo
+//! Owns the command line and the supervisor; it runs no control loop itself. Must not contain
+//! device protocols, device I/O or control logic (those live in `shared/` and in the device
+//! nodes).
+//!
+//! No argument makes it panic: times and speeds are checked when parsed
+//! ([`teleop_runtime::args::parse_seconds`], [`parse_speed`]) and refused naming the argument, and a closed standard output (`teleop echo
 //! glove/state | head`) ends the command quietly with success ([`out!`]).
 
 /// `println!` that returns the write's error instead of panicking on it: a reader that closed
@@ -19,21 +24,18 @@ macro_rules! out {
     };
 }
 
-mod allegro;
 mod calibrate;
 mod certs;
-mod glove;
 mod inspect;
 mod launch;
 mod recordings;
-mod revo2;
-mod shadow;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
+use teleop_runtime::args::parse_seconds;
 use teleop_runtime::{init_logging, IpcSettings, Namespace, ENV_IPC_PREFIX, ENV_IPC_ROOT};
 
 #[derive(Parser)]
@@ -113,31 +115,31 @@ enum Command {
     /// Talk to the EH55BF1 glove directly (with the glove node stopped).
     Glove {
         #[command(flatten)]
-        target: glove::Target,
+        target: teleop_glove::service::Target,
         #[command(subcommand)]
-        command: glove::GloveCommand,
+        command: teleop_glove::service::GloveCommand,
     },
     /// Talk to the Revo2 directly over EtherCAT (with the Revo2 node stopped).
     Revo2 {
         #[command(flatten)]
-        target: revo2::Target,
+        target: teleop_revo2::service::Target,
         #[command(subcommand)]
-        command: revo2::Revo2Command,
+        command: teleop_revo2::service::Revo2Command,
     },
     /// Talk to the Allegro Hand directly over CAN (with the Allegro node stopped).
     Allegro {
         #[command(flatten)]
-        target: allegro::Target,
+        target: teleop_allegro::service::Target,
         #[command(subcommand)]
-        command: allegro::AllegroCommand,
+        command: teleop_allegro::service::AllegroCommand,
     },
     /// Talk to the Shadow Hand's palm directly over EtherCAT (with the Shadow node stopped):
     /// info, motor-board flashing, a crafted CAN message, ADC channel numbers.
     Shadow {
         #[command(flatten)]
-        target: shadow::Target,
+        target: teleop_shadow::service::Target,
         #[command(subcommand)]
-        command: shadow::ShadowCommand,
+        command: teleop_shadow::service::ShadowCommand,
     },
     /// Make a session's certificate authority and station certificates for the bridge's
     /// mutual TLS (`ca.pem`, `ca.key`, `<station>.pem`, `<station>.key`); an existing CA in the
@@ -315,7 +317,7 @@ fn main() -> ExitCode {
             release,
             namespaces,
         } => inspect::estop(&ipc, !release, &namespaces),
-        Command::Glove { target, command } => glove::run(&target, &command),
+        Command::Glove { target, command } => teleop_glove::service::run(&target, &command),
         Command::Certs {
             out,
             stations,
@@ -377,9 +379,9 @@ fn main() -> ExitCode {
                 namespace,
             },
         ),
-        Command::Revo2 { target, command } => revo2::run(&target, &command),
-        Command::Allegro { target, command } => allegro::run(&target, &command),
-        Command::Shadow { target, command } => shadow::run(&target, &command),
+        Command::Revo2 { target, command } => teleop_revo2::service::run(&target, &command),
+        Command::Allegro { target, command } => teleop_allegro::service::run(&target, &command),
+        Command::Shadow { target, command } => teleop_shadow::service::run(&target, &command),
         Command::Calibrate {
             out,
             yes,
@@ -396,25 +398,6 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
-}
-
-/// The longest time an argument may name: ten years (so that adding it to a clock reading can
-/// never overflow).
-const MAX_SECONDS: f64 = 10.0 * 365.25 * 86_400.0;
-
-/// A time argument in seconds: a finite number from 0 to [`MAX_SECONDS`] (clap names the
-/// argument in the error).
-fn parse_seconds(s: &str) -> Result<Duration, String> {
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| "not a number of seconds".to_string())?;
-    if !(0.0..=MAX_SECONDS).contains(&v) {
-        return Err(format!(
-            "expected seconds from 0 to {MAX_SECONDS:.0} (ten years)"
-        ));
-    }
-    Duration::try_from_secs_f64(v).map_err(|e| e.to_string())
 }
 
 /// The replay speed: a finite factor from 0.001 to 1000 (`--max-speed` for as fast as

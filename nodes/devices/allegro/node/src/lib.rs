@@ -26,6 +26,7 @@ pub mod driver;
 pub mod gather;
 pub mod node;
 pub mod pace;
+pub mod service;
 pub mod wire;
 
 pub use config::{AllegroConfig, ProtocolSetting, Settings};

@@ -13,6 +13,7 @@
 pub mod latency;
 pub mod link;
 pub mod node;
+pub mod service;
 
 pub use link::{GloveLink, LinkError, LinkStats};
 pub use node::{run, GloveConfig};

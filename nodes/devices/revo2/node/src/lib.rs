@@ -21,6 +21,7 @@ pub mod convert;
 pub mod driver;
 pub mod flash;
 pub mod node;
+pub mod service;
 
 pub use teleop_ecat_master::mailbox;
 

@@ -1,13 +1,16 @@
-//! `teleop glove ...`: talk to the EH55BF1 glove directly over its serial port (the glove node
-//! must not be running: the port is opened exclusively).
+//! The glove's service commands, `teleop glove ...`: talk to the EH55BF1 glove directly over
+//! its serial port (the glove node must not be running: the port is opened exclusively). The
+//! command-line arguments ([`Target`], [`GloveCommand`]) are here; `teleop` only dispatches to
+//! [`run`].
 
 use std::io::{BufRead, Write};
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
-use teleop_glove::GloveLink;
 use teleop_glove_protocol::{reg, BaudRate, ErrorBits, CALIBRATION_STEPS, FINGERS};
+
+use crate::link::{GloveLink, LinkError};
 
 /// Where the glove is.
 #[derive(clap::Args)]
@@ -61,6 +64,7 @@ pub enum GloveCommand {
     },
 }
 
+/// Runs one glove command against the glove at `target`.
 pub fn run(target: &Target, command: &GloveCommand) -> anyhow::Result<ExitCode> {
     if let GloveCommand::Ports = command {
         return ports();
@@ -72,7 +76,7 @@ pub fn run(target: &Target, command: &GloveCommand) -> anyhow::Result<ExitCode> 
         Duration::from_millis(target.timeout_ms),
     )
     .map_err(|e| anyhow::anyhow!("{e} (is the glove node running? it holds the port)"))?;
-    let context = |e: teleop_glove::LinkError| {
+    let context = |e: LinkError| {
         anyhow::anyhow!(
             "{} (id {}, {} baud): {e}",
             target.port,
@@ -150,7 +154,7 @@ fn ports() -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-fn info(link: &mut GloveLink) -> Result<(), teleop_glove::LinkError> {
+fn info(link: &mut GloveLink) -> Result<(), LinkError> {
     let id = link.read_register(&reg::ID)?;
     let baud = link.read_register(&reg::BAUD_RATE)?;
     let voltage = link.read_register(&reg::VOLTAGE)?;

@@ -1,5 +1,8 @@
-//! `teleop revo2 ...`: talk to the Revo2 directly over EtherCAT in PRE-OP (the Revo2 node must
-//! not be running: a bus has one MainDevice), and upgrade its firmware over FoE in BOOT.
+//! The Revo2's service commands, `teleop revo2 ...`: talk to the Revo2 directly over EtherCAT in
+//! PRE-OP (the Revo2 node must not be running: a bus has one MainDevice), and upgrade its
+//! firmware over FoE in BOOT. The command-line arguments ([`Target`], [`Revo2Command`]) are
+//! here; `teleop` only dispatches to [`run`]. The SDO I/O goes through [`crate::bus`], the
+//! upgrade through [`crate::flash`].
 
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -8,14 +11,13 @@ use std::time::{Duration, Instant};
 
 use clap::Subcommand;
 use futures_lite::future::block_on;
-use teleop_revo2::bus::{self, Bus, PreOpGroup};
-use teleop_revo2::flash::{
-    self, version_text, Firmware, FlashError, FlashEvent, FlashOptions, Progress,
-};
-use teleop_revo2::Transport;
 use teleop_revo2_protocol::{
     config_entries, decode_config_value, obj, parse_config_value, Board, ConfigValue, Entry,
 };
+
+use crate::bus::{self, Bus, PreOpGroup};
+use crate::flash::{self, version_text, Firmware, FlashError, FlashEvent, FlashOptions, Progress};
+use crate::Transport;
 
 /// Where the hand is.
 #[derive(clap::Args)]
@@ -83,6 +85,7 @@ impl From<BoardArg> for Board {
     }
 }
 
+/// Runs one Revo2 command against the hand at `target`.
 pub fn run(target: &Target, command: &Revo2Command) -> anyhow::Result<ExitCode> {
     if let Revo2Command::Flash {
         file,

@@ -1,7 +1,8 @@
-//! `teleop allegro ...`: talk to the Allegro Hand directly over its CAN link (the Allegro node
-//! must not be running: both would send torque). `info` brings the hand up, reads what it
-//! tells and stops it again; `home` and `move` run the node's own PD loop for a few seconds and
-//! release the hand (zero torque, SYSTEM_OFF).
+//! The Allegro Hand's service commands, `teleop allegro ...`: talk to the hand directly over its
+//! CAN link (the Allegro node must not be running: both would send torque). `info` brings the
+//! hand up, reads what it tells and stops it again; `home` and `move` run the node's own PD loop
+//! for a few seconds and release the hand (zero torque, SYSTEM_OFF). The command-line arguments
+//! ([`Target`], [`AllegroCommand`]) are here; `teleop` only dispatches to [`run`].
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -9,13 +10,15 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
-use teleop_allegro::bringup::{self, Hand, Identity};
-use teleop_allegro::can_link::{CanLink, LinkError};
-use teleop_allegro::driver::{self, Connected, Cycle, Down, Host, Target as Goal};
-use teleop_allegro::protocol::{v4, Generation, Protocol, JOINTS};
-use teleop_allegro::wire::{Incoming, Wire};
-use teleop_allegro::{ProtocolSetting, Settings};
+use teleop_allegro_protocol::{v4, Generation, Protocol, JOINTS};
+use teleop_can_link::{CanLink, LinkError};
 use teleop_hand_profile::HandProfile;
+use teleop_runtime::args::parse_seconds;
+
+use crate::bringup::{self, Hand, Identity};
+use crate::driver::{self, Connected, Cycle, Down, Host, Target as Goal};
+use crate::wire::{Incoming, Wire};
+use crate::{ProtocolSetting, Settings};
 
 /// Where the hand is and how it speaks.
 #[derive(clap::Args)]
@@ -42,7 +45,7 @@ pub enum AllegroCommand {
     /// ring 5 -5 50 45, thumb 60 25 15 45 degrees) with the PD loop, then release it.
     Home {
         /// Seconds to hold the pose before releasing.
-        #[arg(long, default_value = "3", value_parser = crate::parse_seconds, allow_hyphen_values = true)]
+        #[arg(long, default_value = "3", value_parser = parse_seconds, allow_hyphen_values = true)]
         seconds: Duration,
     },
     /// Move one joint to an angle (the others hold where they are), then release the hand.
@@ -54,7 +57,7 @@ pub enum AllegroCommand {
         #[arg(allow_hyphen_values = true)]
         degrees: f64,
         /// Seconds to hold before releasing.
-        #[arg(long, default_value = "2", value_parser = crate::parse_seconds, allow_hyphen_values = true)]
+        #[arg(long, default_value = "2", value_parser = parse_seconds, allow_hyphen_values = true)]
         seconds: Duration,
     },
 }
@@ -66,8 +69,9 @@ const HOME_DEG: [f64; JOINTS] = [
 
 const FINGER_NAMES: [&str; 4] = ["index", "middle", "ring", "thumb"];
 
+/// Runs one Allegro command against the hand at `target`.
 pub fn run(target: &Target, command: &AllegroCommand) -> anyhow::Result<ExitCode> {
-    let (mut config, profile) = teleop_allegro::load(target.config.as_deref())?;
+    let (mut config, profile) = crate::load(target.config.as_deref())?;
     if let Some(link) = &target.link {
         config.link = link.clone();
     }
@@ -113,14 +117,12 @@ pub fn run(target: &Target, command: &AllegroCommand) -> anyhow::Result<ExitCode
 
 /// Opens the link, naming a missing adapter plainly.
 fn open(settings: &Settings) -> anyhow::Result<Box<dyn CanLink>> {
-    teleop_allegro::can_link::open(&settings.link, teleop_allegro::node::BITRATE).map_err(|e| {
-        match e {
-            LinkError::NotFound { detail, .. } => anyhow::anyhow!(
-                "{}: no such device; is the adapter plugged in? ({detail})",
-                settings.link
-            ),
-            other => anyhow::anyhow!("{other}"),
-        }
+    teleop_can_link::open(&settings.link, crate::node::BITRATE).map_err(|e| match e {
+        LinkError::NotFound { detail, .. } => anyhow::anyhow!(
+            "{}: no such device; is the adapter plugged in? ({detail})",
+            settings.link
+        ),
+        other => anyhow::anyhow!("{other}"),
     })
 }
 
