@@ -1,4 +1,4 @@
-//! The shipped profiles load and say what the notes say; bad profiles are refused with the file,
+//! The shipped profiles load and say what docs/devices/ says; bad profiles are refused with the file,
 //! the line and the field; no text makes the loader panic.
 
 #![allow(clippy::unwrap_used)]
@@ -80,7 +80,7 @@ fn allegro_profile_has_four_fingers_and_the_urdf_limits() {
     assert_eq!(p.joints.len(), 16);
     assert_eq!(p.command_units, CommandUnits::Radians);
     assert_eq!(p.fingertips().count(), 0);
-    // Limits from the notes (allegro.md): fingers j1 -0.196..1.61, thumb j12 0.263..1.396.
+    // docs/devices/allegro.md, "Joints": fingers j1 -0.196..1.61, thumb j12 0.263..1.396.
     let j1 = &p.joints[p.joint_index("middle_1").unwrap()];
     assert_eq!((j1.lower, j1.upper), (-0.196, 1.61));
     let j12 = &p.joints[12];

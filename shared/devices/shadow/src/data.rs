@@ -378,7 +378,8 @@ pub mod tactile {
     pub const GENERIC_FIRST: u32 = 0xFFF9;
 }
 
-/// The CRC a motor checks config words with (notes: 16 bit, start 0, over config words
+/// The CRC a motor checks config words with (docs/devices/shadow.md, "Enums and flags": 16
+/// bit, start 0, over config words
 /// 5..0xE, each word low byte then high; per byte `i = (crc & 0xFF) ^ byte`, `crc >>= 8`, then
 /// for each set bit k of i, crc ^= TABLE[k]). A CRC of 0 means "ignore" to the motor, so 0 is
 /// sent as 1.

@@ -277,7 +277,7 @@ fn watchdog_trips_and_the_master_recovers() {
             .expect("AL status code");
         assert_eq!(code, 0x001B);
 
-        // Acknowledge the error in SAFE-OP, then request OP (what the notes prescribe).
+        // Acknowledge the error in SAFE-OP, then request OP (docs/devices/revo2.md, "ethercrab").
         sd.register_write(RegisterAddress::AlControl, 0x0014u16)
             .await
             .expect("acknowledge");
