@@ -1,0 +1,57 @@
+//! The virtual objects a simulated hand can hold, one name each on every simulator (the
+//! `object` command, the `--object` argument). Each simulator gives an object its geometry in
+//! its own joint space; one that has no such object says so.
+
+/// An object in the simulated hand.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Object {
+    /// A ball about a third of a fist, under the fingers.
+    Ball,
+    /// A bar across the palm that the fingers wrap.
+    Bar,
+}
+
+impl Object {
+    /// The object named `name` (`ball`, `bar`); `none` and any other name: no object.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "ball" => Some(Self::Ball),
+            "bar" => Some(Self::Bar),
+            _ => None,
+        }
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ball => "ball",
+            Self::Bar => "bar",
+        }
+    }
+
+    /// The `--object` argument's value (`ball`, `bar`, `none`), checked: `Err` names the
+    /// accepted values.
+    pub fn from_arg(text: &str) -> Result<Option<Self>, String> {
+        match text {
+            "none" => Ok(None),
+            other => Self::parse(other)
+                .map(Some)
+                .ok_or_else(|| format!("unknown object {other:?}: use ball, bar or none")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip() {
+        for o in [Object::Ball, Object::Bar] {
+            assert_eq!(Object::parse(o.name()), Some(o));
+            assert_eq!(Object::from_arg(o.name()), Ok(Some(o)));
+        }
+        assert_eq!(Object::from_arg("none"), Ok(None));
+        assert!(Object::from_arg("cube").is_err());
+    }
+}
