@@ -9,7 +9,9 @@
 //! its command line, as a user would.
 
 pub mod netns;
+pub mod rig;
 pub mod stations;
+pub mod watch;
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -154,6 +156,14 @@ impl Sandbox {
         reply
     }
 
+    /// Sends one command to a simulator's control socket and returns its answer, asserting it
+    /// starts with `ok`.
+    pub fn control_ok(&self, socket: &str, command: &str) -> String {
+        let reply = self.control(socket, command);
+        assert!(reply.starts_with("ok"), "{socket}: {command}: {reply}");
+        reply
+    }
+
     /// Pid of the live iceoryx2 node `name` (from `teleop nodes`).
     pub fn pid_of(&self, name: &str) -> Option<u32> {
         let out = String::from_utf8(self.run_teleop(&["nodes"]).stdout).ok()?;
@@ -178,6 +188,11 @@ impl Sandbox {
         let mut cmd = Command::new(bin("teleop"));
         cmd.envs(self.ipc.to_env()).current_dir(self.dir.path());
         cmd
+    }
+
+    /// Runs `teleop args...` to completion: whether it succeeded, and its stdout then stderr.
+    pub fn cli(&self, args: &[&str]) -> (bool, String) {
+        rig::run(self.teleop().args(args))
     }
 
     /// Runs `teleop args...` to completion.
@@ -277,6 +292,12 @@ impl Session {
             std::thread::sleep(Duration::from_millis(20));
         }
         None
+    }
+}
+
+impl rig::Logs for Session {
+    fn logs(&self) -> String {
+        format!("---- teleop launch output ----\n{}", self.log())
     }
 }
 

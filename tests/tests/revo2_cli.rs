@@ -2,59 +2,33 @@
 //! (`teleop-sim-revo2 --socket`), through ethercrab in PRE-OP.
 #![allow(clippy::unwrap_used)]
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-
+use teleop_e2e::rig::Rig;
 use teleop_e2e::{bin, Sandbox};
 
-struct Sim(Child);
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        // SAFETY: kill(2) of our own child.
-        unsafe {
-            libc::kill(self.0.id() as libc::pid_t, libc::SIGINT);
-        }
-        let _ = self.0.wait();
-    }
-}
-
-fn start(sandbox: &Sandbox) -> (Sim, String) {
-    let socket = sandbox.dir.path().join("revo2.sock").display().to_string();
-    let mut child = Command::new(bin("teleop-sim-revo2"))
-        .args(["--socket", &socket])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    assert!(line.starts_with("revo2: socket"), "{line}");
-    (Sim(child), format!("sim:{socket}"))
+/// The emulated Revo2 as its own process on a socket in a fresh rig, and the transport that
+/// reaches it.
+fn start() -> (Rig, String) {
+    let mut rig = Rig::new();
+    let socket = rig.path("revo2.sock").display().to_string();
+    rig.start_sim(
+        "sim-revo2",
+        bin("teleop-sim-revo2"),
+        &["--socket", &socket],
+        "revo2: socket",
+    );
+    let transport = format!("sim:{socket}");
+    (rig, transport)
 }
 
 fn revo2(sandbox: &Sandbox, transport: &str, args: &[&str]) -> (bool, String) {
-    let out = sandbox
-        .teleop()
-        .args(["revo2", "--transport", transport])
-        .args(args)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
+    sandbox.cli(&[&["revo2", "--transport", transport], args].concat())
 }
 
 #[test]
 fn info_set_and_calibrate_on_the_emulated_revo2() {
-    let sandbox = Sandbox::new();
-    let (_sim, transport) = start(&sandbox);
-    let (ok, info) = revo2(&sandbox, &transport, &["info"]);
+    let (rig, transport) = start();
+    let sandbox = &rig.sandbox;
+    let (ok, info) = revo2(sandbox, &transport, &["info"]);
     assert!(ok, "{info}");
     assert!(
         info.contains("vendor 0x00bc0000 product 0x00009252 revision 1"),
@@ -67,20 +41,20 @@ fn info_set_and_calibrate_on_the_emulated_revo2() {
     );
     assert!(info.contains("touch_vendor               1"), "{info}");
 
-    let (ok, out) = revo2(&sandbox, &transport, &["set", "led_switch", "1"]);
+    let (ok, out) = revo2(sandbox, &transport, &["set", "led_switch", "1"]);
     assert!(ok && out.contains("led_switch = 1"), "{out}");
-    let (ok, out) = revo2(&sandbox, &transport, &["set", "index_pro_cur", "750"]);
+    let (ok, out) = revo2(sandbox, &transport, &["set", "index_pro_cur", "750"]);
     assert!(ok && out.contains("index_pro_cur = 750"), "{out}");
-    let (_, info) = revo2(&sandbox, &transport, &["info"]);
+    let (_, info) = revo2(sandbox, &transport, &["info"]);
     assert!(
         info.contains("index_pro_cur              750"),
         "persisted: {info}"
     );
 
-    let (ok, out) = revo2(&sandbox, &transport, &["set", "unit_mode", "7"]);
+    let (ok, out) = revo2(sandbox, &transport, &["set", "unit_mode", "7"]);
     assert!(!ok && out.contains("unit_mode"), "{out}");
     let (ok, out) = revo2(
-        &sandbox,
+        sandbox,
         &transport,
         &["set", "ctrl_wrist_fw_version", "9.9.9"],
     );
@@ -88,15 +62,15 @@ fn info_set_and_calibrate_on_the_emulated_revo2() {
         !ok && out.to_lowercase().contains("read"),
         "read-only: {out}"
     );
-    let (ok, out) = revo2(&sandbox, &transport, &["set", "ctrl_sn", "RV2C0001"]);
+    let (ok, out) = revo2(sandbox, &transport, &["set", "ctrl_sn", "RV2C0001"]);
     assert!(
         !ok && out.contains("segmented"),
         "strings need a segmented download: {out}"
     );
-    let (ok, out) = revo2(&sandbox, &transport, &["set", "no_such_thing", "1"]);
+    let (ok, out) = revo2(sandbox, &transport, &["set", "no_such_thing", "1"]);
     assert!(!ok && out.contains("no_such_thing"), "{out}");
 
-    let (ok, out) = revo2(&sandbox, &transport, &["calibrate", "--tactile"]);
+    let (ok, out) = revo2(sandbox, &transport, &["calibrate", "--tactile"]);
     assert!(
         ok && out.contains("position calibration started") && out.contains("pinky started"),
         "{out}"
@@ -131,42 +105,31 @@ fn firmware(
     path.display().to_string()
 }
 
-/// One command on the emulator's control socket.
-fn control(sandbox: &Sandbox, line: &str) -> String {
-    use std::io::Write;
-    let mut stream =
-        std::os::unix::net::UnixStream::connect(sandbox.dir.path().join("revo2.ctl")).unwrap();
-    writeln!(stream, "{line}").unwrap();
-    let mut answer = String::new();
-    BufReader::new(stream).read_line(&mut answer).unwrap();
-    answer
-}
-
 #[test]
 fn flash_both_boards_of_the_emulated_revo2() {
-    let sandbox = Sandbox::new();
-    let (_sim, transport) = start(&sandbox);
+    let (rig, transport) = start();
+    let sandbox = &rig.sandbox;
     let wrist = firmware(
-        &sandbox,
+        sandbox,
         "Revo2EC_1.0.3_2506231346.bin",
         b"BRCW2025",
         (1, 0, 3),
         6000,
     );
     let control_fw = firmware(
-        &sandbox,
+        sandbox,
         "Revo2_V2.1.0_2506231346.bin",
         b"BRCC2025",
         (2, 1, 0),
         9000,
     );
-    let (ok, out) = revo2(&sandbox, &transport, &["flash", &wrist, "--board", "wrist"]);
+    let (ok, out) = revo2(sandbox, &transport, &["flash", &wrist, "--board", "wrist"]);
     assert!(
         ok && out.contains("wrist board firmware 0.9.7 -> 1.0.3") && out.contains("KiB/s"),
         "{out}"
     );
     let (ok, out) = revo2(
-        &sandbox,
+        sandbox,
         &transport,
         &["flash", &control_fw, "--board", "control"],
     );
@@ -175,20 +138,20 @@ fn flash_both_boards_of_the_emulated_revo2() {
         "{out}"
     );
     assert_eq!(
-        control(&sandbox, "versions").trim(),
+        sandbox.control("revo2.ctl", "versions").trim(),
         "control 2.1.0 wrist 1.0.3"
     );
 
     // Refused before the device is touched.
     let wrong_magic = firmware(
-        &sandbox,
+        sandbox,
         "Revo2EC_1.0.4_2506231346.bin",
         b"BRCC2025",
         (1, 0, 4),
         100,
     );
     let lower_case = firmware(
-        &sandbox,
+        sandbox,
         "revo2EC_1.0.4_2506231346.bin",
         b"BRCW2025",
         (1, 0, 4),
@@ -207,7 +170,7 @@ fn flash_both_boards_of_the_emulated_revo2() {
         (&lower_case, "wrist", "must start with \"Revo2EC_\""),
         (&truncated, "wrist", "truncated"),
     ] {
-        let (ok, out) = revo2(&sandbox, &transport, &["flash", file, "--board", board]);
+        let (ok, out) = revo2(sandbox, &transport, &["flash", file, "--board", board]);
         assert!(
             !ok && out.contains(expected) && out.contains("refused before contacting the device"),
             "{out}"
@@ -215,14 +178,14 @@ fn flash_both_boards_of_the_emulated_revo2() {
     }
     // Refused by the device.
     let again = firmware(
-        &sandbox,
+        sandbox,
         "Revo2EC_1.1.0_2506231346.bin",
         b"BRCW2025",
         (1, 1, 0),
         3000,
     );
     let (ok, out) = revo2(
-        &sandbox,
+        sandbox,
         &transport,
         &[
             "flash",
@@ -238,19 +201,19 @@ fn flash_both_boards_of_the_emulated_revo2() {
         "{out}"
     );
     // A device that stops answering mid-transfer.
-    assert!(control(&sandbox, "foe-stall 4").starts_with("ok"));
-    let (ok, out) = revo2(&sandbox, &transport, &["flash", &again, "--board", "wrist"]);
+    sandbox.control_ok("revo2.ctl", "foe-stall 4");
+    let (ok, out) = revo2(sandbox, &transport, &["flash", &again, "--board", "wrist"]);
     assert!(
         !ok && out.contains("no answer from the device to data packet 5")
             && out.contains("stopped answering"),
         "{out}"
     );
     // Still usable: its configuration reads, and the next upgrade works.
-    let (ok, info) = revo2(&sandbox, &transport, &["info"]);
+    let (ok, info) = revo2(sandbox, &transport, &["info"]);
     assert!(
         ok && info.contains("wrist_fw_version           1.0.3"),
         "{info}"
     );
-    let (ok, out) = revo2(&sandbox, &transport, &["flash", &again, "--board", "wrist"]);
+    let (ok, out) = revo2(sandbox, &transport, &["flash", &again, "--board", "wrist"]);
     assert!(ok && out.contains("1.0.3 -> 1.1.0"), "{out}");
 }

@@ -5,72 +5,28 @@
 //! crafted CAN message and its reply, and the ADC channel check.
 #![allow(clippy::unwrap_used)]
 
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixStream;
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
-
-use teleop_e2e::{bin, Sandbox};
+use teleop_e2e::bin;
+use teleop_e2e::rig::Rig;
 use teleop_shadow_protocol::can::APP_START;
 use teleop_shadow_protocol::hex;
 
-struct Sim {
-    child: Child,
-    control: PathBuf,
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        // SAFETY: kill(2) of our own child.
-        unsafe {
-            libc::kill(self.child.id() as libc::pid_t, libc::SIGINT);
-        }
-        let _ = self.child.wait();
-    }
-}
-
-impl Sim {
-    fn control(&self, command: &str) -> String {
-        let stream = UnixStream::connect(&self.control).unwrap();
-        writeln!(&stream, "{command}").unwrap();
-        let mut line = String::new();
-        BufReader::new(stream).read_line(&mut line).unwrap();
-        assert!(line.starts_with("ok"), "{command}: {line}");
-        line
-    }
-}
-
-fn start(sandbox: &Sandbox) -> (Sim, String) {
-    let socket = sandbox.dir.path().join("shadow.sock");
-    let mut child = Command::new(bin("teleop-sim-shadow"))
-        .arg("--socket")
-        .arg(&socket)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    assert!(line.starts_with("shadow: socket"), "{line}");
-    let control = socket.with_extension("ctl");
-    (Sim { child, control }, format!("sim:{}", socket.display()))
-}
-
-fn shadow(sandbox: &Sandbox, transport: &str, args: &[&str]) -> (bool, String) {
-    let out = sandbox
-        .teleop()
-        .args(["shadow", "--transport", transport])
-        .args(args)
-        .output()
-        .unwrap();
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
+/// The emulated Shadow Hand as its own process on a socket in a fresh rig, and the transport
+/// that reaches it.
+fn start() -> (Rig, String) {
+    let mut rig = Rig::new();
+    let socket = rig.path("shadow.sock").display().to_string();
+    rig.start_sim(
+        "sim-shadow",
+        bin("teleop-sim-shadow"),
+        &["--socket", &socket],
+        "shadow: socket",
     );
-    (out.status.success(), text)
+    (rig, format!("sim:{socket}"))
+}
+
+fn shadow(rig: &Rig, transport: &str, args: &[&str]) -> (bool, String) {
+    rig.sandbox
+        .cli(&[&["shadow", "--transport", transport], args].concat())
 }
 
 /// A pseudo-random application whose first word (the emulator's revision word) is `revision`.
@@ -89,9 +45,8 @@ fn motor_line(info: &str, motor: u8) -> String {
 
 #[test]
 fn info_names_the_palm_and_each_motors_revision_and_serial() {
-    let sandbox = Sandbox::new();
-    let (_sim, transport) = start(&sandbox);
-    let (ok, info) = shadow(&sandbox, &transport, &["info"]);
+    let (rig, transport) = start();
+    let (ok, info) = shadow(&rig, &transport, &["info"]);
     assert!(ok, "{info}");
     assert!(
         info.contains("palm: product 6 (SR06, protocol 0220), vendor 0x00000530"),
@@ -107,8 +62,8 @@ fn info_names_the_palm_and_each_motors_revision_and_serial() {
 
 #[test]
 fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
-    let sandbox = Sandbox::new();
-    let (sim, transport) = start(&sandbox);
+    let (rig, transport) = start();
+    let sandbox = &rig.sandbox;
     let app = application(1500, 0x0BEE);
     let good = sandbox.write("good.hex", &hex::write(APP_START, &app));
 
@@ -120,7 +75,7 @@ fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
     bad = bad.replacen(&second, &broken, 1);
     let bad = sandbox.write("bad.hex", &bad);
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", bad.to_str().unwrap(), "--motor", "13"],
     );
@@ -130,7 +85,7 @@ fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
     );
     let low = sandbox.write("low.hex", &hex::write(0x0400, &app));
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", low.to_str().unwrap(), "--motor", "13"],
     );
@@ -139,35 +94,35 @@ fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
         "{out}"
     );
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", good.to_str().unwrap(), "--motor", "20"],
     );
     assert!(!ok && out.contains("motors 0..19"), "{out}");
 
     // A board that does not answer MAGIC: named, then flashed once it answers.
-    sim.control("silent 13");
+    sandbox.control_ok("shadow.ctl", "silent 13");
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", good.to_str().unwrap(), "--motor", "13"],
     );
     assert!(!ok && out.contains("no acknowledgement of MAGIC"), "{out}");
-    sim.control("silent none");
+    sandbox.control_ok("shadow.ctl", "silent none");
 
     // A board that stops acking mid-transfer: the step and address named; flashed again after.
-    sim.control("flash-stall 13 200");
+    sandbox.control_ok("shadow.ctl", "flash-stall 13 200");
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", good.to_str().unwrap(), "--motor", "13"],
     );
     assert!(!ok && out.contains("0x"), "{out}");
     assert!(out.contains("flash it again"), "{out}");
-    sim.control("flash-stall 13 off");
+    sandbox.control_ok("shadow.ctl", "flash-stall 13 off");
 
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["flash", good.to_str().unwrap(), "--motor", "13"],
     );
@@ -176,7 +131,7 @@ fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
     assert!(out.contains("47/47 rows"), "{out}");
 
     // The board runs the new image: its revision word is what it reports.
-    let (ok, info) = shadow(&sandbox, &transport, &["info"]);
+    let (ok, info) = shadow(&rig, &transport, &["info"]);
     assert!(ok, "{info}");
     assert!(motor_line(&info, 13).contains("3054"), "{info}");
     assert!(motor_line(&info, 12).contains("2035"), "{info}");
@@ -184,12 +139,11 @@ fn a_board_is_flashed_read_back_restarted_and_each_refusal_is_clear() {
 
 #[test]
 fn a_crafted_can_message_is_answered_and_the_adc_channels_are_checked() {
-    let sandbox = Sandbox::new();
-    let (_sim, transport) = start(&sandbox);
+    let (rig, transport) = start();
     // MAGIC to board 3 of bus 2 (motor 13): its application restarts into the bootloader,
     // which announces itself.
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["can-send", "2", "0x66A", "55AA55AA55AA55AA"],
     );
@@ -199,16 +153,16 @@ fn a_crafted_can_message_is_answered_and_the_adc_channels_are_checked() {
         "{out}"
     );
     // VERSION, then RESET back into the application.
-    let (ok, out) = shadow(&sandbox, &transport, &["can-send", "2", "664"]);
+    let (ok, out) = shadow(&rig, &transport, &["can-send", "2", "664"]);
     assert!(ok && out.contains("SID 0x674 [4] 40 41 42 43"), "{out}");
-    let (ok, out) = shadow(&sandbox, &transport, &["can-send", "2", "663"]);
+    let (ok, out) = shadow(&rig, &transport, &["can-send", "2", "663"]);
     assert!(ok && out.contains("SID 0x673"), "{out}");
-    let (ok, out) = shadow(&sandbox, &transport, &["can-send", "3", "663"]);
+    let (ok, out) = shadow(&rig, &transport, &["can-send", "3", "663"]);
     assert!(!ok && out.contains("buses 1 and 2"), "{out}");
 
-    let config = Sandbox::repo().join("config/shadow.toml");
+    let config = teleop_e2e::Sandbox::repo().join("config/shadow.toml");
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["--config", config.to_str().unwrap(), "channels"],
     );
@@ -217,9 +171,9 @@ fn a_crafted_can_message_is_answered_and_the_adc_channels_are_checked() {
     let wrong = std::fs::read_to_string(&config)
         .unwrap()
         .replace("LFJ5 = [5, 6]", "LFJ5 = [5, 7]");
-    let wrong = sandbox.write("wrong.toml", &wrong);
+    let wrong = rig.sandbox.write("wrong.toml", &wrong);
     let (ok, out) = shadow(
-        &sandbox,
+        &rig,
         &transport,
         &["--config", wrong.to_str().unwrap(), "channels"],
     );
