@@ -1,6 +1,8 @@
 //! Wire protocol and register map of the EH55BF1-BL/BR exoskeleton glove
 //! (RS232 115200 8N1, or Bluetooth SPP carrying the same frames).
 //!
+//! "Section N" is the manual's, restated by number in docs/devices/glove.md.
+//!
 //! # What this crate owns
 //!
 //! * The frames of section 2.2 ([`Request`], [`Response`], [`Frame`]), their

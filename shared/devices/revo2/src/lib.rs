@@ -1,6 +1,8 @@
 //! EtherCAT object dictionary and process data of the BrainCo Revo2
 //! dexterous hand ("BrainCo-Revo2Slave", CoE SDO, PDO, FoE).
 //!
+//! "Section N" is the device document's, restated by number in docs/devices/revo2.md.
+//!
 //! # What this crate owns
 //!
 //! * Identity and orders (section 1, 2.2): [`VENDOR_ID`], [`PRODUCT_CODE`],
