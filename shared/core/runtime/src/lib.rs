@@ -22,6 +22,10 @@
 //!   deadlines (`clock_nanosleep`, `TIMER_ABSTIME`); [`init_logging`]: `tracing` through a
 //!   bounded queue that drops (and counts) instead of blocking a loop;
 //! - [`control`]: a simulator's line-based control socket;
+//! - [`node_main`]: the opening of every node's `main` (logging, arguments, configuration file,
+//!   exit status) and [`NodeArgs`], the arguments every node with a configuration file takes;
+//! - [`schedule`]: when a pipeline engine's inputs go stale (by their samples' stamps) and when
+//!   it ticks (absolute deadlines), pure, for the nodes and for reprocessing alike;
 //! - [`args`]: command-line value parsers (`teleop` and the device service commands);
 //! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
 //!   `launch.toml` gives a process, for its time-critical threads.
@@ -40,9 +44,11 @@ mod hand_ports;
 mod health;
 mod ipc;
 mod logging;
+pub mod node_main;
 mod ports;
 pub mod realtime;
 pub mod resume;
+pub mod schedule;
 mod signals;
 
 pub use clock::{now_ns, sleep_until, sleep_until_ns};
@@ -59,6 +65,7 @@ pub use ipc::{
     ENV_IPC_PREFIX, ENV_IPC_ROOT, ENV_NAMESPACE,
 };
 pub use logging::{dropped_log_lines, init_logging};
+pub use node_main::{node_main, NodeArgs, NodeMain};
 pub use ports::{sample_time, Publisher, Subscriber};
 pub use resume::Resume;
 pub use signals::{
