@@ -15,7 +15,7 @@ use teleop_msgs::{
 use teleop_recorder::{record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::{
     info as recording_info, read_messages, repair_with, Filter, OwnedMessage, RecordedMessage,
-    Recorder, RepairOptions, WriterOptions,
+    Recorder, RepairOptions, TopicId, WriterOptions,
 };
 use teleop_retarget::RetargetEngine;
 use teleop_runtime::{now_ns, qualified, split, IpcSettings, Namespace, NodeRuntime, Publisher};
@@ -555,8 +555,14 @@ pub fn reprocess_cmd(
     let (fcfg, _) = teleop_feedback::load(opts.feedback_config.as_deref(), Some(profile.clone()))?;
     let mut retarget = RetargetEngine::new(&rcfg, loaded.calibration, &profile)?;
     let mut feedback = FeedbackEngine::new(&fcfg, &profile)?;
-    let glove_timeout = rcfg.glove_timeout_ms.max(1) * 1_000_000;
-    let tick = fcfg.tick_ms.max(1) * 1_000_000;
+    // The live node ticks from its own start, which the recording does not hold: here the
+    // ticks start with the first hand sample, the first input feedback follows.
+    let first_hand = messages
+        .iter()
+        .find(|m| m.topic == HandState::TOPIC || m.topic == Tactile::TOPIC);
+    if let Some(m) = first_hand {
+        feedback.start(m.log_time_ns);
+    }
 
     let mut metadata = vec![(
         "reprocess".to_string(),
@@ -578,123 +584,74 @@ pub fn reprocess_cmd(
     let state_id = rec.add_message_type::<HandState>()?;
     let tactile_id = rec.add_message_type::<Tactile>()?;
     let estop_id = rec.add_message_type::<EStop>()?;
-    let cmd_id = rec.add_message_type::<HandCommand>()?;
-    let force_id = rec.add_message_type::<GloveForceCommand>()?;
+    let mut outputs = Outputs::new(&mut rec, &messages)?;
 
-    // The recorded outputs, by the origin stamp they descend from (first occurrence).
-    let mut recorded_cmds: HashMap<u64, HandCommand> = HashMap::new();
-    let mut recorded_forces: HashMap<u64, GloveForceCommand> = HashMap::new();
-    let source = source_id("reprocess");
-    let mut cmds = Comparison::default();
-    let mut forces = Comparison::default();
-    let mut out_cmds: Vec<(u64, HandCommand)> = Vec::new();
-    let mut out_forces: Vec<(u64, GloveForceCommand)> = Vec::new();
-    let mut last_glove: Option<u64> = None;
-    let mut next_tick: Option<u64> = None;
-    let mut counter = 0u64;
-    let mut finalize = |mut header: teleop_msgs::SampleHeader, t: u64, origin: u64| {
-        counter += 1;
-        header.seq = counter;
-        header.stamp_ns = t;
-        header.origin_ns = if origin == 0 { t } else { origin };
-        header.source_id = source;
-        header
-    };
-
-    // The recorded outputs are logged after the inputs they answer: index them first.
-    for msg in &messages {
-        match msg.topic.as_str() {
-            "hand/command" => {
-                if let Some(c) = msg.decode::<HandCommand>() {
-                    recorded_cmds.entry(c.header.origin_ns).or_insert(c);
-                }
-            }
-            "glove/force_command" => {
-                if let Some(c) = msg.decode::<GloveForceCommand>() {
-                    recorded_forces.entry(c.header.origin_ns).or_insert(c);
-                }
-            }
-            _ => {}
-        }
-    }
     for msg in &messages {
         let t = msg.log_time_ns;
-        // Feedback ticks between events.
-        while let Some(due) = next_tick.filter(|&due| due <= t) {
-            if let Some(mut c) = feedback.handle(&Event::Tick, due).command {
-                c.header = finalize(c.header, due, c.header.origin_ns);
-                out_forces.push((due, c));
+        // The engines' schedules up to `t`, in time order: the glove's watchdog (held
+        // commands), feedback's ticks and its inputs' watchdogs.
+        loop {
+            let retarget_first = match (retarget.next_due(), feedback.next_due()) {
+                (Some(r), Some(f)) => r <= f,
+                (r, _) => r.is_some(),
+            };
+            if retarget_first {
+                let Some((at, out)) = retarget.poll(t) else {
+                    break;
+                };
+                if let Some(c) = out.command {
+                    let c = outputs.command(&mut rec, c, at)?;
+                    feedback.handle(&Event::Command(c), at);
+                }
+            } else {
+                let Some((at, out)) = feedback.poll(t) else {
+                    break;
+                };
+                if let Some(c) = out.command {
+                    outputs.force(&mut rec, c, at)?;
+                }
             }
-            next_tick = Some(due + tick);
         }
-        match msg.topic.as_str() {
+        let event = match msg.topic.as_str() {
             "glove/state" => {
                 let s: GloveState = msg
                     .decode()
                     .ok_or_else(|| anyhow::anyhow!("bad glove/state payload"))?;
                 rec.write(glove_id, &RecordedMessage::from_sample(&s, t))?;
-                // The node's watchdog fires every timeout while the glove is silent.
-                if let Some(prev) = last_glove {
-                    let mut due = prev + glove_timeout;
-                    while due < t {
-                        if let Some(mut c) = retarget.on_timeout().command {
-                            c.header = finalize(c.header, due, c.header.origin_ns);
-                            out_cmds.push((due, c));
-                        }
-                        due += glove_timeout;
-                    }
+                if let Some(c) = retarget.on_glove(&s, t).command {
+                    let c = outputs.command(&mut rec, c, t)?;
+                    feedback.handle(&Event::Command(c), t);
                 }
-                last_glove = Some(t);
-                if let Some(mut c) = retarget.on_glove(&s, t).command {
-                    c.header = finalize(c.header, t, c.header.origin_ns);
-                    let _ = feedback.handle(&Event::Command(c), t);
-                    out_cmds.push((t, c));
-                }
+                continue;
             }
             "hand/state" => {
                 let s: HandState = msg
                     .decode()
                     .ok_or_else(|| anyhow::anyhow!("bad hand/state payload"))?;
                 rec.write(state_id, &RecordedMessage::from_sample(&s, t))?;
-                next_tick.get_or_insert(t + tick);
-                if let Some(mut c) = feedback.handle(&Event::State(s), t).command {
-                    c.header = finalize(c.header, t, c.header.origin_ns);
-                    out_forces.push((t, c));
-                }
+                Event::State(s)
             }
             "hand/tactile" => {
                 let s: Tactile = msg
                     .decode()
                     .ok_or_else(|| anyhow::anyhow!("bad hand/tactile payload"))?;
                 rec.write(tactile_id, &RecordedMessage::from_sample(&s, t))?;
-                next_tick.get_or_insert(t + tick);
-                if let Some(mut c) = feedback.handle(&Event::Tactile(s), t).command {
-                    c.header = finalize(c.header, t, c.header.origin_ns);
-                    out_forces.push((t, c));
-                }
+                Event::Tactile(s)
             }
             "estop" => {
                 let s: EStop = msg
                     .decode()
                     .ok_or_else(|| anyhow::anyhow!("bad estop payload"))?;
                 rec.write(estop_id, &RecordedMessage::from_sample(&s, t))?;
-                if let Some(mut c) = feedback.handle(&Event::EStop(s), t).command {
-                    c.header = finalize(c.header, t, c.header.origin_ns);
-                    out_forces.push((t, c));
-                }
+                Event::EStop(s)
             }
-            _ => {}
-        }
-        // Write outputs as they are produced, keeping the file in time order.
-        for (at, c) in out_cmds.drain(..) {
-            rec.write(cmd_id, &RecordedMessage::from_sample(&c, at))?;
-            compare_cmd(&mut cmds, &c, recorded_cmds.get(&c.header.origin_ns));
-        }
-        for (at, c) in out_forces.drain(..) {
-            rec.write(force_id, &RecordedMessage::from_sample(&c, at))?;
-            compare_force(&mut forces, &c, recorded_forces.get(&c.header.origin_ns));
+            _ => continue,
+        };
+        if let Some(c) = feedback.handle(&event, t).command {
+            outputs.force(&mut rec, c, t)?;
         }
     }
+    let (cmds, forces) = (outputs.cmds, outputs.forces);
     let summary = rec.finish()?;
     out!(
         "reprocessed {} messages of {} into {}",
@@ -721,6 +678,106 @@ pub fn reprocess_cmd(
     }
     let _ = summary;
     Ok(ExitCode::SUCCESS)
+}
+
+/// Reprocessing's outputs: stamped as their node stamps them, written as they are made (the file
+/// stays in time order) and compared with the recorded outputs of the same origin.
+struct Outputs {
+    cmd_id: TopicId,
+    force_id: TopicId,
+    source: u32,
+    seq: u64,
+    /// The recorded outputs, by the origin stamp they descend from (first occurrence).
+    recorded_cmds: HashMap<u64, HandCommand>,
+    recorded_forces: HashMap<u64, GloveForceCommand>,
+    cmds: Comparison,
+    forces: Comparison,
+}
+
+impl Outputs {
+    /// Adds the output topics to `rec` and indexes the recorded outputs of `messages` (logged
+    /// after the inputs they answer).
+    fn new(rec: &mut Recorder, messages: &[OwnedMessage]) -> anyhow::Result<Self> {
+        let mut outputs = Self {
+            cmd_id: rec.add_message_type::<HandCommand>()?,
+            force_id: rec.add_message_type::<GloveForceCommand>()?,
+            source: source_id("reprocess"),
+            seq: 0,
+            recorded_cmds: HashMap::new(),
+            recorded_forces: HashMap::new(),
+            cmds: Comparison::default(),
+            forces: Comparison::default(),
+        };
+        for msg in messages {
+            match msg.topic.as_str() {
+                "hand/command" => {
+                    if let Some(c) = msg.decode::<HandCommand>() {
+                        outputs.recorded_cmds.entry(c.header.origin_ns).or_insert(c);
+                    }
+                }
+                "glove/force_command" => {
+                    if let Some(c) = msg.decode::<GloveForceCommand>() {
+                        outputs
+                            .recorded_forces
+                            .entry(c.header.origin_ns)
+                            .or_insert(c);
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok(outputs)
+    }
+
+    /// The header of an output made at `t`.
+    fn stamp(
+        &mut self,
+        mut header: teleop_msgs::SampleHeader,
+        t: u64,
+    ) -> teleop_msgs::SampleHeader {
+        self.seq += 1;
+        header.seq = self.seq;
+        header.stamp_ns = t;
+        if header.origin_ns == 0 {
+            header.origin_ns = t;
+        }
+        header.source_id = self.source;
+        header
+    }
+
+    /// Writes and compares a hand command made at `t`; returns it as published.
+    fn command(
+        &mut self,
+        rec: &mut Recorder,
+        mut c: HandCommand,
+        t: u64,
+    ) -> anyhow::Result<HandCommand> {
+        c.header = self.stamp(c.header, t);
+        rec.write(self.cmd_id, &RecordedMessage::from_sample(&c, t))?;
+        compare_cmd(
+            &mut self.cmds,
+            &c,
+            self.recorded_cmds.get(&c.header.origin_ns),
+        );
+        Ok(c)
+    }
+
+    /// Writes and compares a glove force command made at `t`.
+    fn force(
+        &mut self,
+        rec: &mut Recorder,
+        mut c: GloveForceCommand,
+        t: u64,
+    ) -> anyhow::Result<()> {
+        c.header = self.stamp(c.header, t);
+        rec.write(self.force_id, &RecordedMessage::from_sample(&c, t))?;
+        compare_force(
+            &mut self.forces,
+            &c,
+            self.recorded_forces.get(&c.header.origin_ns),
+        );
+        Ok(())
+    }
 }
 
 fn compare_cmd(c: &mut Comparison, new: &HandCommand, old: Option<&HandCommand>) {

@@ -1,7 +1,9 @@
 //! The force-feedback process's logic without its plumbing: its configuration file and the
 //! [`FeedbackEngine`] that turns tactile, hand-state, hand-command and e-stop samples (each with
-//! its receive time) into glove force commands. The `teleop-feedback` executable feeds it from the
-//! live topics; `teleop reprocess` feeds it from a recording, so both run the same code.
+//! its receive time), its ticks and its inputs' watchdogs (a
+//! [`Schedule`](teleop_runtime::schedule::Schedule)) into glove force commands. The
+//! `teleop-feedback` executable feeds it from the live topics and the clock; `teleop reprocess`
+//! feeds it from a recording and its log times, so both run the same code, schedule included.
 
 use std::path::{Path, PathBuf};
 
@@ -14,6 +16,7 @@ use teleop_msgs::{
     Tactile as TactileMsg,
 };
 use teleop_runtime::sample_time;
+use teleop_runtime::schedule::Schedule;
 
 /// The node's configuration file.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -106,8 +109,6 @@ pub enum Event {
     Command(HandCommand),
     /// An e-stop sample.
     EStop(EStop),
-    /// The periodic tick (stale inputs ramp down even when nothing arrives).
-    Tick,
 }
 
 /// What one event did.
@@ -127,7 +128,6 @@ pub struct Output {
 
 /// Force feedback with its input state.
 pub struct FeedbackEngine {
-    config: NodeConfig,
     profile: HandProfile,
     law: ForceFeedback,
     /// The newest tactile sample and when it was made.
@@ -137,13 +137,20 @@ pub struct FeedbackEngine {
     command: Option<HandCommand>,
     estop: bool,
     stale: bool,
+    /// The tick (`tick_ms`) and the watchdogs of tactile (`tactile_timeout_ms`) and hand state
+    /// (`hand_timeout_ms`).
+    schedule: Schedule,
 }
+
+/// The tactile input's index in the engine's schedule.
+const TACTILE: usize = 0;
+/// The hand state input's index in the engine's schedule.
+const STATE: usize = 1;
 
 impl FeedbackEngine {
     /// An engine for the hand `profile` with this configuration.
     pub fn new(config: &NodeConfig, profile: &HandProfile) -> anyhow::Result<Self> {
         Ok(Self {
-            config: config.clone(),
             profile: profile.clone(),
             law: ForceFeedback::new(config.feedback.clone(), profile)?,
             tactile: None,
@@ -151,7 +158,36 @@ impl FeedbackEngine {
             command: None,
             estop: false,
             stale: false,
+            schedule: {
+                let mut schedule = Schedule::new();
+                let tactile = schedule.watch(config.tactile_timeout_ms);
+                let state = schedule.watch(config.hand_timeout_ms);
+                debug_assert_eq!((tactile, state), (TACTILE, STATE));
+                schedule.tick_every(config.tick_ms);
+                schedule
+            },
         })
+    }
+
+    /// Starts the ticks: the first is due `tick_ms` after `at_ns`, the next every `tick_ms` after
+    /// that (absolute deadlines). The node starts them when its loop starts; reprocessing with
+    /// the recording's first hand sample.
+    pub fn start(&mut self, at_ns: u64) {
+        self.schedule.start_ticks(at_ns);
+    }
+
+    /// When the next tick or input watchdog is due, if no sample comes before.
+    pub fn next_due(&self) -> Option<u64> {
+        self.schedule.next_due()
+    }
+
+    /// What the ticks and the input watchdogs did by `now_ns`: a deadline and the output there,
+    /// the earliest first (call until `None`). Both step the law at their deadline, so stale
+    /// inputs ramp the force down even when nothing arrives, and an input is found stale as soon
+    /// as it is.
+    pub fn poll(&mut self, now_ns: u64) -> Option<(u64, Output)> {
+        let (at, _) = self.schedule.pop(now_ns)?;
+        Some((at, self.step(at)))
     }
 
     /// True while the e-stop is engaged.
@@ -163,16 +199,17 @@ impl FeedbackEngine {
     /// Tactile and hand-state samples are as old as their stamps say (never newer than their
     /// receipt, see [`sample_time`]): a sample from a topic's history, made before a restart, is
     /// stale when it arrives.
-    /// Steps the law on tactile samples, on hand state when the hand has no tactile data, on
-    /// e-stop changes and on ticks.
+    /// Steps the law on tactile samples, on hand state when the hand has no tactile data and on
+    /// e-stop changes (and on ticks, see [`poll`](Self::poll)).
     pub fn handle(&mut self, event: &Event, now_ns: u64) -> Output {
-        let mut out = Output::default();
         let step = match *event {
             Event::Tactile(t) => {
+                self.schedule.sample(TACTILE, t.header.stamp_ns, now_ns);
                 self.tactile = Some((t, sample_time(t.header.stamp_ns, now_ns)));
                 true
             }
             Event::State(s) => {
+                self.schedule.sample(STATE, s.header.stamp_ns, now_ns);
                 self.state = Some((s, sample_time(s.header.stamp_ns, now_ns)));
                 self.tactile.is_none()
             }
@@ -182,57 +219,67 @@ impl FeedbackEngine {
             }
             Event::EStop(e) => {
                 let engaged = e.engaged != 0;
-                if engaged != self.estop {
-                    out.estop_changed = Some(engaged);
-                    self.estop = engaged;
-                }
-                true
+                let changed = (engaged != self.estop).then_some(engaged);
+                self.estop = engaged;
+                let mut out = self.step(now_ns);
+                out.estop_changed = changed;
+                return out;
             }
-            Event::Tick => true,
         };
         if step {
-            let (inputs, origin) = self.inputs(now_ns);
-            let law = self.law.step(&inputs);
-            out.became_stale = law.stale && !self.stale;
-            out.became_fresh = !law.stale && self.stale;
-            self.stale = law.stale;
-            out.clamped = law.clamped;
-            let mut msg = GloveForceCommand {
-                force: law.force,
-                ..Default::default()
-            };
-            msg.header.origin_ns = origin;
-            for (slot, source) in msg.source.iter_mut().zip(law.source) {
-                *slot = source as u8;
-            }
-            if law.stale {
-                msg.flags |= force_flags::STALE;
-            }
-            if self.estop {
-                msg.flags |= force_flags::ESTOP;
-            }
-            if law.clamped > 0 {
-                msg.flags |= force_flags::CLAMPED;
-            }
-            out.command = Some(msg);
+            self.step(now_ns)
+        } else {
+            Output::default()
         }
-        out
+    }
+
+    /// Steps the law at `now_ns`.
+    fn step(&mut self, now_ns: u64) -> Output {
+        let (inputs, origin) = self.inputs(now_ns);
+        let law = self.law.step(&inputs);
+        let became_stale = law.stale && !self.stale;
+        let became_fresh = !law.stale && self.stale;
+        self.stale = law.stale;
+        let mut msg = GloveForceCommand {
+            force: law.force,
+            ..Default::default()
+        };
+        msg.header.origin_ns = origin;
+        for (slot, source) in msg.source.iter_mut().zip(law.source) {
+            *slot = source as u8;
+        }
+        if law.stale {
+            msg.flags |= force_flags::STALE;
+        }
+        if self.estop {
+            msg.flags |= force_flags::ESTOP;
+        }
+        if law.clamped > 0 {
+            msg.flags |= force_flags::CLAMPED;
+        }
+        Output {
+            command: Some(msg),
+            became_stale,
+            became_fresh,
+            estop_changed: None,
+            clamped: law.clamped,
+        }
     }
 
     /// The law's inputs at `now_ns`, and the origin stamp of the newest device sample used.
     fn inputs(&self, now_ns: u64) -> (Inputs, u64) {
-        let fresh = |at: u64, timeout_ms: u64| now_ns.saturating_sub(at) <= timeout_ms * 1_000_000;
+        let fresh = |input: usize, made: u64| !self.schedule.stale(input, made, now_ns);
         let mut origin = 0;
         let tactile = match &self.tactile {
             None => Tactile::Absent,
-            Some((_, at)) if !fresh(*at, self.config.tactile_timeout_ms) => Tactile::Stale,
+            Some((_, made)) if !fresh(TACTILE, *made) => Tactile::Stale,
             Some((msg, _)) => {
                 origin = msg.header.origin_ns;
                 Tactile::Fresh(tactile_from_msg(msg, &self.law.config().pst))
             }
         };
         let hand = match &self.state {
-            Some((msg, at)) if fresh(*at, self.config.hand_timeout_ms) && msg.link_up != 0 => {
+            Some((msg, made)) if fresh(STATE, *made) && msg.link_up != 0 => {
                 if origin == 0 {
                     origin = msg.header.origin_ns;
                 }
@@ -402,19 +449,30 @@ mod tests {
             .handle(&Event::Command(HandCommand::default()), 0)
             .command
             .is_none());
+        e.start(0);
         for i in 0..200 {
             t.header.stamp_ns = i * ms;
+            while e.poll(i * ms).is_some() {}
             let out = e.handle(&Event::Tactile(t), i * ms);
             assert!(out.command.is_some());
         }
-        let out = e.handle(&Event::Tick, 200 * ms);
+        let (at, out) = e.poll(205 * ms).unwrap();
+        assert_eq!(at, 200 * ms, "ticks every tick_ms from the start");
         assert!(
             out.command.unwrap().force[3] > 400,
             "index force {:?}",
             out.command
         );
-        let out = e.handle(&Event::Tick, 400 * ms);
-        assert!(out.became_stale, "200 ms without tactile");
+        assert_eq!(e.next_due(), Some(210 * ms));
+        // The tactile watchdog steps the law at the first instant the input is stale (its
+        // newest sample was made at 199 ms), between two ticks.
+        let mut steps = std::iter::from_fn(|| e.poll(400 * ms));
+        let stale = steps.find(|(_, out)| out.became_stale).unwrap();
+        assert_eq!(
+            stale.0,
+            299 * ms + 1,
+            "100 ms after the newest sample was made"
+        );
         let engaged = e.handle(
             &Event::EStop(EStop {
                 engaged: 1,

@@ -1,6 +1,7 @@
 //! `teleop-feedback`: the force-feedback process. Subscribes to `hand/tactile`, `hand/state`,
-//! `hand/command` and `estop`, runs the [`FeedbackEngine`] on every sample and on a tick every
-//! `tick_ms` (so stale inputs ramp the force to zero even when nothing arrives), and publishes
+//! `hand/command` and `estop`, runs the [`FeedbackEngine`] on every sample and on its schedule (a
+//! tick every `tick_ms`, so stale inputs ramp the force to zero even when nothing arrives, and
+//! each input's watchdog), and publishes
 //! `glove/force_command`. An engaged e-stop zeroes every force at once until it is released; it
 //! is latched outside the process (`teleop_runtime::EStopInput`), so a restart keeps it.
 //!
@@ -15,34 +16,32 @@ use teleop_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
 use teleop_runtime::{
-    init_logging, now_ns, EStopInput, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime,
+    node_main, now_ns, EStopInput, EventLoop, Flow, Health, Input, NodeArgs, NodeRuntime,
     Publisher, Wake,
 };
+
+/// The health details of the force feedback: per glove finger (`GLOVE_FINGERS` order), where
+/// its force came from (a `contact_source` value).
+const SOURCE_DETAILS: [&str; 5] = [
+    "source_little",
+    "source_ring",
+    "source_middle",
+    "source_index",
+    "source_thumb",
+];
 
 #[derive(Parser)]
 #[command(version, about = "Tactile + hand state -> glove force command")]
 struct Args {
-    /// Node configuration (TOML); defaults are used without it.
-    #[arg(long)]
-    config: Option<PathBuf>,
+    #[command(flatten)]
+    node: NodeArgs,
     /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
     #[arg(long)]
     profile: Option<PathBuf>,
-    /// iceoryx2 node name.
-    #[arg(long, default_value = "feedback")]
-    name: String,
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    match start(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("stopping: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    node_main("feedback", start)
 }
 
 /// Logs, counts and publishes what one event did.
@@ -67,9 +66,9 @@ fn emit(
     if let Some(cmd) = out.command {
         health.count_loop();
         forces.publish(&cmd)?;
-        let mut detail = [0u8; 7];
-        detail[..5].copy_from_slice(&cmd.source);
-        health.set_detail(detail);
+        for (name, source) in SOURCE_DETAILS.iter().zip(cmd.source) {
+            health.set_detail(name, f64::from(source));
+        }
     }
     Ok(())
 }
@@ -83,13 +82,12 @@ fn estop_sample(engaged: bool) -> EStop {
 }
 
 /// Loads everything the arguments name, then runs.
-fn start(args: &Args) -> anyhow::Result<()> {
+fn start(args: Args) -> anyhow::Result<()> {
     let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
-    let (config, profile) = load(args.config.as_deref(), profile)?;
+    let (config, profile) = load(args.node.config.as_deref(), profile)?;
     tracing::info!(hand = %profile.name, "hand profile loaded");
     let engine = FeedbackEngine::new(&config, &profile)?;
-    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-    run(&runtime, &config, engine)
+    run(&args.node.runtime()?, &config, engine)
 }
 
 fn run(
@@ -117,7 +115,15 @@ fn run(
     tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
 
     let mut failure: Option<anyhow::Error> = None;
+    // The ticks fall every tick_ms from here (the loop's tick, attached just after, is the
+    // wake-up for them; the inputs' deadlines for their watchdogs).
+    engine.start(now_ns());
     let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
+        // The engine's ticks and watchdogs, whatever woke the loop: what fell due by now, in
+        // time order, before any newer sample.
+        while let Some((_, out)) = engine.poll(now_ns()) {
+            emit(out, &mut forces, &mut health)?;
+        }
         let mut events = Vec::new();
         // The e-stop on every wake: its doorbell, or its latch read every LATCH_POLL when the
         // doorbell could not be rung.
@@ -128,11 +134,7 @@ fn run(
             Wake::Input(0) => tactile.drain(|t| events.push(Event::Tactile(*t))),
             Wake::Input(1) => state.drain(|s| events.push(Event::State(*s))),
             Wake::Input(2) => command.drain(|c| events.push(Event::Command(*c))),
-            Wake::Input(_) => 1,
-            Wake::Timeout(_) | Wake::Tick => {
-                events.push(Event::Tick);
-                1
-            }
+            Wake::Input(_) | Wake::Timeout(_) | Wake::Tick => 0,
         };
         for event in &events {
             emit(engine.handle(event, now_ns()), &mut forces, &mut health)?;

@@ -1,14 +1,15 @@
 //! The retargeting process's logic without its plumbing: its configuration file and the
-//! [`RetargetEngine`] that turns glove samples (and input timeouts) into hand commands. The
-//! `teleop-retarget` executable feeds it from the live topics; `teleop reprocess` feeds it from a
-//! recording, so both run exactly the same code.
+//! [`RetargetEngine`] that turns glove samples (and its glove watchdog, a
+//! [`Schedule`](teleop_runtime::schedule::Schedule)) into hand commands. The `teleop-retarget`
+//! executable feeds it from the live topics and the clock; `teleop reprocess` feeds it from a
+//! recording and its log times, so both run exactly the same code, schedule included.
 
 use std::path::{Path, PathBuf};
 
 use teleop_hand_profile::{CommandUnits, HandProfile};
 use teleop_msgs::{command_flags, control_mode, units, GloveState, HandCommand, MAX_JOINTS};
 use teleop_retargeting::{Calibration, GloveInput, JointTargets, RetargetConfig, Retargeter};
-use teleop_runtime::sample_time;
+use teleop_runtime::schedule::Schedule;
 
 // The retargeter sizes its joint arrays with the profile crate's bound; the contract must carry
 // as many.
@@ -131,9 +132,12 @@ pub struct RetargetEngine {
     command: CommandShape,
     stale: bool,
     last_origin: u64,
-    /// A glove sample made longer ago than this is stale when it arrives.
-    timeout_ns: u64,
+    /// The glove's watchdog (`glove_timeout_ms`).
+    schedule: Schedule,
 }
+
+/// The glove's input index in the engine's schedule.
+const GLOVE: usize = 0;
 
 impl RetargetEngine {
     /// An engine for the hand `profile` with this configuration and calibration.
@@ -147,18 +151,25 @@ impl RetargetEngine {
             command: CommandShape::of(profile),
             stale: true,
             last_origin: 0,
-            timeout_ns: config.glove_timeout_ms.max(1).saturating_mul(1_000_000),
+            schedule: {
+                let mut schedule = Schedule::new();
+                let glove = schedule.watch(config.glove_timeout_ms);
+                debug_assert_eq!(glove, GLOVE);
+                schedule
+            },
         })
     }
 
     /// A glove sample arrived at `received_ns` (CLOCK_MONOTONIC, or the log time when
     /// reprocessing). A glove that reports its link down counts as stale input, and so does a
-    /// sample made longer than the glove timeout ago by its stamp (never newer than its receipt,
-    /// see [`sample_time`]): one from the topic's history, made before a restart, moves nothing.
+    /// sample made longer than the glove timeout ago by its stamp (see
+    /// [`Schedule::sample`]): one from the topic's history, made before a restart, moves nothing.
     pub fn on_glove(&mut self, sample: &GloveState, received_ns: u64) -> Output {
-        let made = sample_time(sample.header.stamp_ns, received_ns);
-        if sample.link_up == 0 || received_ns - made > self.timeout_ns {
-            return self.on_timeout();
+        let stale = self
+            .schedule
+            .sample(GLOVE, sample.header.stamp_ns, received_ns);
+        if sample.link_up == 0 || stale {
+            return self.hold();
         }
         let targets = self.retargeter.step(&GloveInput {
             t_ns: sample.header.origin_ns,
@@ -175,9 +186,22 @@ impl RetargetEngine {
         }
     }
 
-    /// No glove sample within the timeout: repeat the last command flagged as held (nothing
-    /// before the first sample).
-    pub fn on_timeout(&mut self) -> Output {
+    /// When the glove's watchdog fires next, if no sample comes before (`None`: no sample yet).
+    pub fn next_due(&self) -> Option<u64> {
+        self.schedule.next_due()
+    }
+
+    /// What the glove's watchdog did by `now_ns`: its deadline and the output there, the
+    /// earliest first (call until `None`). It fires when the newest glove sample becomes older
+    /// than `glove_timeout_ms` and every timeout after, each time repeating the last command
+    /// flagged as held.
+    pub fn poll(&mut self, now_ns: u64) -> Option<(u64, Output)> {
+        let (at, _) = self.schedule.pop(now_ns)?;
+        Some((at, self.hold()))
+    }
+
+    /// Stale input: repeat the last command flagged as held (nothing before the first sample).
+    fn hold(&mut self) -> Output {
         let became_stale = !self.stale;
         self.stale = true;
         Output {
@@ -296,7 +320,7 @@ mod tests {
         let cmd = CommandShape::of(&revo2()).command(&targets, 77);
         assert_eq!(cmd.header.origin_ns, 77);
         assert_eq!(cmd.joint_count, 6);
-        assert_eq!(cmd.hand_model, teleop_msgs::hand_model::REVO2);
+        assert_eq!(cmd.hand_model, teleop_msgs::device_model::REVO2);
         assert_eq!(cmd.units, units::NORMALISED);
         let t: Vec<f32> = cmd.active_joints().iter().map(|j| j.target).collect();
         assert_eq!(t, vec![0.1, 0.2, 0.3, 0.4, 0.5, 0.6]);
@@ -311,7 +335,7 @@ mod tests {
         values[2] = 1.0; // FFJ3 closed: 90 degrees
         values[3] = 0.5; // FFJ4 half way from -20 to 20 degrees: 0
         let cmd = CommandShape::of(&shadow).command(&targets(&values), 1);
-        assert_eq!(cmd.hand_model, teleop_msgs::hand_model::SHADOW);
+        assert_eq!(cmd.hand_model, teleop_msgs::device_model::SHADOW);
         assert_eq!(cmd.units, units::PHYSICAL);
         assert_eq!(cmd.joint_count, 24);
         assert!((cmd.joints[2].target - core::f32::consts::FRAC_PI_2).abs() < 1e-5);
@@ -320,7 +344,7 @@ mod tests {
         // Model ids in the profiles are the contract's.
         assert_eq!(
             HandProfile::builtin("allegro").unwrap().model_id,
-            teleop_msgs::hand_model::ALLEGRO
+            teleop_msgs::device_model::ALLEGRO
         );
     }
 
@@ -328,30 +352,44 @@ mod tests {
     fn engine_holds_on_timeout_and_link_down_and_reports_transitions() {
         let mut e =
             RetargetEngine::new(&NodeConfig::default(), Calibration::default(), &revo2()).unwrap();
+        let ms = 1_000_000;
         assert_eq!(
-            e.on_timeout().command,
+            e.poll(u64::MAX),
             None,
-            "nothing to hold before the first sample"
+            "no watchdog before the first sample"
         );
         let mut s = GloveState {
-            link_up: 1,
+            link_up: 0,
             raw_position: [500; 6],
             ..Default::default()
         };
-        s.header.origin_ns = 1_000_000;
-        s.header.stamp_ns = 1_000_000;
-        let out = e.on_glove(&s, 1_000_000);
+        assert_eq!(
+            e.on_glove(&s, 0).command,
+            None,
+            "nothing to hold before the first sample"
+        );
+        s.link_up = 1;
+        s.header.origin_ns = ms;
+        s.header.stamp_ns = ms;
+        let out = e.on_glove(&s, 2 * ms);
         assert!(out.became_fresh && out.command.is_some());
         let live = out.command.unwrap();
-        let held = e.on_timeout();
+        // The watchdog runs from when the sample was made (1 ms), not from its arrival.
+        assert_eq!(e.next_due(), Some(101 * ms + 1));
+        assert_eq!(e.poll(101 * ms), None, "exactly the timeout old: fresh");
+        let (at, held) = e.poll(250 * ms).unwrap();
+        assert_eq!(at, 101 * ms + 1);
         assert!(held.became_stale);
         let cmd = held.command.unwrap();
         assert_ne!(cmd.flags & command_flags::HELD, 0);
         assert_eq!(cmd.joints[2].target, live.joints[2].target);
-        assert!(!e.on_timeout().became_stale, "reported once");
+        let (at, again) = e.poll(250 * ms).unwrap();
+        assert_eq!(at, 201 * ms + 1, "every timeout while the glove is silent");
+        assert!(!again.became_stale, "reported once");
+        assert_eq!(e.poll(250 * ms), None);
         s.link_up = 0;
         assert_ne!(
-            e.on_glove(&s, 1_000_000).command.unwrap().flags & command_flags::HELD,
+            e.on_glove(&s, 260 * ms).command.unwrap().flags & command_flags::HELD,
             0
         );
     }

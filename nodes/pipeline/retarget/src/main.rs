@@ -1,9 +1,9 @@
 //! `teleop-retarget`: the retargeting process. Subscribes to `glove/state`, runs the
 //! [`RetargetEngine`] on every sample and publishes `hand/command` for the hand its profile
 //! describes (position targets, normalised or in radians as the profile says, with the slew limit
-//! as speed limit). A stale glove (no sample within
-//! `glove_timeout_ms`, or the glove reports its link down) makes it repeat the last command
-//! flagged as held: the hand holds, never drifts.
+//! as speed limit). A stale glove (its newest sample older than `glove_timeout_ms` by its stamp,
+//! or the glove reports its link down) makes it repeat the last command flagged as held: the
+//! hand holds, never drifts. When that happens is the engine's schedule; the loop only wakes.
 //!
 //! Owns only the plumbing between the topics and the engine.
 
@@ -16,7 +16,7 @@ use teleop_hand_profile::HandProfile;
 use teleop_msgs::{GloveState, HandCommand};
 use teleop_retarget::{load, Loaded, NodeConfig, Output, RetargetEngine};
 use teleop_runtime::{
-    init_logging, now_ns, EventLoop, Flow, Health, Input, IpcSettings, NodeRuntime, Publisher, Wake,
+    node_main, now_ns, EventLoop, Flow, Health, Input, NodeArgs, NodeRuntime, Publisher, Wake,
 };
 
 #[derive(Parser)]
@@ -25,49 +25,40 @@ use teleop_runtime::{
     about = "Glove state -> hand command, for the hand a profile describes"
 )]
 struct Args {
-    /// Node configuration (TOML); defaults are used without it.
-    #[arg(long)]
-    config: Option<PathBuf>,
+    #[command(flatten)]
+    node: NodeArgs,
     /// Operator calibration profile (TOML); overrides the one named in the configuration.
     #[arg(long)]
     calibration: Option<PathBuf>,
     /// Hand profile (config/hands/<hand>.toml); overrides `hand_profile` in the configuration.
     #[arg(long)]
     profile: Option<PathBuf>,
-    /// iceoryx2 node name.
-    #[arg(long, default_value = "retarget")]
-    name: String,
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    match start(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("stopping: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    node_main("retarget", start)
 }
 
 /// Loads everything the arguments name, then runs.
-fn start(args: &Args) -> anyhow::Result<()> {
+fn start(args: Args) -> anyhow::Result<()> {
     let profile = args.profile.as_deref().map(HandProfile::load).transpose()?;
     let Loaded {
         config,
         calibration,
         calibration_path,
         profile,
-    } = load(args.config.as_deref(), args.calibration.as_deref(), profile)?;
+    } = load(
+        args.node.config.as_deref(),
+        args.calibration.as_deref(),
+        profile,
+    )?;
     match &calibration_path {
         Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
         None => tracing::info!("no calibration profile: using the full 0..1000 range"),
     }
     tracing::info!(hand = %profile.name, joints = profile.joints.len(), "hand profile loaded");
     let engine = RetargetEngine::new(&config, calibration, &profile)?;
-    let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-    run(&runtime, &config, engine)
+    run(&args.node.runtime()?, &config, engine)
 }
 
 fn run(
@@ -108,17 +99,18 @@ fn run(
     };
     let mut failure: Option<anyhow::Error> = None;
     let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
-        match wake {
-            Wake::Input(_) => {
-                let mut outs = Vec::new();
-                glove.drain(|s| outs.push(engine.on_glove(s, now_ns())));
-                for out in outs {
-                    health.count_loop();
-                    emit(out, &mut commands, &mut health)?;
-                }
+        // The engine's glove watchdog, whatever woke the loop (the input's deadline is the
+        // wake-up for it): what fell due by now, in time order, before any newer sample.
+        while let Some((_, out)) = engine.poll(now_ns()) {
+            emit(out, &mut commands, &mut health)?;
+        }
+        if let Wake::Input(_) = wake {
+            let mut outs = Vec::new();
+            glove.drain(|s| outs.push(engine.on_glove(s, now_ns())));
+            for out in outs {
+                health.count_loop();
+                emit(out, &mut commands, &mut health)?;
             }
-            Wake::Timeout(_) => emit(engine.on_timeout(), &mut commands, &mut health)?,
-            Wake::Tick => {}
         }
         if last_health.elapsed() >= health_period {
             last_health = Instant::now();
