@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use teleop_bridge::config::BridgeConfig;
 use teleop_bridge::station::{run, Options};
-use teleop_runtime::init_logging;
+use teleop_runtime::node_main;
 
 #[derive(Parser)]
 #[command(
@@ -18,7 +18,7 @@ struct Args {
     #[arg(long)]
     config: PathBuf,
     /// iceoryx2 node name.
-    #[arg(long, default_value = "bridge")]
+    #[arg(long)]
     name: String,
     /// A control socket for fault injection in tests and benchmarks (`delay MS`,
     /// `loss PERCENT`, `clear`, `stats`).
@@ -27,22 +27,11 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    let result = BridgeConfig::load(&args.config)
-        .map_err(anyhow::Error::from)
-        .and_then(|config| {
-            run(Options {
-                config,
-                name: args.name,
-                control: args.control,
-            })
-        });
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("stopping: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    node_main("bridge", |args: Args| -> anyhow::Result<()> {
+        run(Options {
+            config: BridgeConfig::load(&args.config)?,
+            name: args.name,
+            control: args.control,
+        })
+    })
 }

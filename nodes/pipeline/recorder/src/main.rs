@@ -10,7 +10,7 @@ use teleop_recorder::{
     SESSION_METADATA,
 };
 use teleop_recording::WriterOptions;
-use teleop_runtime::{init_logging, IpcSettings, Namespace, NodeRuntime};
+use teleop_runtime::{IpcSettings, Namespace, NodeMain, NodeRuntime};
 
 #[derive(Parser)]
 #[command(version, about = "Record the pipeline's topics into MCAP")]
@@ -39,7 +39,7 @@ struct Args {
     #[arg(long, value_parser = parse_metadata)]
     metadata: Vec<(String, PathBuf)>,
     /// iceoryx2 node name.
-    #[arg(long, default_value = "recorder")]
+    #[arg(long)]
     name: String,
 }
 
@@ -49,16 +49,10 @@ fn parse_metadata(s: &str) -> Result<(String, PathBuf), String> {
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            // The line `teleop launch` looks for to say RECORDING STOPPED in its summary.
-            eprintln!("recording stopped: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    // On failure the line `teleop launch` looks for to say RECORDING STOPPED in its summary.
+    NodeMain::new("recorder")
+        .failure_line("recording stopped")
+        .run(|args: Args| run(&args))
 }
 
 fn run(args: &Args) -> anyhow::Result<()> {

@@ -10,8 +10,8 @@ use clap::Parser;
 use teleop_hand_profile::HandProfile;
 use teleop_recording::Filter;
 use teleop_runtime::{
-    init_logging, now_ns, qualified, IpcSettings, Namespace, NodeRuntime, ENV_IPC_PREFIX,
-    ENV_IPC_ROOT, ENV_NAMESPACE,
+    now_ns, qualified, IpcSettings, Namespace, NodeMain, NodeRuntime, ENV_IPC_PREFIX, ENV_IPC_ROOT,
+    ENV_NAMESPACE,
 };
 use teleop_viewer::content::SceneConfig;
 use teleop_viewer::kinematics::RobotHand;
@@ -80,7 +80,7 @@ struct Args {
     #[arg(long)]
     duration: Option<f64>,
     /// Live: the viewer's iceoryx2 node name.
-    #[arg(long, default_value = "viewer")]
+    #[arg(long)]
     name: String,
     /// Live: iceoryx2 root path of the pipeline.
     #[arg(long, env = ENV_IPC_ROOT)]
@@ -91,15 +91,9 @@ struct Args {
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    match run(&args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    NodeMain::new("viewer")
+        .failure_line("error")
+        .run(|args: Args| run(&args))
 }
 
 fn run(args: &Args) -> anyhow::Result<()> {

@@ -5,48 +5,25 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use teleop_glove::GloveConfig;
-use teleop_runtime::{init_logging, load_toml, IpcSettings, NodeRuntime};
+use teleop_runtime::{node_main, NodeArgs};
 
 #[derive(Parser)]
 #[command(version, about = "EH55BF1 glove: glove state out, force commands in")]
 struct Args {
-    /// Node configuration (TOML).
-    #[arg(long)]
-    config: Option<PathBuf>,
+    #[command(flatten)]
+    node: NodeArgs,
     /// Serial port; overrides the configuration.
     #[arg(long)]
     port: Option<PathBuf>,
-    /// iceoryx2 node name.
-    #[arg(long, default_value = "glove")]
-    name: String,
 }
 
 fn main() -> ExitCode {
-    init_logging();
-    let args = Args::parse();
-    let result = load(&args).and_then(|config| {
-        let runtime = NodeRuntime::new(&args.name, &IpcSettings::from_env())?;
-        teleop_glove::run(&runtime, &config)
-    });
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("stopping: {e:#}");
-            ExitCode::FAILURE
+    node_main("glove", |args: Args| -> anyhow::Result<()> {
+        let mut config: GloveConfig = args.node.load_config()?;
+        if let Some(port) = args.port {
+            config.port = port;
         }
-    }
-}
-
-fn load(args: &Args) -> anyhow::Result<GloveConfig> {
-    let (mut config, origin) = match &args.config {
-        Some(path) => (load_toml::<GloveConfig>(path)?, path.display().to_string()),
-        None => (GloveConfig::default(), "defaults".to_string()),
-    };
-    if let Some(port) = &args.port {
-        config.port = port.clone();
-    }
-    config
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{origin}: {e}"))?;
-    Ok(config)
+        args.node.check(config.validate())?;
+        teleop_glove::run(&args.node.runtime()?, &config)
+    })
 }
