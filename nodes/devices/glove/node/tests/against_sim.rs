@@ -3,26 +3,27 @@
 //! inject faults; the node is the real `teleop-glove` executable with `serialport`.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use teleop_e2e::rig::{Logs, Process, Rig as TestRig};
+use teleop_e2e::watch::wait_sample;
 use teleop_glove_protocol::BaudRate;
 use teleop_msgs::{GloveDiagnostics, GloveForceCommand, GloveState, NodeHealth};
-use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
 use teleop_sim_glove::hand::{Hand, HandModel, Script};
 use teleop_sim_glove::{Faults, SimGlove, SimOptions};
 
-/// Fields drop in order: the ports before their node, the IPC folder last.
+/// Fields drop in order: the ports before their node, the node (its log printed on failure)
+/// and the sandbox next, the simulator last.
 struct Rig {
     states: Subscriber<GloveState>,
     diagnostics: Subscriber<GloveDiagnostics>,
     health: Subscriber<NodeHealth>,
     forces: Publisher<GloveForceCommand>,
     _runtime: NodeRuntime,
-    node: Option<Child>,
+    rig: TestRig,
     sim: SimGlove,
-    ipc: IpcSettings,
-    dir: tempfile::TempDir,
 }
 
 impl Rig {
@@ -31,10 +32,8 @@ impl Rig {
     }
 
     fn with_answer_timeout(answer_timeout_ms: u64) -> Self {
-        teleop_runtime::init_logging();
-        let dir = tempfile::tempdir().unwrap();
-        let ipc = IpcSettings::isolated(&dir.path().join("iox"));
-        let link = dir.path().join("glove");
+        let mut rig = TestRig::new();
+        let link = rig.path("glove");
         let sim = SimGlove::start(
             SimOptions {
                 link: link.clone(),
@@ -47,36 +46,20 @@ impl Rig {
             Hand::new(Script::Hold([600.0; 6]), HandModel::default()),
         )
         .unwrap();
-        let config = dir.path().join("glove.toml");
-        std::fs::write(
-            &config,
-            format!(
-                "port = {:?}\nanswer_timeout_ms = {answer_timeout_ms}\ndiagnostics_hz = 4.0\nforce_timeout_ms = 100\nreopen_backoff_ms = [50, 400]\nhealth_period_ms = 200\n",
-                link.display().to_string()
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("node.log")).unwrap();
-        let node = Command::new(env!("CARGO_BIN_EXE_teleop-glove"))
-            .arg("--config")
-            .arg(&config)
-            .envs(ipc.to_env())
-            .env("TELEOP_LOG", "info")
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let runtime = NodeRuntime::new("glove-test", &ipc).unwrap();
+        let config = format!(
+            "port = {:?}\nanswer_timeout_ms = {answer_timeout_ms}\ndiagnostics_hz = 4.0\nforce_timeout_ms = 100\nreopen_backoff_ms = [50, 400]\nhealth_period_ms = 200\n",
+            link.display().to_string()
+        );
+        rig.start_node("glove", env!("CARGO_BIN_EXE_teleop-glove"), &config);
+        let runtime = NodeRuntime::new("glove-test", &rig.sandbox.ipc).unwrap();
         let rig = Self {
             states: runtime.subscriber().unwrap(),
             diagnostics: runtime.subscriber().unwrap(),
             health: runtime.subscriber().unwrap(),
             forces: runtime.publisher().unwrap(),
             _runtime: runtime,
-            node: Some(node),
+            rig,
             sim,
-            ipc,
-            dir,
         };
         rig.wait_until(Duration::from_secs(20), "the first glove state", |s| {
             s.link_up == 1
@@ -85,7 +68,7 @@ impl Rig {
     }
 
     fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("node.log")).unwrap_or_default()
+        self.rig.logs()
     }
 
     /// Glove states received during `d`.
@@ -103,52 +86,18 @@ impl Rig {
         &self,
         timeout: Duration,
         what: &str,
-        mut ok: impl FnMut(&GloveState) -> bool,
+        ok: impl FnMut(&GloveState) -> bool,
     ) -> GloveState {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            self.states.drain(|s| {
-                if found.is_none() && ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        wait_sample(&self.states, &self.rig, timeout, what, ok)
+    }
+
+    fn node(&mut self) -> &mut Process {
+        self.rig.process("glove")
     }
 
     fn node_alive(&mut self) -> bool {
-        self.node.as_mut().unwrap().try_wait().unwrap().is_none()
+        self.node().is_running()
     }
-}
-
-impl Drop for Rig {
-    fn drop(&mut self) {
-        if let Some(mut node) = self.node.take() {
-            stop(&mut node);
-        }
-        if std::thread::panicking() {
-            eprintln!("---- node log ----\n{}", self.log());
-        }
-        self.ipc.remove_shared_memory();
-    }
-}
-
-/// SIGINT, as Ctrl-C or `teleop launch` would, and wait for the exit.
-fn stop(node: &mut Child) {
-    // SAFETY: kill(2) of our own, not yet reaped child.
-    unsafe {
-        libc::kill(node.id() as libc::pid_t, libc::SIGINT);
-    }
-    node.wait().unwrap();
 }
 
 #[test]
@@ -236,7 +185,6 @@ fn glove_node_streams_states_near_line_rate_and_applies_force_commands() {
         })
         .unwrap();
     std::thread::sleep(Duration::from_millis(30));
-    let mut node = rig.node.take().unwrap();
     for _ in 0..5 {
         rig.forces
             .publish(&GloveForceCommand {
@@ -246,7 +194,7 @@ fn glove_node_streams_states_near_line_rate_and_applies_force_commands() {
             .unwrap();
         std::thread::sleep(Duration::from_millis(10));
     }
-    stop(&mut node);
+    rig.node().stop();
     assert_eq!(
         rig.sim.device().unwrap().force_set,
         [0; 5],
@@ -258,7 +206,7 @@ fn glove_node_streams_states_near_line_rate_and_applies_force_commands() {
 #[test]
 fn every_injected_fault_is_survived_counted_and_logged() {
     let mut rig = Rig::new();
-    let pid = rig.node.as_ref().unwrap().id();
+    let pid = rig.node().pid();
     for (name, mut faults) in [
         (
             "garbage",
@@ -312,7 +260,7 @@ fn every_injected_fault_is_survived_counted_and_logged() {
         let errors = after.last().unwrap().errors;
         assert!(errors > before, "{name}: counted ({before} -> {errors})");
         assert!(rig.node_alive(), "{name}: no restart");
-        assert_eq!(rig.node.as_ref().unwrap().id(), pid);
+        assert_eq!(rig.node().pid(), pid);
     }
     let stats = rig.sim.stats();
     assert!(
@@ -331,7 +279,7 @@ fn every_injected_fault_is_survived_counted_and_logged() {
 #[test]
 fn a_late_answer_is_discarded_counted_and_logged_without_a_restart() {
     let mut rig = Rig::with_answer_timeout(100);
-    let pid = rig.node.as_ref().unwrap().id();
+    let pid = rig.node().pid();
     // Past the node's answer timeout, within the one more timeout the link waits for late
     // answers (the link's own test checks the data after it).
     rig.sim.answer_late(Duration::from_millis(150));
@@ -346,7 +294,7 @@ fn a_late_answer_is_discarded_counted_and_logged_without_a_restart() {
     let states = rig.collect(Duration::from_millis(500));
     assert!(states.len() > 50 && states.iter().all(|s| s.link_up == 1));
     assert!(rig.node_alive());
-    assert_eq!(rig.node.as_ref().unwrap().id(), pid);
+    assert_eq!(rig.node().pid(), pid);
     let start = Instant::now();
     while !rig.log().contains("late=1") {
         assert!(start.elapsed() < Duration::from_secs(2), "{}", rig.log());
@@ -362,14 +310,14 @@ fn a_late_answer_is_discarded_counted_and_logged_without_a_restart() {
 #[test]
 fn unplug_and_replug_recover_without_a_restart() {
     let mut rig = Rig::new();
-    let pid = rig.node.as_ref().unwrap().id();
+    let pid = rig.node().pid();
     rig.sim.unplug(Duration::from_millis(700));
     rig.wait_until(Duration::from_secs(5), "link down", |s| s.link_up == 0);
     rig.wait_until(Duration::from_secs(10), "link up again", |s| s.link_up == 1);
     let states = rig.collect(Duration::from_millis(500));
     assert!(states.len() > 50 && states.iter().all(|s| s.link_up == 1));
     assert!(rig.node_alive());
-    assert_eq!(rig.node.as_ref().unwrap().id(), pid);
+    assert_eq!(rig.node().pid(), pid);
     assert_eq!(rig.sim.stats().unplugs, 1);
     let log = rig.log();
     assert!(
