@@ -34,7 +34,7 @@ use teleop_e2e::bench::{loadavg, percentiles};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
 use teleop_ecat_sim::SubDevice;
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState};
+use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 use teleop_sim_revo2::hand::Drive;
 use teleop_sim_revo2::{revo2_subdevice, Revo2};
@@ -159,7 +159,7 @@ fn run(stress: bool) {
         let k = 100 + (2 * i % 800) as i32;
         i += 1;
         let mut c = HandCommand {
-            hand_model: hand_model::REVO2,
+            hand_model: device_model::REVO2,
             joint_count: 6,
             control_mode: control_mode::POSITION,
             units: units::NORMALISED,

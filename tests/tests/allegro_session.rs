@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use teleop_e2e::{Sandbox, Session};
 use teleop_msgs::{
-    contact_source, hand_model, link_kind, GloveDiagnostics, GloveForceCommand, GloveState,
+    contact_source, device_model, link_kind, GloveDiagnostics, GloveForceCommand, GloveState,
     HandCommand, HandState,
 };
 use teleop_runtime::{NodeRuntime, Subscriber};
@@ -76,7 +76,7 @@ fn the_allegro_session_closes_the_loop_and_reprocesses() {
     wait_running(&session, &watch);
 
     let state = watch.state.latest().unwrap();
-    assert_eq!(state.hand_model, hand_model::ALLEGRO);
+    assert_eq!(state.hand_model, device_model::ALLEGRO);
     assert_eq!(state.joint_count, 16);
     assert_eq!(state.link_kind, link_kind::CAN);
     assert_eq!(state.link_up, 1);

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{
-    command_flags, contact_source, force_flags, hand_model, units, GloveForceCommand, GloveState,
+    command_flags, contact_source, device_model, force_flags, units, GloveForceCommand, GloveState,
     HandCommand, HandState, Tactile,
 };
 use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
@@ -86,7 +86,7 @@ impl Rig {
             }
             if let Some(normals) = tactile {
                 let mut state = HandState {
-                    hand_model: hand_model::REVO2,
+                    hand_model: device_model::REVO2,
                     joint_count: 6,
                     link_up: 1,
                     link_kind: teleop_msgs::link_kind::ETHERCAT,
@@ -97,7 +97,7 @@ impl Rig {
                 state.joints[0].position = 0.2;
                 self.state.publish(&state).unwrap();
                 let mut t = Tactile {
-                    hand_model: hand_model::REVO2,
+                    hand_model: device_model::REVO2,
                     fingertip_count: 5,
                     ..Default::default()
                 };
@@ -151,7 +151,7 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
         "one command per glove sample, got {}",
         cmds.len()
     );
-    assert_eq!(last.hand_model, hand_model::REVO2);
+    assert_eq!(last.hand_model, device_model::REVO2);
     assert_eq!(last.units, units::NORMALISED);
     // Revo2 order: thumb flex, thumb abduct, index, middle, ring, pinky; index clamped to 0.6.
     assert_close(&targets(&last), &[1.0, 0.8, 0.6, 0.5, 0.25, 0.0], 0.02);

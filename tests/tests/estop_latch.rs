@@ -9,7 +9,7 @@ use std::process::Output;
 use std::time::{Duration, Instant};
 
 use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
-use teleop_msgs::{force_flags, hand_model, units, GloveForceCommand, GloveState, HandCommand};
+use teleop_msgs::{device_model, force_flags, units, GloveForceCommand, GloveState, HandCommand};
 use teleop_msgs::{HandState, NodeHealth, Tactile};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 
@@ -58,7 +58,7 @@ impl Hand {
         while start.elapsed() < duration {
             self.state
                 .publish(&HandState {
-                    hand_model: hand_model::REVO2,
+                    hand_model: device_model::REVO2,
                     joint_count: 6,
                     link_up: 1,
                     units: units::NORMALISED,
@@ -66,7 +66,7 @@ impl Hand {
                 })
                 .unwrap();
             let mut t = Tactile {
-                hand_model: hand_model::REVO2,
+                hand_model: device_model::REVO2,
                 fingertip_count: 5,
                 ..Default::default()
             };

@@ -202,7 +202,7 @@ fn two_stations_across_a_veth_pair() {
             &format!("{name} bridge reports the link down"),
             || {
                 let mut down = false;
-                station.health_of("bridge", |h| down = h.detail[0] == 0);
+                station.health_of("bridge", |h| down = h.detail("link_state") == Some(0.0));
                 down
             },
         );
@@ -365,7 +365,7 @@ fn rogue_is_refused(
             &format!("{name} bridge reports the link up"),
             || {
                 let mut up = false;
-                station.health_of("bridge", |h| up = h.detail[0] == 1);
+                station.health_of("bridge", |h| up = h.detail("link_state") == Some(1.0));
                 up
             },
         );

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 
 use teleop_e2e::Sandbox;
-use teleop_msgs::{hand_model, units, GloveState, HandCommand, Message};
+use teleop_msgs::{device_model, units, GloveState, HandCommand, Message};
 use teleop_recording::{read_messages, Filter, RecordedMessage, Recorder, WriterOptions};
 
 fn sample() -> std::path::PathBuf {
@@ -69,7 +69,7 @@ fn the_profile_embedded_in_a_recording_drives_reprocessing() {
     let cmds = commands(&out);
     assert_eq!(cmds.len(), n);
     for c in &cmds {
-        assert_eq!(c.hand_model, hand_model::ALLEGRO);
+        assert_eq!(c.hand_model, device_model::ALLEGRO);
         assert_eq!(c.joint_count, 16);
         assert_eq!(c.units, units::PHYSICAL);
     }
@@ -140,7 +140,7 @@ fn a_recording_without_a_profile_uses_the_shipped_profile_of_its_hand() {
     assert!(cmds.len() > 1000);
     assert!(cmds
         .iter()
-        .all(|c| c.hand_model == hand_model::REVO2 && c.joint_count == 6));
+        .all(|c| c.hand_model == device_model::REVO2 && c.joint_count == 6));
 }
 
 #[test]

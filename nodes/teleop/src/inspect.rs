@@ -6,13 +6,14 @@
 //! namespace given or named in the topic (`left/hand/command`).
 
 use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
-use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, TopicVisitor};
+use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, NodeHealth, TopicVisitor};
 use teleop_runtime::{
     discover_namespaces, latch_path, latched_namespaces, now_ns, qualified, set_latch, split,
     EventLoop, Flow, Input, IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber,
@@ -276,6 +277,7 @@ pub fn stats(
         }
     }
     let mut probes = Vec::new();
+    let mut health = Vec::new();
     for ns in covered(ipc, namespaces)? {
         for t in teleop_msgs::topics() {
             probes.push(
@@ -283,12 +285,29 @@ pub fn stats(
                     .ok_or_else(|| unknown_topic(t.name))??,
             );
         }
+        let sub = runtime.subscriber_in::<NodeHealth>(ns.as_ref())?;
+        // Reports from before the window are not this window's.
+        sub.drain(|_| {});
+        health.push(sub);
     }
-    let inputs: Vec<Input> = probes.iter().map(|p| Input::new(p.listener())).collect();
+    let inputs: Vec<Input> = probes
+        .iter()
+        .map(|p| p.listener())
+        .chain(health.iter().map(Subscriber::listener))
+        .map(Input::new)
+        .collect();
+    let mut latest: BTreeMap<String, NodeHealth> = BTreeMap::new();
     let start = Instant::now();
     let stop = EventLoop::new(Duration::from_millis(50)).run(&inputs, |wake| {
         if let Wake::Input(i) = wake {
-            probes[i].drain();
+            match probes.get(i) {
+                Some(probe) => probe.drain(),
+                None => {
+                    health[i - probes.len()].drain(|h| {
+                        latest.insert(h.name(), *h);
+                    });
+                }
+            }
         }
         if start.elapsed() >= window {
             Flow::Break(())
@@ -317,10 +336,34 @@ pub fn stats(
     for p in &probes {
         out!("{}", p.report(measured))?;
     }
+    out!("{}", health_table(&latest))?;
     if stop != StopReason::Requested {
         out!("(interrupted)")?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Each node's newest health report: its counters and its details by name.
+fn health_table(latest: &BTreeMap<String, NodeHealth>) -> String {
+    let mut out = format!(
+        "{:<28} {:>8} {:>8} {:>8} {:>8}  DETAILS",
+        "NODE", "TIMEOUTS", "ERRORS", "CLAMPS", "DROPS"
+    );
+    for (name, h) in latest {
+        let details: Vec<String> = h
+            .details()
+            .map(|(name, value)| format!("{name}={value}"))
+            .collect();
+        out.push_str(&format!(
+            "\n{name:<28} {:>8} {:>8} {:>8} {:>8}  {}",
+            h.timeouts,
+            h.errors,
+            h.clamps,
+            h.dropped,
+            details.join(" ")
+        ));
+    }
+    out
 }
 
 /// How long `teleop estop` waits for the nodes that obey the e-stop to acknowledge it.
@@ -566,4 +609,27 @@ fn print_acks(sides: &mut [Side]) -> usize {
         );
     }
     acknowledged
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn health_table_shows_counters_and_details_by_name() {
+        let mut h = NodeHealth {
+            errors: 3,
+            ..Default::default()
+        };
+        h.set_name("left/allegro");
+        h.set_detail("reconnects", 2.0);
+        h.set_detail("rtt_ms", 0.25);
+        let table = health_table(&BTreeMap::from([(h.name(), h)]));
+        let row = table.lines().nth(1).unwrap();
+        assert!(row.starts_with("left/allegro "), "{table}");
+        assert!(row.ends_with("  reconnects=2 rtt_ms=0.25"), "{table}");
+        let counters: Vec<&str> = row.split_whitespace().skip(1).take(4).collect();
+        assert_eq!(counters, ["0", "3", "0", "0"], "{table}");
+    }
 }

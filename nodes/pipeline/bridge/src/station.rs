@@ -433,10 +433,11 @@ fn outgoing(
             }
             counted = (errors, stale);
             health.set_dropped(shared.gaps.load(Ordering::Relaxed));
-            let tens = |ns: u64| u16::try_from(ns / 10_000).unwrap_or(u16::MAX).to_le_bytes();
-            let rtt = tens(shared.rtt_ns.load(Ordering::Relaxed));
-            let p99 = tens(shared.percentiles().map_or(0, |(_, p99, _)| u64::from(p99) * 1000));
-            health.set_detail([state as u8, rtt[0], rtt[1], p99[0], p99[1], 0, 0]);
+            let ms = |ns: u64| ns as f64 / 1e6;
+            health.set_detail("link_state", f64::from(state as u8));
+            health.set_detail("rtt_ms", ms(shared.rtt_ns.load(Ordering::Relaxed)));
+            let p99 = shared.percentiles().map_or(0, |(_, p99, _)| u64::from(p99) * 1000);
+            health.set_detail("latency_p99_ms", ms(p99));
             let since_beat = (received != 0).then(|| Duration::from_nanos(now.saturating_sub(received)));
             if let Err(e) = health.publish(&[since_beat]) {
                 tracing::warn!("health: {e}");

@@ -31,7 +31,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use iceoryx2::port::listener::Listener;
 use teleop_msgs::Message;
-use teleop_msgs::{device_kind, text_of, topics, visit_topic, DeviceInfo, TopicVisitor};
+use teleop_msgs::{device_model, topics, visit_topic, DeviceInfo, TopicVisitor};
 use teleop_recording::{
     RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
 };
@@ -499,7 +499,7 @@ impl Devices {
                 known.retain(|k| !same_device(k, d));
                 known.push(*d);
                 result = rec.add_metadata(
-                    &format!("{prefix}device.{}", device_kind::name(d.kind)),
+                    &format!("{prefix}device.{}", device_model::name(d.device_model)),
                     device_fields(d),
                 );
             }
@@ -509,34 +509,25 @@ impl Devices {
 }
 
 fn same_device(a: &DeviceInfo, b: &DeviceInfo) -> bool {
-    a.kind == b.kind && a.id == b.id
+    (a.device_model, a.bus_address, a.identity_serial)
+        == (b.device_model, b.bus_address, b.identity_serial)
 }
 
-/// Same device with the same firmware and serial numbers (the header differs every time).
+/// Same device with the same identity in every field (the header differs every time).
 fn same_identity(a: &DeviceInfo, b: &DeviceInfo) -> bool {
-    same_device(a, b)
-        && (a.model, a.firmware_a, a.firmware_b, a.serial_a, a.serial_b)
-            == (b.model, b.firmware_a, b.firmware_b, b.serial_a, b.serial_b)
+    let identity = |d: &DeviceInfo| DeviceInfo {
+        header: Default::default(),
+        ..*d
+    };
+    identity(a) == identity(b)
 }
 
-/// A device identity as metadata fields.
+/// A device identity as metadata fields (by the contract's field names).
 fn device_fields(d: &DeviceInfo) -> BTreeMap<String, String> {
-    let mut m = BTreeMap::from([
-        ("model".to_string(), text_of(&d.model)),
-        ("id".to_string(), d.id.to_string()),
-    ]);
-    for (k, v) in [
-        ("firmware", &d.firmware_a),
-        ("firmware_2", &d.firmware_b),
-        ("serial", &d.serial_a),
-        ("serial_2", &d.serial_b),
-    ] {
-        let t = text_of(v);
-        if !t.is_empty() {
-            m.insert(k.to_string(), t);
-        }
-    }
-    m
+    d.named_fields()
+        .into_iter()
+        .map(|(name, value)| (name.to_string(), value))
+        .collect()
 }
 
 fn stop_reason(stop: StopReason) -> &'static str {

@@ -35,9 +35,8 @@ use std::collections::{HashMap, HashSet};
 use glam::Vec3;
 use teleop_hand_profile::TipSensor;
 use teleop_msgs::{
-    control_mode, device_kind, hand_model, text_of, units, DeviceInfo, GloveDiagnostics,
-    GloveForceCommand, GloveState, HandCommand, HandState, Message, NodeHealth, Tactile,
-    GLOVE_CHANNELS,
+    control_mode, device_model, units, DeviceInfo, GloveDiagnostics, GloveForceCommand, GloveState,
+    HandCommand, HandState, Message, NodeHealth, Tactile, GLOVE_CHANNELS,
 };
 
 use crate::kinematics::{
@@ -852,7 +851,7 @@ impl Scene {
             Count::Joints(n) => ("joints", n, profile.joints.len()),
             Count::Fingertips(n) => ("fingertips", n, profile.fingertips().count()),
         };
-        if model != hand_model::UNKNOWN && model != model_id {
+        if model != device_model::UNKNOWN && model != model_id {
             self.warn_once(format!(
                 "{topic}: hand_model {model} is not the profile's ({name}, hand_model \
                  {model_id}); not drawn"
@@ -1132,21 +1131,24 @@ fn node_health(m: &NodeHealth, out: &mut Vec<Entry>) {
             value as f64,
         ));
     }
+    for (name, value) in m.details() {
+        out.push(Entry::scalar(
+            format!("health/nodes/{node}/{}", path_part(&name)),
+            value,
+        ));
+    }
 }
 
 fn device_info(m: &DeviceInfo, out: &mut Vec<Entry>) {
-    let kind = device_kind::name(m.kind);
-    let mut text = format!("**{}** (id {})\n", text_of(&m.model), m.id);
-    for (name, field) in [
-        ("firmware", &m.firmware_a),
-        ("firmware 2", &m.firmware_b),
-        ("serial", &m.serial_a),
-        ("serial 2", &m.serial_b),
-    ] {
-        let value = text_of(field);
-        if !value.is_empty() {
-            text.push_str(&format!("\n- {name}: {value}"));
-        }
+    let kind = device_model::name(m.device_model);
+    let fields = m.named_fields();
+    let model = fields
+        .iter()
+        .find(|(name, _)| *name == "model_name")
+        .map_or("", |(_, value)| value.as_str());
+    let mut text = format!("**{model}**\n");
+    for (name, value) in fields.iter().filter(|(name, _)| *name != "model_name") {
+        text.push_str(&format!("\n- {name}: {value}"));
     }
     out.push(Entry::new(
         format!("devices/{kind}"),
@@ -1186,7 +1188,7 @@ mod tests {
     }
 
     fn revo2() -> Option<RobotHand> {
-        RobotHand::builtin_for_model(hand_model::REVO2)
+        RobotHand::builtin_for_model(device_model::REVO2)
     }
 
     fn scene(robot: Option<RobotHand>) -> Scene {
@@ -1272,7 +1274,7 @@ mod tests {
         let mut scene = scene(None);
         let mut m = Tactile {
             header: header(1, 1_000),
-            hand_model: hand_model::REVO2,
+            hand_model: device_model::REVO2,
             fingertip_count: 5,
             ..Default::default()
         };
@@ -1337,7 +1339,7 @@ mod tests {
         let mut scene = scene(revo2());
         let mut s = HandState {
             header: header(1, 1_000),
-            hand_model: hand_model::REVO2,
+            hand_model: device_model::REVO2,
             joint_count: 6,
             link_up: 1,
             link_errors: 4,
@@ -1424,7 +1426,7 @@ mod tests {
         let allegro = HandProfile::builtin("allegro").unwrap();
         let mut c = HandCommand {
             header: header(1, 1_000),
-            hand_model: hand_model::ALLEGRO,
+            hand_model: device_model::ALLEGRO,
             joint_count: 16,
             control_mode: control_mode::POSITION,
             units: units::PHYSICAL,
@@ -1479,7 +1481,7 @@ mod tests {
         let mut scene = scene(revo2());
         let mut s = HandState {
             header: header(1, 1_000),
-            hand_model: hand_model::ALLEGRO,
+            hand_model: device_model::ALLEGRO,
             joint_count: 16,
             link_errors: 2,
             ..Default::default()
@@ -1491,7 +1493,7 @@ mod tests {
             Some(&Visual::Scalar(2.0))
         );
         // The right model with the wrong joint count, or unknown units.
-        s.hand_model = hand_model::REVO2;
+        s.hand_model = device_model::REVO2;
         s.joint_count = 5;
         s.header = header(2, 500_000_000);
         let frame = scene.frame(&Sample::HandState(s), 0).unwrap();
@@ -1506,7 +1508,7 @@ mod tests {
         let frame = scene.frame(&Sample::HandState(s), 0).unwrap();
         assert_eq!(paths(&frame, "robot/").len(), 6);
         // No builtin profile for the model: nothing is picked.
-        let mut unknown = scene_without_profile_after(hand_model::UNKNOWN);
+        let mut unknown = scene_without_profile_after(device_model::UNKNOWN);
         assert!(unknown.robot_model().is_none());
         unknown = scene_without_profile_after(42);
         assert!(unknown.robot_model().is_none());
@@ -1527,7 +1529,7 @@ mod tests {
 
     #[test]
     fn pressure_fingertips_plot_pressure_without_contacts() {
-        let shadow = RobotHand::builtin_for_model(hand_model::SHADOW).unwrap();
+        let shadow = RobotHand::builtin_for_model(device_model::SHADOW).unwrap();
         let mut scene = scene(Some(shadow));
         let layout = scene.layout();
         assert_eq!(layout.closures.len(), 6, "ff, mf, rf, lf, th and the wrist");
@@ -1539,7 +1541,7 @@ mod tests {
         assert_eq!(plot.contents[0], "robot/ff/tactile/pressure");
         let mut t = Tactile {
             header: header(1, 1_000),
-            hand_model: hand_model::SHADOW,
+            hand_model: device_model::SHADOW,
             fingertip_count: 5,
             ..Default::default()
         };
@@ -1580,7 +1582,7 @@ mod tests {
                 source_id: 1,
                 reserved: 0,
             },
-            hand_model: hand_model::REVO2,
+            hand_model: device_model::REVO2,
             joint_count: 6,
             control_mode: control_mode::POSITION,
             ..Default::default()
@@ -1605,7 +1607,12 @@ mod tests {
             ..Default::default()
         };
         h.set_name("revo2 node");
+        h.set_detail("rtt_ms", 0.5);
         let frame = scene.frame(&Sample::Health(h), 10).unwrap();
+        assert_eq!(
+            frame.get("health/nodes/revo2_node/rtt_ms"),
+            Some(&Visual::Scalar(0.5))
+        );
         assert_eq!(
             frame.get("health/nodes/revo2_node/timeouts"),
             Some(&Visual::Scalar(2.0))
@@ -1617,6 +1624,26 @@ mod tests {
         assert_eq!(
             frame.get("health/nodes/revo2_node/dropped"),
             Some(&Visual::Scalar(9.0))
+        );
+
+        // A device's identity by field name; what it lacks is left out.
+        let device = DeviceInfo {
+            header: header(1, 10),
+            device_model: device_model::ALLEGRO,
+            link_kind: teleop_msgs::link_kind::CAN,
+            model_name: teleop_msgs::fixed_text("Wonik Allegro Hand v4"),
+            protocol: teleop_msgs::fixed_text("v4"),
+            link: teleop_msgs::fixed_text("slcan:/dev/ttyACM0"),
+            ..Default::default()
+        };
+        let frame = scene.frame(&Sample::DeviceInfo(device), 10).unwrap();
+        assert_eq!(
+            frame.get("devices/allegro"),
+            Some(&Visual::Markdown(
+                "**Wonik Allegro Hand v4**\n\n- device_model: allegro\n- link_kind: can\n\
+                 - bus_address: 0\n- protocol: v4\n- link: slcan:/dev/ttyACM0"
+                    .to_string()
+            ))
         );
 
         let mut f = GloveForceCommand {

@@ -4,7 +4,7 @@
 
 use std::time::Duration;
 
-use teleop_msgs::{hand_model, HandState};
+use teleop_msgs::{device_model, HandState};
 use teleop_runtime::{IpcSettings, NodeRuntime};
 use teleop_viewer::content::SAMPLE_TIME;
 use teleop_viewer::live::{run_live, LiveOptions};
@@ -76,7 +76,7 @@ fn live_samples_are_decimated_and_logged() {
     let mut other = other_runtime.publisher::<HandState>().unwrap();
     std::thread::sleep(Duration::from_millis(500)); // the viewer subscribes meanwhile
     let mut state = HandState {
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         joint_count: 6,
         link_up: 1,
         ..Default::default()

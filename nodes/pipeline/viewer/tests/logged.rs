@@ -6,7 +6,8 @@ use std::path::Path;
 
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    hand_model, units, Fingertip, GloveState, HandState, Message, NodeHealth, SampleHeader, Tactile,
+    device_model, units, Fingertip, GloveState, HandState, Message, NodeHealth, SampleHeader,
+    Tactile,
 };
 use teleop_recording::{Filter, RecordedMessage, Recorder, WriterOptions};
 use teleop_runtime::Namespace;
@@ -205,7 +206,7 @@ fn glove_state_logs_the_operator_hand_and_closures() {
 fn tactile_logs_bars_and_contacts_scaled_by_force() {
     let mut state = HandState {
         header: header(ORIGIN + MS),
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         joint_count: 6,
         link_up: 1,
         link_errors: 3,
@@ -215,7 +216,7 @@ fn tactile_logs_bars_and_contacts_scaled_by_force() {
     state.joints[2].position = 0.5; // index half closed
     let mut tactile = Tactile {
         header: header(ORIGIN + 2 * MS),
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         fingertip_count: 5,
         ..Default::default()
     };
@@ -383,11 +384,11 @@ fn a_recording_is_drawn_with_its_profile_in_its_namespace() {
     let states = [
         (
             "left/hand/state",
-            hand_state(hand_model::ALLEGRO, 16, units::PHYSICAL, (index_1, 0.4)),
+            hand_state(device_model::ALLEGRO, 16, units::PHYSICAL, (index_1, 0.4)),
         ),
         (
             "hand/state",
-            hand_state(hand_model::REVO2, 6, units::NORMALISED, (2, 0.5)),
+            hand_state(device_model::REVO2, 6, units::NORMALISED, (2, 0.5)),
         ),
     ];
 

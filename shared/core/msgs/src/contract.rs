@@ -15,32 +15,49 @@ pub const GLOVE_CHANNELS: [&str; 6] = [
     "thumb",
     "thumb_rotation",
 ];
-/// Revo2 joint order (the device's `finger_index_t`).
-pub const REVO2_JOINTS: [&str; 6] = [
-    "thumb_flex",
-    "thumb_abduct",
-    "index",
-    "middle",
-    "ring",
-    "pinky",
-];
-/// Revo2 fingertip order of the tactile arrays.
-pub const REVO2_FINGERTIPS: [&str; 5] = ["thumb", "index", "middle", "ring", "pinky"];
 /// Most joints a [`HandCommand`] or [`HandState`] can carry (Shadow Hand has 24 with the wrist).
 pub const MAX_JOINTS: usize = 24;
 /// Most fingertips a [`Tactile`] sample can carry.
 pub const MAX_FINGERTIPS: usize = 5;
 
-/// Hand model ids (`hand_model` fields).
-pub mod hand_model {
-    /// Not known.
+/// The one numbering of the devices the pipeline drives or reads: the `hand_model` fields of
+/// [`HandCommand`], [`HandState`] and [`Tactile`], [`DeviceInfo::device_model`], and (by
+/// [`name`](device_model::name)) the `name` of a hand profile, recording metadata keys
+/// (`device.allegro`) and the viewer's entity paths.
+pub mod device_model {
+    /// Not known (a hand command for no particular hand is refused by every hand node).
     pub const UNKNOWN: u8 = 0;
     /// BrainCo Revo2 (6 joints, EtherCAT).
     pub const REVO2: u8 = 1;
     /// Wonik Allegro Hand (16 joints, CAN).
     pub const ALLEGRO: u8 = 2;
-    /// Shadow Dexterous Hand (EtherCAT).
+    /// Shadow Dexterous Hand (24 joints, EtherCAT).
     pub const SHADOW: u8 = 3;
+    /// The EH55BF1 exoskeleton glove (serial line).
+    pub const GLOVE: u8 = 4;
+
+    /// Every known model with its short name.
+    const NAMES: [(u8, &str); 4] = [
+        (REVO2, "revo2"),
+        (ALLEGRO, "allegro"),
+        (SHADOW, "shadow"),
+        (GLOVE, "glove"),
+    ];
+
+    /// The model's short name (`revo2`, `allegro`, `shadow`, `glove`; `unknown` for
+    /// [`UNKNOWN`] and any value not listed here): a hand profile's `name`, recording metadata
+    /// keys (`device.allegro`) and the viewer's paths use it.
+    pub fn name(model: u8) -> &'static str {
+        NAMES
+            .iter()
+            .find(|(id, _)| *id == model)
+            .map_or("unknown", |(_, name)| name)
+    }
+
+    /// The model whose short name is `name` (a hand profile's `name`), if there is one.
+    pub fn from_name(name: &str) -> Option<u8> {
+        NAMES.iter().find(|(_, n)| *n == name).map(|(id, _)| *id)
+    }
 }
 
 /// Control modes of a [`HandCommand`].
@@ -104,8 +121,8 @@ pub mod contact_source {
     pub const EFFORT: u8 = 6;
 }
 
-/// Link kinds (`HandState::link_kind`): how the node reaches the hand. They give
-/// [`HandState::bus_state`] and [`HandState::link_error_code`] their meaning.
+/// Link kinds (`link_kind` of [`HandState`] and [`DeviceInfo`]): how the node reaches the
+/// device. They give [`HandState::bus_state`] and [`HandState::link_error_code`] their meaning.
 pub mod link_kind {
     /// No link reported (a node without a bus, or not known).
     pub const NONE: u8 = 0;
@@ -113,24 +130,17 @@ pub mod link_kind {
     pub const ETHERCAT: u8 = 1;
     /// CAN (Allegro Hand).
     pub const CAN: u8 = 2;
+    /// A serial line (the glove: USB serial, Bluetooth SPP or the simulator's pseudo-terminal).
+    pub const SERIAL: u8 = 3;
 }
 
 /// Values of [`HandState::bus_state`]; which ones apply depends on [`HandState::link_kind`].
 pub mod bus_state {
-    /// Not known (and the value for [`link_kind::NONE`](super::link_kind::NONE)).
+    /// Not known (and the value for [`link_kind::NONE`](super::link_kind::NONE), and while an
+    /// EtherCAT link is down).
     pub const UNKNOWN: u8 = 0;
-    /// EtherCAT AL state INIT.
-    pub const AL_INIT: u8 = 1;
-    /// EtherCAT AL state PRE-OP.
-    pub const AL_PRE_OP: u8 = 2;
-    /// EtherCAT AL state BOOT.
-    pub const AL_BOOT: u8 = 3;
-    /// EtherCAT AL state SAFE-OP.
-    pub const AL_SAFE_OP: u8 = 4;
-    /// EtherCAT AL state OP.
+    /// EtherCAT AL state OP (the EtherCAT hands publish it while cycling).
     pub const AL_OP: u8 = 8;
-    /// EtherCAT: added to the AL state when the SubDevice reports an error (AL status bit 4).
-    pub const AL_ERROR: u8 = 0x10;
     /// CAN controller error-active (normal operation).
     pub const CAN_ERROR_ACTIVE: u8 = 1;
     /// CAN controller error-passive (an error counter passed 127).
@@ -301,7 +311,7 @@ message! {
     HandCommand("teleop_msgs/msg/HandCommand", topic "hand/command", nested [SampleHeader, JointCommand]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
-        /// See [`hand_model`].
+        /// The hand it is for, see [`device_model`].
         hand_model: u8 => "uint8",
         /// How many entries of `joints` are used.
         joint_count: u8 => "uint8",
@@ -313,7 +323,7 @@ message! {
         flags: u8 => "uint8",
         /// Zero.
         reserved: [u8; 3] => "uint8[3]",
-        /// Joint targets in the hand's joint order (Revo2: [`REVO2_JOINTS`]).
+        /// Joint targets in the hand's joint order (its hand profile's `[[joint]]` order).
         joints: [JointCommand; MAX_JOINTS] => "teleop_msgs/JointCommand[24]",
     }
 }
@@ -323,7 +333,7 @@ message! {
     HandState("teleop_msgs/msg/HandState", topic "hand/state", nested [SampleHeader, JointState]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
-        /// See [`hand_model`].
+        /// The hand that measured it, see [`device_model`].
         hand_model: u8 => "uint8",
         /// How many entries of `joints` are used.
         joint_count: u8 => "uint8",
@@ -335,8 +345,8 @@ message! {
         link_up: u8 => "uint8",
         /// See [`link_kind`].
         link_kind: u8 => "uint8",
-        /// The bus state, see [`bus_state`]: EtherCAT the AL state (1 INIT, 2 PRE-OP, 3 BOOT,
-        /// 4 SAFE-OP, 8 OP; bit 4 = error), CAN error-active, error-passive or bus-off.
+        /// The bus state, see [`bus_state`]: EtherCAT the AL state (8 OP while cycling, 0 while
+        /// the link is down), CAN error-active, error-passive or bus-off.
         bus_state: u8 => "uint8",
         /// Zero.
         reserved: [u8; 5] => "uint8[5]",
@@ -357,20 +367,34 @@ message! {
     Tactile("teleop_msgs/msg/Tactile", topic "hand/tactile", nested [SampleHeader, Fingertip]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
-        /// See [`hand_model`].
+        /// The hand that measured it, see [`device_model`].
         hand_model: u8 => "uint8",
         /// How many entries of `fingertips` are used.
         fingertip_count: u8 => "uint8",
         /// Zero.
         reserved: [u8; 2] => "uint8[2]",
-        /// Fingertips in the hand's order (Revo2: [`REVO2_FINGERTIPS`]).
+        /// Fingertips in the hand's order (its hand profile's fingers with a tip sensor).
         fingertips: [Fingertip; MAX_FINGERTIPS] => "teleop_msgs/Fingertip[5]",
+    }
+}
+
+/// Most named details a [`NodeHealth`] report carries.
+pub const MAX_HEALTH_DETAILS: usize = 8;
+
+nested! {
+    /// One named, node-specific value of a [`NodeHealth`] report (e.g. the Allegro node's
+    /// `reconnects`, the bridge's `rtt_ms`).
+    HealthDetail("teleop_msgs/HealthDetail", "teleop::HealthDetail") {
+        /// The value's name, `[a-z0-9_]` UTF-8, zero padded; empty for an unused entry.
+        name: [u8; 24] => "uint8[24]",
+        /// The value (counters count from the node's start; units are in the name: `_ms`, `_c`).
+        value: f64 => "float64",
     }
 }
 
 message! {
     /// A node's periodic health report.
-    NodeHealth("teleop_msgs/msg/NodeHealth", topic "health", nested [SampleHeader]) {
+    NodeHealth("teleop_msgs/msg/NodeHealth", topic "health", nested [SampleHeader, HealthDetail]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
         /// Node name, UTF-8, zero padded.
@@ -379,8 +403,10 @@ message! {
         loop_rate_hz: f32 => "float32",
         /// How many entries of `input_age_ms` are used.
         input_count: u8 => "uint8",
-        /// Node-specific state, e.g. the force-feedback contact source per finger.
-        detail: [u8; 7] => "uint8[7]",
+        /// How many entries of `details` are used.
+        detail_count: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 6] => "uint8[6]",
         /// Age of the newest sample of each input in ms, -1 if never received.
         input_age_ms: [f32; 5] => "float32[5]",
         /// Input watchdog timeouts since start.
@@ -391,6 +417,8 @@ message! {
         errors: u64 => "uint64",
         /// Samples lost on inputs (sequence gaps) since start.
         dropped: u64 => "uint64",
+        /// Node-specific values by name (see [`NodeHealth::details`]).
+        details: [HealthDetail; MAX_HEALTH_DETAILS] => "teleop_msgs/HealthDetail[8]",
     }
 }
 
@@ -422,59 +450,53 @@ message! {
     }
 }
 
-/// Device kinds of [`DeviceInfo`].
-pub mod device_kind {
-    /// The EH55BF1 exoskeleton glove.
-    pub const GLOVE: u8 = 1;
-    /// The BrainCo Revo2 hand.
-    pub const REVO2: u8 = 2;
-    /// The Wonik Allegro Hand.
-    pub const ALLEGRO: u8 = 3;
-    /// The Shadow Dexterous Hand (its palm).
-    pub const SHADOW: u8 = 4;
-
-    /// The kind's short name (`glove`, `revo2`, `allegro`, `shadow`; `other` for an unknown value), as
-    /// recording metadata keys (`device.allegro`) and the viewer use it.
-    pub fn name(kind: u8) -> &'static str {
-        match kind {
-            GLOVE => "glove",
-            REVO2 => "revo2",
-            ALLEGRO => "allegro",
-            SHADOW => "shadow",
-            _ => "other",
-        }
-    }
-}
-
 message! {
     /// Identity of a device, published by its node when the device connects (history keeps the
-    /// last one for late subscribers such as the recorder).
+    /// last one for late subscribers such as the recorder). Each field is what its name says;
+    /// what a device does not have or report is 0 or empty.
     DeviceInfo("teleop_msgs/msg/DeviceInfo", topic "device/info", nested [SampleHeader]) {
         /// Common header.
         header: SampleHeader => "teleop_msgs/SampleHeader",
-        /// See [`device_kind`].
-        kind: u8 => "uint8",
+        /// See [`device_model`].
+        device_model: u8 => "uint8",
+        /// How the node reaches the device, see [`link_kind`].
+        link_kind: u8 => "uint8",
         /// Zero.
-        reserved: [u8; 3] => "uint8[3]",
-        /// Device id (glove id) or serial number (EtherCAT identity).
-        id: u32 => "uint32",
-        /// Model name, UTF-8, zero padded.
-        model: [u8; 32] => "uint8[32]",
-        /// Firmware version (Revo2: control board), UTF-8, zero padded.
-        firmware_a: [u8; 32] => "uint8[32]",
-        /// Second firmware version (Revo2: wrist board), UTF-8, zero padded.
-        firmware_b: [u8; 32] => "uint8[32]",
-        /// Serial number (Revo2: control board), UTF-8, zero padded.
-        serial_a: [u8; 32] => "uint8[32]",
-        /// Second serial number (Revo2: wrist board), UTF-8, zero padded.
-        serial_b: [u8; 32] => "uint8[32]",
+        reserved: [u8; 6] => "uint8[6]",
+        /// The device's address on its link: the glove's device id on its serial line, the
+        /// Allegro's CAN device id (EtherCAT devices are addressed by position: 0).
+        bus_address: u32 => "uint32",
+        /// The serial number of the bus's identity record (EtherCAT: object 0x1018:04); 0 when
+        /// the link has none.
+        identity_serial: u32 => "uint32",
+        /// Model name as the device or its protocol names it, UTF-8, zero padded.
+        model_name: [u8; 32] => "uint8[32]",
+        /// Serial number as the device reports it (Revo2: its control board's), UTF-8, zero
+        /// padded.
+        serial_number: [u8; 32] => "uint8[32]",
+        /// Firmware version (Revo2: its control board's), UTF-8, zero padded.
+        firmware_version: [u8; 32] => "uint8[32]",
+        /// Hardware revision (Shadow Hand: the palm's EtherCAT revision number), UTF-8, zero
+        /// padded.
+        hardware_revision: [u8; 32] => "uint8[32]",
+        /// The protocol generation the node speaks with it (Allegro Hand: `v1` .. `v4`), UTF-8,
+        /// zero padded.
+        protocol: [u8; 32] => "uint8[32]",
+        /// Serial number of a second board with its own firmware (Revo2: the wrist board),
+        /// UTF-8, zero padded.
+        second_board_serial: [u8; 32] => "uint8[32]",
+        /// Firmware version of that second board, UTF-8, zero padded.
+        second_board_firmware: [u8; 32] => "uint8[32]",
+        /// The link the node opened, as configured (a serial port, a CAN link spec such as
+        /// `slcan:/dev/ttyACM0`, an EtherCAT interface or socket), UTF-8, zero padded.
+        link: [u8; 64] => "uint8[64]",
     }
 }
 
-/// Text into a zero-padded fixed field (cut at a character boundary).
-pub fn fixed_text(text: &str) -> [u8; 32] {
-    let mut out = [0u8; 32];
-    let mut end = text.len().min(32);
+/// Text into a zero-padded fixed field of any length (cut at a character boundary).
+pub fn fixed_text<const N: usize>(text: &str) -> [u8; N] {
+    let mut out = [0u8; N];
+    let mut end = text.len().min(N);
     while !text.is_char_boundary(end) {
         end -= 1;
     }
@@ -510,6 +532,79 @@ impl NodeHealth {
     /// The node name (invalid UTF-8 is replaced).
     pub fn name(&self) -> String {
         text_of(&self.node_name)
+    }
+
+    /// Sets the detail called `name` (truncated to 24 bytes), adding it when it is new; false
+    /// when all [`MAX_HEALTH_DETAILS`] entries hold other names (nothing is stored).
+    pub fn set_detail(&mut self, name: &str, value: f64) -> bool {
+        let key: [u8; 24] = fixed_text(name);
+        let used = usize::from(self.detail_count).min(MAX_HEALTH_DETAILS);
+        if let Some(d) = self.details[..used].iter_mut().find(|d| d.name == key) {
+            d.value = value;
+            return true;
+        }
+        let Some(free) = self.details.get_mut(used) else {
+            return false;
+        };
+        *free = HealthDetail { name: key, value };
+        self.detail_count = (used + 1) as u8;
+        true
+    }
+
+    /// The used details as (name, value), in the order they were first set.
+    pub fn details(&self) -> impl Iterator<Item = (String, f64)> + '_ {
+        self.details[..usize::from(self.detail_count).min(MAX_HEALTH_DETAILS)]
+            .iter()
+            .map(|d| (text_of(&d.name), d.value))
+    }
+
+    /// The value of the detail called `name`, if the report has it.
+    pub fn detail(&self, name: &str) -> Option<f64> {
+        self.details()
+            .find(|(n, _)| n.as_str() == name)
+            .map(|(_, v)| v)
+    }
+}
+
+impl DeviceInfo {
+    /// The identity by field name, as text, without what the device does not have (empty
+    /// texts; the bus address only on links that address devices, CAN and serial; the
+    /// identity serial only when there is one): what the recorder writes as metadata and the
+    /// viewer shows.
+    pub fn named_fields(&self) -> Vec<(&'static str, String)> {
+        let link_kind = match self.link_kind {
+            link_kind::ETHERCAT => "ethercat",
+            link_kind::CAN => "can",
+            link_kind::SERIAL => "serial",
+            _ => "",
+        };
+        let mut fields = vec![
+            (
+                "device_model",
+                device_model::name(self.device_model).to_string(),
+            ),
+            ("link_kind", link_kind.to_string()),
+        ];
+        if matches!(self.link_kind, link_kind::CAN | link_kind::SERIAL) {
+            fields.push(("bus_address", self.bus_address.to_string()));
+        }
+        if self.identity_serial != 0 {
+            fields.push(("identity_serial", self.identity_serial.to_string()));
+        }
+        for (name, text) in [
+            ("model_name", &self.model_name[..]),
+            ("serial_number", &self.serial_number),
+            ("firmware_version", &self.firmware_version),
+            ("hardware_revision", &self.hardware_revision),
+            ("protocol", &self.protocol),
+            ("second_board_serial", &self.second_board_serial),
+            ("second_board_firmware", &self.second_board_firmware),
+            ("link", &self.link),
+        ] {
+            fields.push((name, text_of(text)));
+        }
+        fields.retain(|(_, value)| !value.is_empty());
+        fields
     }
 }
 

@@ -27,7 +27,7 @@ mod message;
 #[macro_export]
 macro_rules! contract_version {
     () => {
-        2
+        3
     };
 }
 
@@ -38,7 +38,9 @@ macro_rules! contract_version {
 ///
 /// History: 1, the first contract (EtherCAT-shaped `HandState`, Revo2-only `Fingertip`);
 /// 2, link-neutral `HandState` (link kind, bus state, link error code, link errors), joint
-/// effort, fingertip sensor kind with pressure and temperature.
+/// effort, fingertip sensor kind with pressure and temperature; 3, one numbering of hands and
+/// devices (`device_model`: `DeviceInfo`'s device kind is gone), `DeviceInfo` fields named by
+/// meaning, `NodeHealth` details named (`HealthDetail`) instead of seven anonymous bytes.
 pub const CONTRACT_VERSION: u32 = contract_version!();
 
 pub use contract::*;

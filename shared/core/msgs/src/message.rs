@@ -144,10 +144,21 @@ macro_rules! define_struct {
         }
     ) => {
         $(#[$meta])*
-        #[derive(Debug, Clone, Copy, Default, PartialEq)]
+        #[derive(Debug, Clone, Copy, PartialEq)]
         #[repr(C)]
         pub struct $name {
             $( $(#[$fmeta])* pub $field: $ty, )*
+        }
+
+        // Written out because `Default` is derived for arrays of at most 32 elements only.
+        impl Default for $name {
+            /// Every field zero (what a derived `Default` gives for integers and floats).
+            fn default() -> Self {
+                // SAFETY: the struct is made only of integers and floats, and arrays and
+                // structs of them (checked below: `ZeroCopySend`, no padding), for all of which
+                // the all-zero bit pattern is a valid value, zero.
+                unsafe { core::mem::zeroed() }
+            }
         }
 
         // Written out rather than derived because the derive takes only a literal type name,

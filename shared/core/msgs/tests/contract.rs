@@ -93,6 +93,7 @@ fn repr_c_layout(fields: &[Field], base: usize, path: &str, out: &mut Vec<(Strin
         (JointCommand::ROS_NAME, JointCommand::FIELDS),
         (JointState::ROS_NAME, JointState::FIELDS),
         (Fingertip::ROS_NAME, Fingertip::FIELDS),
+        (HealthDetail::ROS_NAME, HealthDetail::FIELDS),
     ]
     .into_iter()
     .collect();
@@ -157,9 +158,9 @@ fn every_schema_matches_the_struct_layout_as_cdr() {
 }
 
 #[test]
-fn contract_version_2_layout_of_the_hand_types() {
-    assert_eq!(CONTRACT_VERSION, 2);
-    assert_eq!(HandState::TYPE_NAME, "teleop_msgs/msg/HandState@v2");
+fn contract_version_3_layout_of_the_hand_types() {
+    assert_eq!(CONTRACT_VERSION, 3);
+    assert_eq!(HandState::TYPE_NAME, "teleop_msgs/msg/HandState@v3");
     assert_eq!(size_of::<HandState>(), 536);
     assert_eq!(size_of::<Tactile>(), 176);
     assert_eq!(size_of::<JointState>(), 20);
@@ -185,6 +186,92 @@ fn contract_version_2_layout_of_the_hand_types() {
             assert!(!schema.contains(gone), "{gone} in {schema}");
         }
     }
+}
+
+/// Offset and ROS type of the field `name` of a field table.
+fn field(fields: &[Field], name: &str) -> (usize, &'static str) {
+    fields
+        .iter()
+        .find(|f| f.name == name)
+        .map(|f| (f.offset, f.ros_type))
+        .unwrap_or_else(|| panic!("no field {name}"))
+}
+
+#[test]
+fn contract_version_3_device_info_and_health_layout() {
+    assert_eq!(size_of::<DeviceInfo>(), 336);
+    assert_eq!(field(DeviceInfo::FIELDS, "device_model"), (32, "uint8"));
+    assert_eq!(field(DeviceInfo::FIELDS, "link_kind"), (33, "uint8"));
+    assert_eq!(field(DeviceInfo::FIELDS, "bus_address"), (40, "uint32"));
+    assert_eq!(field(DeviceInfo::FIELDS, "identity_serial"), (44, "uint32"));
+    assert_eq!(field(DeviceInfo::FIELDS, "model_name"), (48, "uint8[32]"));
+    assert_eq!(field(DeviceInfo::FIELDS, "link"), (272, "uint8[64]"));
+    assert_eq!(size_of::<NodeHealth>(), 384);
+    assert_eq!(size_of::<HealthDetail>(), 32);
+    assert_eq!(field(NodeHealth::FIELDS, "detail_count"), (69, "uint8"));
+    assert_eq!(
+        field(NodeHealth::FIELDS, "details"),
+        (128, "teleop_msgs/HealthDetail[8]")
+    );
+    // Slot names of version 2 are gone.
+    for gone in ["firmware_a", "serial_b", "uint32 id\n", "uint8 kind"] {
+        assert!(!DeviceInfo::schema().contains(gone), "{gone}");
+    }
+    assert!(!NodeHealth::schema().contains("uint8[7] detail"));
+    // A default (zeroed) payload: every field zero, whatever the array lengths.
+    assert!(DeviceInfo::default().as_bytes().iter().all(|&b| b == 0));
+}
+
+#[test]
+fn one_numbering_of_devices_with_names() {
+    let models = [
+        (device_model::REVO2, "revo2"),
+        (device_model::ALLEGRO, "allegro"),
+        (device_model::SHADOW, "shadow"),
+        (device_model::GLOVE, "glove"),
+    ];
+    for (id, name) in models {
+        assert_eq!(device_model::name(id), name);
+        assert_eq!(device_model::from_name(name), Some(id));
+    }
+    let mut ids: Vec<u8> = models.iter().map(|(id, _)| *id).collect();
+    ids.push(device_model::UNKNOWN);
+    ids.sort_unstable();
+    ids.dedup();
+    assert_eq!(ids.len(), 5, "every model has its own number");
+    assert_eq!(device_model::name(device_model::UNKNOWN), "unknown");
+    assert_eq!(device_model::name(200), "unknown");
+    assert_eq!(device_model::from_name("unknown"), None);
+    assert_eq!(device_model::from_name("Revo2"), None);
+}
+
+#[test]
+fn health_details_are_set_by_name_and_read_back() {
+    let mut h = NodeHealth::default();
+    assert_eq!(h.details().count(), 0);
+    assert!(h.set_detail("reconnects", 1.0));
+    assert!(h.set_detail("rtt_ms", 0.25));
+    assert!(h.set_detail("reconnects", 3.0));
+    assert_eq!(
+        h.details().collect::<Vec<_>>(),
+        vec![
+            ("reconnects".to_string(), 3.0),
+            ("rtt_ms".to_string(), 0.25)
+        ]
+    );
+    assert_eq!(h.detail("rtt_ms"), Some(0.25));
+    assert_eq!(h.detail("missing"), None);
+    for i in 2..MAX_HEALTH_DETAILS {
+        assert!(h.set_detail(&format!("d{i}"), i as f64));
+    }
+    // Full: a new name is refused and nothing is overwritten; known names still update.
+    assert!(!h.set_detail("one_too_many", 9.0));
+    assert_eq!(h.details().count(), MAX_HEALTH_DETAILS);
+    assert!(h.set_detail("d7", 70.0));
+    assert_eq!(h.detail("d7"), Some(70.0));
+    // A count past the array reads as the array, never out of bounds.
+    h.detail_count = u8::MAX;
+    assert_eq!(h.details().count(), MAX_HEALTH_DETAILS);
 }
 
 #[test]

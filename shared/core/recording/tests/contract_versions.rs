@@ -1,5 +1,7 @@
-//! Recordings of contract version 1 are read converted to the current contract; unknown
-//! versions are refused by name; the current version round-trips and is recorded as metadata.
+//! Recordings of contract versions 1 and 2 are read converted to the current contract (the
+//! version 1 sample, and two version 2 sessions recorded by the version 2 build: Allegro and
+//! Shadow); unknown versions are refused by name; the current version round-trips and is
+//! recorded as metadata.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -12,17 +14,29 @@ use std::{
 
 use common::{fill, leaves, sample, value, Leaf, Value};
 use teleop_msgs::{
-    bus_state, fingertip_sensor, link_kind, HandState, Message, Tactile, CDR_LE_HEADER,
-    CONTRACT_VERSION,
+    bus_state, device_model, fingertip_sensor, link_kind, text_of, DeviceInfo, HandState, Message,
+    NodeHealth, Tactile, CDR_LE_HEADER, CONTRACT_VERSION,
 };
 use teleop_recording::{
-    legacy::{HAND_STATE_V1_SCHEMA, TACTILE_V1_SCHEMA},
+    legacy::{
+        DEVICE_INFO_V2_SCHEMA, HAND_STATE_V1_SCHEMA, NODE_HEALTH_V2_SCHEMA, TACTILE_V1_SCHEMA,
+    },
     *,
 };
 
 const SAMPLE: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../../../recordings/grasp.sample.mcap"
+);
+/// The default session with the Allegro Hand, 2 s, recorded by the contract version 2 build.
+const ALLEGRO_V2: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../../recordings/allegro-v2.sample.mcap"
+);
+/// The default session with the Shadow Hand, 2 s, recorded by the contract version 2 build.
+const SHADOW_V2: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../../recordings/shadow-v2.sample.mcap"
 );
 
 /// Leaf values of a payload by path (`joints[3].speed`).
@@ -137,37 +151,212 @@ fn v1_schema_of(topic: &str) -> Option<&'static str> {
     }
 }
 
+/// The bytes of the field `name` (all its primitive leaves, in order) of a payload.
+fn field_bytes(schema: &str, bytes: &[u8], name: &str) -> Vec<u8> {
+    let leaves = leaves(schema);
+    let of_field: Vec<&Leaf> = leaves
+        .iter()
+        .filter(|l| {
+            l.path == name
+                || l.path.starts_with(&format!("{name}["))
+                || l.path.starts_with(&format!("{name}."))
+        })
+        .collect();
+    assert!(!of_field.is_empty(), "no field {name}");
+    let start = of_field[0].offset;
+    let end = of_field.last().unwrap().offset + leaf_size(of_field.last().unwrap());
+    bytes[start..end].to_vec()
+}
+
+fn leaf_size(leaf: &Leaf) -> usize {
+    match leaf.ty.as_str() {
+        "uint8" | "int8" => 1,
+        "uint16" | "int16" => 2,
+        "uint32" | "int32" | "float32" => 4,
+        _ => 8,
+    }
+}
+
+/// `bytes` in a field of `size` bytes (zero padded).
+fn padded(bytes: &[u8], size: usize) -> Vec<u8> {
+    let mut out = bytes.to_vec();
+    out.resize(size, 0);
+    out
+}
+
+/// What version 3 makes of a version 2 `DeviceInfo`, written from the slot meanings of
+/// version 2 per device kind (1 glove, 2 Revo2, 3 Allegro, 4 Shadow), independent of the
+/// converter: the expected version 3 payload.
+fn device_info_expected(v2: &[u8]) -> DeviceInfo {
+    let f = |name: &str| field_bytes(DEVICE_INFO_V2_SCHEMA, v2, name);
+    let id = u32::from_le_bytes(f("id").try_into().unwrap());
+    let text = |name: &str| -> [u8; 32] { padded(&f(name), 32).try_into().unwrap() };
+    let strip = |name: &str, prefix: &str| -> [u8; 32] {
+        let t = text(name);
+        let rest = t.strip_prefix(prefix.as_bytes()).unwrap_or(&t);
+        padded(rest, 32).try_into().unwrap()
+    };
+    let mut want = DeviceInfo::from_bytes(&[0; size_of::<DeviceInfo>()]).unwrap();
+    want.header = teleop_msgs::SampleHeader {
+        seq: u64::from_le_bytes(f("header.seq").try_into().unwrap()),
+        stamp_ns: u64::from_le_bytes(f("header.stamp_ns").try_into().unwrap()),
+        origin_ns: u64::from_le_bytes(f("header.origin_ns").try_into().unwrap()),
+        source_id: u32::from_le_bytes(f("header.source_id").try_into().unwrap()),
+        reserved: u32::from_le_bytes(f("header.reserved").try_into().unwrap()),
+    };
+    want.model_name = text("model");
+    match f("kind")[0] {
+        1 => {
+            want.device_model = device_model::GLOVE;
+            want.link_kind = link_kind::SERIAL;
+            want.bus_address = id;
+        }
+        3 => {
+            want.device_model = device_model::ALLEGRO;
+            want.link_kind = link_kind::CAN;
+            want.bus_address = id;
+            want.firmware_version = text("firmware_a");
+            want.protocol = strip("firmware_b", "protocol ");
+            want.serial_number = text("serial_a");
+            want.link = padded(&text("serial_b"), 64).try_into().unwrap();
+        }
+        4 => {
+            want.device_model = device_model::SHADOW;
+            want.link_kind = link_kind::ETHERCAT;
+            want.identity_serial = id;
+            want.hardware_revision = strip("firmware_a", "palm revision ");
+            want.serial_number = text("serial_a");
+        }
+        kind => {
+            if kind == 2 {
+                want.device_model = device_model::REVO2;
+                want.link_kind = link_kind::ETHERCAT;
+                want.identity_serial = id;
+            } else {
+                want.bus_address = id;
+            }
+            want.firmware_version = text("firmware_a");
+            want.second_board_firmware = text("firmware_b");
+            want.serial_number = text("serial_a");
+            want.second_board_serial = text("serial_b");
+        }
+    }
+    want
+}
+
+/// Checks a converted `NodeHealth` against the version 2 payload it came from: every counter
+/// carried, the detail bytes named as the node that wrote them filled them.
+fn check_health(v2: &[u8], v3: &NodeHealth) {
+    let f = |name: &str| field_bytes(NODE_HEALTH_V2_SCHEMA, v2, name);
+    let carried = [
+        "header",
+        "node_name",
+        "loop_rate_hz",
+        "input_count",
+        "input_age_ms",
+        "timeouts",
+        "clamps",
+        "errors",
+        "dropped",
+    ];
+    for name in carried {
+        let now = if name == "header" {
+            v3.as_bytes()[..32].to_vec()
+        } else {
+            field_bytes(&NodeHealth::schema(), v3.as_bytes(), name)
+        };
+        assert_eq!(now, f(name), "{name}");
+    }
+    let detail = f("detail");
+    let name = text_of(&f("node_name"));
+    let node = name.rsplit('/').next().unwrap();
+    let byte = |i: usize| f64::from(detail[i]);
+    let u16_ms = |i: usize| f64::from(u16::from_le_bytes([detail[i], detail[i + 1]])) / 100.0;
+    let want: Vec<(String, f64)> = match node {
+        "feedback" => ["little", "ring", "middle", "index", "thumb"]
+            .iter()
+            .enumerate()
+            .map(|(i, finger)| (format!("source_{finger}"), byte(i)))
+            .collect(),
+        "bridge" => vec![
+            ("link_state".into(), byte(0)),
+            ("rtt_ms".into(), u16_ms(1)),
+            ("latency_p99_ms".into(), u16_ms(3)),
+        ],
+        "allegro" => [
+            "protocol_generation",
+            "bus_state",
+            "unknown_frames",
+            "bad_frames",
+            "reconnects",
+            "max_temperature_c",
+            "late_periods",
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.to_string(), byte(i)))
+        .collect(),
+        _ => (0..7)
+            .filter(|&i| detail[i] != 0)
+            .map(|i| (format!("detail_{i}"), byte(i)))
+            .collect(),
+    };
+    assert_eq!(v3.details().collect::<Vec<_>>(), want, "{name}");
+}
+
+/// Compares every message read from `path` with the raw one recorded: converted ones field
+/// by field, the others byte for byte. Returns how many of each topic were converted.
 fn check_against_raw(path: &Path, messages: &[OwnedMessage]) -> HashMap<String, usize> {
     let raw = raw_messages(path);
     let mut converted: HashMap<String, usize> = HashMap::new();
     for m in messages {
         let (schema, bytes) = &raw[&(m.topic.clone(), m.log_time_ns, m.sequence)];
-        match v1_schema_of(&m.topic) {
-            Some(v1_schema) => {
-                assert_eq!(schema, v1_schema, "{}", m.topic);
-                let v2_schema = if m.topic == HandState::TOPIC {
+        let legacy = match m.topic.as_str() {
+            "hand/state" | "hand/tactile" if schema == v1_schema_of(&m.topic).unwrap() => {
+                let v1_schema = v1_schema_of(&m.topic).unwrap();
+                let now_schema = if m.topic == HandState::TOPIC {
                     HandState::schema()
                 } else {
                     Tactile::schema()
                 };
-                check_converted(v1_schema, bytes, &v2_schema, &m.payload);
-                *converted.entry(m.topic.clone()).or_default() += 1;
+                check_converted(v1_schema, bytes, &now_schema, &m.payload);
+                true
             }
+            "device/info" if schema == DEVICE_INFO_V2_SCHEMA => {
+                let got: DeviceInfo = m.decode().unwrap();
+                assert_eq!(got, device_info_expected(bytes));
+                true
+            }
+            "health" if schema == NODE_HEALTH_V2_SCHEMA => {
+                check_health(bytes, &m.decode().unwrap());
+                true
+            }
+            _ => false,
+        };
+        if legacy {
+            *converted.entry(m.topic.clone()).or_default() += 1;
+        } else {
             // Unchanged types: the recorded bytes.
-            None => assert_eq!(&m.payload, bytes, "{}", m.topic),
+            assert_eq!(&m.payload, bytes, "{}", m.topic);
         }
     }
     converted
 }
 
-/// The topics `info` says are converted, each from version 1.
-fn converted_topics(info: &RecordingInfo) -> Vec<&str> {
+/// The topics `info` says are converted, with the version each is converted from.
+fn converted_topics(info: &RecordingInfo) -> Vec<(&str, u32)> {
     info.topics
         .iter()
-        .filter(|t| t.converted_from.is_some())
-        .inspect(|t| assert_eq!(t.converted_from, Some(1), "{}", t.topic))
-        .map(|t| t.topic.as_str())
+        .filter_map(|t| Some((t.topic.as_str(), t.converted_from?)))
         .collect()
+}
+
+/// Every message of a file, read.
+fn all_messages(path: &Path) -> Vec<OwnedMessage> {
+    read_messages(path, &Filter::all())
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap()
 }
 
 #[test]
@@ -175,15 +364,21 @@ fn the_version_1_sample_recording_reads_converted() {
     let path = Path::new(SAMPLE);
     let info = info(path).unwrap();
     assert!(info.complete);
-    assert_eq!(converted_topics(&info), ["hand/state", "hand/tactile"]);
+    // Version 1's `DeviceInfo` and `NodeHealth` have version 2's layout.
+    assert_eq!(
+        converted_topics(&info),
+        [
+            ("device/info", 2),
+            ("hand/state", 1),
+            ("hand/tactile", 1),
+            ("health", 2)
+        ]
+    );
     assert!(
         !info.metadata.iter().any(|(n, _)| n == CONTRACT_METADATA),
         "written before contract version 2"
     );
-    let messages: Vec<OwnedMessage> = read_messages(path, &Filter::all())
-        .unwrap()
-        .collect::<Result<_, _>>()
-        .unwrap();
+    let messages = all_messages(path);
     assert_eq!(messages.len() as u64, info.messages);
     let converted = check_against_raw(path, &messages);
     let count = |topic: &str| {
@@ -193,8 +388,9 @@ fn the_version_1_sample_recording_reads_converted() {
             .unwrap()
             .messages
     };
-    assert_eq!(converted["hand/state"] as u64, count("hand/state"));
-    assert_eq!(converted["hand/tactile"] as u64, count("hand/tactile"));
+    for topic in ["hand/state", "hand/tactile", "health", "device/info"] {
+        assert_eq!(converted[topic] as u64, count(topic), "{topic}");
+    }
 
     // What the session did is still there: the hand in OP, the fingertips touching the ball.
     let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
@@ -209,6 +405,243 @@ fn the_version_1_sample_recording_reads_converted() {
         .active_fingertips()
         .iter()
         .any(|f| f.normal_n > 1.0 && f.sensor_kind == fingertip_sensor::REVO2_FORCE)));
+    // The Revo2's two boards and the glove, by name.
+    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
+    let revo2 = devices
+        .iter()
+        .find(|d| d.device_model == device_model::REVO2)
+        .unwrap();
+    assert_eq!(
+        revo2.named_fields(),
+        [
+            ("device_model", "revo2".to_string()),
+            ("link_kind", "ethercat".to_string()),
+            ("identity_serial", "42".to_string()),
+            ("model_name", "BrainCo-Revo2Slave".to_string()),
+            ("serial_number", "RV2C24110000042".to_string()),
+            ("firmware_version", "1.4.2".to_string()),
+            ("second_board_serial", "RV2W24110000042".to_string()),
+            ("second_board_firmware", "0.9.7".to_string()),
+        ]
+    );
+    let glove = devices
+        .iter()
+        .find(|d| d.device_model == device_model::GLOVE)
+        .unwrap();
+    assert_eq!(
+        (
+            glove.link_kind,
+            glove.bus_address,
+            text_of(&glove.model_name)
+        ),
+        (link_kind::SERIAL, 1, "EH55BF1".to_string())
+    );
+    // The force feedback's contact sources, named: the fingertips touched the ball (tactile).
+    let health: Vec<NodeHealth> = messages.iter().filter_map(|m| m.decode()).collect();
+    assert!(health.iter().any(|h| h.name() == "feedback"
+        && h.detail("source_index") == Some(f64::from(teleop_msgs::contact_source::TACTILE))));
+}
+
+/// Reads a version 2 sample: `hand/state` and the other unchanged types as recorded,
+/// `device/info` and `health` converted from version 2. Returns the messages.
+fn read_v2_sample(path: &Path) -> Vec<OwnedMessage> {
+    let info = info(path).unwrap();
+    assert!(info.complete);
+    assert_eq!(
+        converted_topics(&info),
+        [("device/info", 2), ("health", 2)],
+        "{}",
+        path.display()
+    );
+    let contract: Vec<_> = info
+        .metadata
+        .iter()
+        .filter(|(n, _)| n == CONTRACT_METADATA)
+        .map(|(_, fields)| fields.get("version").map(String::as_str))
+        .collect();
+    assert_eq!(contract, [Some("2")]);
+    let messages = all_messages(path);
+    assert_eq!(messages.len() as u64, info.messages);
+    let converted = check_against_raw(path, &messages);
+    for topic in ["health", "device/info"] {
+        let recorded = info.topics.iter().find(|t| t.topic == topic).unwrap();
+        assert_eq!(converted[topic] as u64, recorded.messages, "{topic}");
+    }
+    messages
+}
+
+#[test]
+fn the_version_2_allegro_sample_reads_converted() {
+    let messages = read_v2_sample(Path::new(ALLEGRO_V2));
+    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
+    let allegro = devices
+        .iter()
+        .find(|d| d.device_model == device_model::ALLEGRO)
+        .unwrap();
+    // Version 2 kept the link in `serial_b` (32 bytes: the path is cut there).
+    assert_eq!(
+        allegro.named_fields(),
+        [
+            ("device_model", "allegro".to_string()),
+            ("link_kind", "can".to_string()),
+            ("bus_address", "0".to_string()),
+            ("model_name", "Wonik Allegro Hand v4".to_string()),
+            ("serial_number", "SAH04000AR0042".to_string()),
+            ("firmware_version", "hw 0x0401 fw 0x0102".to_string()),
+            ("protocol", "v4".to_string()),
+            ("link", "slcan:/tmp/v2fix/run/teleop-alle".to_string()),
+        ]
+    );
+    let health: Vec<NodeHealth> = messages.iter().filter_map(|m| m.decode()).collect();
+    let node = health.iter().rev().find(|h| h.name() == "allegro").unwrap();
+    assert_eq!(node.detail("protocol_generation"), Some(4.0));
+    assert_eq!(
+        node.detail("bus_state"),
+        Some(f64::from(bus_state::CAN_ERROR_ACTIVE))
+    );
+    assert!(node.detail("max_temperature_c") > Some(0.0));
+    // The hand state is version 2's, unchanged: CAN, 16 joints.
+    let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
+    assert!(states.iter().any(|s| s.link_up == 1
+        && s.link_kind == link_kind::CAN
+        && s.hand_model == device_model::ALLEGRO
+        && s.joint_count == 16));
+}
+
+#[test]
+fn the_version_2_shadow_sample_reads_converted() {
+    let messages = read_v2_sample(Path::new(SHADOW_V2));
+    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
+    let shadow = devices
+        .iter()
+        .find(|d| d.device_model == device_model::SHADOW)
+        .unwrap();
+    assert_eq!(
+        shadow.named_fields(),
+        [
+            ("device_model", "shadow".to_string()),
+            ("link_kind", "ethercat".to_string()),
+            ("identity_serial", "1178".to_string()),
+            ("model_name", "Shadow Hand E (SR06 palm, 0220)".to_string()),
+            ("serial_number", "1178".to_string()),
+            ("hardware_revision", "0".to_string()),
+        ]
+    );
+    let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
+    assert!(states
+        .iter()
+        .any(|s| s.link_up == 1 && s.hand_model == device_model::SHADOW && s.joint_count == 24));
+}
+
+#[test]
+fn every_version_2_slot_lands_in_its_named_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let size = 200;
+    let kind_at = leaves(DEVICE_INFO_V2_SCHEMA)
+        .into_iter()
+        .find(|l| l.path == "kind")
+        .unwrap()
+        .offset;
+    // Each device kind of version 2 and one it did not number; text slots full of distinctive
+    // bytes (no zero: all 32 bytes are text).
+    for kind in [1u8, 2, 3, 4, 9] {
+        let mut payload = v1_payload(DEVICE_INFO_V2_SCHEMA, size, u64::from(kind));
+        payload[kind_at] = kind;
+        let path = raw_file(
+            dir.path(),
+            "device/info",
+            DeviceInfo::SCHEMA_NAME,
+            DEVICE_INFO_V2_SCHEMA,
+            &payload,
+        );
+        let messages = all_messages(&path);
+        assert_eq!(messages.len(), 1);
+        let got: DeviceInfo = messages[0].decode().unwrap();
+        assert_eq!(got, device_info_expected(&payload), "kind {kind}");
+        let expected_model = [
+            device_model::GLOVE,
+            device_model::REVO2,
+            device_model::ALLEGRO,
+            device_model::SHADOW,
+        ]
+        .get(usize::from(kind) - 1)
+        .copied()
+        .unwrap_or(device_model::UNKNOWN);
+        assert_eq!(got.device_model, expected_model, "kind {kind}");
+    }
+    // Prefixes version 2 wrote are dropped: "protocol v4" is v4, "palm revision 7" is 7.
+    for (kind, slot, text, field) in [
+        (3u8, "firmware_b", "protocol v4", "protocol"),
+        (4, "firmware_a", "palm revision 7", "hardware_revision"),
+    ] {
+        let mut payload = vec![0u8; size];
+        payload[kind_at] = kind;
+        let at = leaves(DEVICE_INFO_V2_SCHEMA)
+            .into_iter()
+            .find(|l| l.path == format!("{slot}[0]"))
+            .unwrap()
+            .offset;
+        payload[at..at + text.len()].copy_from_slice(text.as_bytes());
+        let path = raw_file(
+            dir.path(),
+            "device/info",
+            DeviceInfo::SCHEMA_NAME,
+            DEVICE_INFO_V2_SCHEMA,
+            &payload,
+        );
+        let got: DeviceInfo = all_messages(&path)[0].decode().unwrap();
+        let value = got
+            .named_fields()
+            .into_iter()
+            .find(|(name, _)| *name == field)
+            .map(|(_, v)| v);
+        assert_eq!(value.as_deref(), text.rsplit(' ').next(), "{field}");
+    }
+}
+
+#[test]
+fn every_version_2_health_detail_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let leaves_v2 = leaves(NODE_HEALTH_V2_SCHEMA);
+    let at = |path: &str| leaves_v2.iter().find(|l| l.path == path).unwrap().offset;
+    for node in ["feedback", "left/bridge", "right/allegro", "retarget"] {
+        let mut payload = v1_payload(NODE_HEALTH_V2_SCHEMA, 128, 5);
+        let name_at = at("node_name[0]");
+        payload[name_at..name_at + 32].fill(0);
+        payload[name_at..name_at + node.len()].copy_from_slice(node.as_bytes());
+        // One zero detail byte: a node without names of its own keeps only the others.
+        payload[at("detail[2]")] = 0;
+        let path = raw_file(
+            dir.path(),
+            "health",
+            NodeHealth::SCHEMA_NAME,
+            NODE_HEALTH_V2_SCHEMA,
+            &payload,
+        );
+        let got: NodeHealth = all_messages(&path)[0].decode().unwrap();
+        check_health(&payload, &got);
+        let named = got.details().count();
+        let want = match node {
+            "feedback" => 5,
+            "left/bridge" => 3,
+            "right/allegro" => 7,
+            _ => 6,
+        };
+        assert_eq!(named, want, "{node}");
+    }
+    // A version 2 message of the wrong size is a bad message naming the version.
+    let path = raw_file(
+        dir.path(),
+        "health",
+        NodeHealth::SCHEMA_NAME,
+        NODE_HEALTH_V2_SCHEMA,
+        &[0u8; 127],
+    );
+    let err = read_messages(&path, &Filter::all())
+        .unwrap()
+        .find_map(Result::err)
+        .unwrap();
+    assert!(err.to_string().contains("contract version 2"), "{err}");
 }
 
 #[test]
@@ -219,7 +652,14 @@ fn a_killed_version_1_recording_reads_converted_too() {
     let cut = write(dir.path(), "cut.mcap", &bytes[..bytes.len() / 2]);
     let cut_info = info(&cut).unwrap();
     assert!(!cut_info.complete);
-    assert_eq!(converted_topics(&cut_info), ["hand/state", "hand/tactile"]);
+    let topics: Vec<&str> = converted_topics(&cut_info)
+        .into_iter()
+        .map(|(topic, _)| topic)
+        .collect();
+    assert_eq!(
+        topics,
+        ["device/info", "hand/state", "hand/tactile", "health"]
+    );
     let messages: Vec<OwnedMessage> = read_messages(&cut, &Filter::topics(["hand/state"]))
         .unwrap()
         .collect::<Result<_, _>>()
@@ -372,7 +812,7 @@ fn an_unknown_version_is_refused_by_name() {
 #[test]
 fn the_current_version_round_trips_and_is_recorded() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("v2.mcap");
+    let path = dir.path().join("current.mcap");
     // A `contract` record given by the caller (copied from a version 1 file's reprocessing,
     // say) is replaced by the recorder's own.
     let stale = BTreeMap::from([("version".to_string(), "1".to_string())]);

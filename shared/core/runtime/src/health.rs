@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_msgs::NodeHealth;
+use teleop_msgs::{NodeHealth, MAX_HEALTH_DETAILS};
 
 use crate::ipc::{NodeRuntime, RuntimeError};
 use crate::ports::Publisher;
@@ -15,6 +15,8 @@ pub struct Health {
     report: NodeHealth,
     loops: u64,
     window_start: Instant,
+    /// A detail was refused because all entries were taken (logged once).
+    details_full_logged: bool,
 }
 
 impl Health {
@@ -27,6 +29,7 @@ impl Health {
             report,
             loops: 0,
             window_start: Instant::now(),
+            details_full_logged: false,
         })
     }
 
@@ -60,9 +63,16 @@ impl Health {
         self.report.dropped = total;
     }
 
-    /// Sets the node-specific detail bytes.
-    pub fn set_detail(&mut self, detail: [u8; 7]) {
-        self.report.detail = detail;
+    /// Sets the node-specific value called `name` (`[a-z0-9_]`, at most 24 bytes, the unit
+    /// in the name: `rtt_ms`), shown by name by `teleop stats` and the viewer. A node has at
+    /// most [`MAX_HEALTH_DETAILS`] of them: one more is not stored, and logged once.
+    pub fn set_detail(&mut self, name: &str, value: f64) {
+        if !self.report.set_detail(name, value) && !self.details_full_logged {
+            self.details_full_logged = true;
+            tracing::warn!(
+                "health detail {name} not reported: a node reports at most {MAX_HEALTH_DETAILS}"
+            );
+        }
     }
 
     /// The counters so far.

@@ -9,8 +9,8 @@ use teleop_allegro_protocol::{v4, Generation, JOINTS};
 use teleop_can_link::{Bitrate, BusState};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    bus_state, control_mode, device_kind, fixed_text, hand_model, link_kind, units, DeviceInfo,
-    HandCommand, HandState,
+    bus_state, control_mode, device_model, fixed_text, link_kind, units, DeviceInfo, HandCommand,
+    HandState,
 };
 use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
 
@@ -39,7 +39,7 @@ fn saturate(v: u64) -> u32 {
 /// frame or a bus error, `lost_frames` the finger frames missing.
 pub fn hand_state(cycle: &Cycle) -> HandState {
     let mut state = HandState {
-        hand_model: hand_model::ALLEGRO,
+        hand_model: device_model::ALLEGRO,
         joint_count: JOINTS as u8,
         units: units::PHYSICAL,
         holding: u8::from(cycle.holding),
@@ -64,7 +64,7 @@ pub fn hand_state(cycle: &Cycle) -> HandState {
 /// The `hand/state` sample while the hand is down.
 pub fn link_down_state(counters: &Counters) -> HandState {
     HandState {
-        hand_model: hand_model::ALLEGRO,
+        hand_model: device_model::ALLEGRO,
         joint_count: JOINTS as u8,
         units: units::PHYSICAL,
         link_up: 0,
@@ -91,20 +91,21 @@ pub fn firmware_text(identity: &crate::bringup::Identity) -> String {
 pub fn device_info(hand: &Connected<'_>, device_id: u8) -> DeviceInfo {
     let serial = hand.identity.serial.as_ref().map(v4::serial_text);
     DeviceInfo {
-        kind: device_kind::ALLEGRO,
-        id: u32::from(device_id),
-        model: fixed_text(&format!("Wonik Allegro Hand {}", hand.generation)),
-        firmware_a: fixed_text(&firmware_text(hand.identity)),
-        firmware_b: fixed_text(&format!("protocol {}", hand.generation)),
-        serial_a: fixed_text(serial.as_deref().unwrap_or("")),
-        serial_b: fixed_text(hand.link),
+        device_model: device_model::ALLEGRO,
+        link_kind: link_kind::CAN,
+        bus_address: u32::from(device_id),
+        model_name: fixed_text(&format!("Wonik Allegro Hand {}", hand.generation)),
+        firmware_version: fixed_text(&firmware_text(hand.identity)),
+        protocol: fixed_text(&hand.generation.to_string()),
+        serial_number: fixed_text(serial.as_deref().unwrap_or("")),
+        link: fixed_text(hand.link),
         ..Default::default()
     }
 }
 
 /// Why a fresh hand command is not followed (None: it is).
 pub fn refusal(cmd: &HandCommand) -> Option<&'static str> {
-    if cmd.hand_model != hand_model::ALLEGRO && cmd.hand_model != hand_model::UNKNOWN {
+    if cmd.hand_model != device_model::ALLEGRO && cmd.hand_model != device_model::UNKNOWN {
         return Some("hand/command is for another hand model");
     }
     if cmd.units != units::PHYSICAL {
@@ -154,7 +155,6 @@ struct Ports {
     following: bool,
     refused: Option<&'static str>,
     errors_counted: u64,
-    detail: [u8; 7],
 }
 
 impl Ports {
@@ -172,12 +172,15 @@ impl Ports {
             .count_errors(errors.saturating_sub(self.errors_counted));
         self.errors_counted = errors;
         self.health.set_dropped(self.commands.dropped());
-        self.detail[2] = u8::try_from(counters.unknown_frames).unwrap_or(u8::MAX);
-        self.detail[3] = u8::try_from(counters.bad_frames).unwrap_or(u8::MAX);
-        self.detail[4] = u8::try_from(counters.reconnects).unwrap_or(u8::MAX);
-        // Waits the frames' stamps showed were a loaded host's, not the hand's (saturating).
-        self.detail[6] = u8::try_from(counters.late_periods).unwrap_or(u8::MAX);
-        self.health.set_detail(self.detail);
+        for (name, count) in [
+            ("unknown_frames", counters.unknown_frames),
+            ("bad_frames", counters.bad_frames),
+            ("reconnects", counters.reconnects),
+            // Waits the frames' stamps showed were a loaded host's, not the hand's.
+            ("late_periods", counters.late_periods),
+        ] {
+            self.health.set_detail(name, count as f64);
+        }
         self.health.publish(&[self.commands.age(Instant::now())])?;
         if let Some(d) = &self.connected {
             self.device.publish(d)?;
@@ -235,12 +238,13 @@ impl Host for Ports {
         let info = device_info(hand, self.device_id);
         self.device.publish(&info)?;
         self.connected = Some(info);
-        self.detail[0] = match hand.generation {
-            Generation::V1 => 1,
-            Generation::V2 => 2,
-            Generation::V3 => 3,
-            Generation::V4 => 4,
+        let generation = match hand.generation {
+            Generation::V1 => 1.0,
+            Generation::V2 => 2.0,
+            Generation::V3 => 3.0,
+            Generation::V4 => 4.0,
         };
+        self.health.set_detail("protocol_generation", generation);
         tracing::info!(
             generation = %hand.generation,
             firmware = %firmware_text(hand.identity),
@@ -253,13 +257,11 @@ impl Host for Ports {
     fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
         self.state.publish(&hand_state(cycle))?;
         self.health.count_loop();
-        self.detail[1] = bus_state_code(cycle.bus_state);
-        self.detail[5] = cycle
-            .temperatures
-            .iter()
-            .filter_map(|t| *t)
-            .max()
-            .unwrap_or(0);
+        self.health
+            .set_detail("bus_state", f64::from(bus_state_code(cycle.bus_state)));
+        let hottest = cycle.temperatures.iter().filter_map(|t| *t).max();
+        self.health
+            .set_detail("max_temperature_c", f64::from(hottest.unwrap_or(0)));
         self.health_due(&cycle.counters)
     }
 
@@ -305,7 +307,6 @@ pub fn run(
         following: false,
         refused: None,
         errors_counted: 0,
-        detail: [0; 7],
     };
     tracing::info!(link = %settings.link, protocol = %settings.protocol, "Allegro node starting");
     // This thread is the torque loop: it runs at the real-time priority launch.toml names.
@@ -322,7 +323,7 @@ mod tests {
 
     fn command(targets: [f32; JOINTS]) -> HandCommand {
         let mut c = HandCommand {
-            hand_model: hand_model::ALLEGRO,
+            hand_model: device_model::ALLEGRO,
             joint_count: JOINTS as u8,
             control_mode: control_mode::POSITION,
             units: units::PHYSICAL,
@@ -356,7 +357,7 @@ mod tests {
         c.joints[15].target = f32::NAN;
         assert!(refusal(&c).is_some());
         let mut c = command([0.3; JOINTS]);
-        c.hand_model = hand_model::REVO2;
+        c.hand_model = device_model::REVO2;
         assert!(refusal(&c).is_some());
     }
 

@@ -17,7 +17,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, NodeHealth};
+use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 /// The simulations run one at a time: two 333 Hz hands over pseudo-terminals at once on a small
@@ -302,7 +302,7 @@ impl Drop for Rig {
 
 fn command(targets: &[f32; 16]) -> HandCommand {
     let mut c = HandCommand {
-        hand_model: hand_model::ALLEGRO,
+        hand_model: device_model::ALLEGRO,
         joint_count: 16,
         control_mode: control_mode::POSITION,
         units: units::PHYSICAL,
@@ -450,14 +450,15 @@ fn generation(generation: &str) {
     assert!(rig.sim.control("garbage").starts_with("ok"));
     std::thread::sleep(Duration::from_millis(400));
     let h = rig.latest_health();
+    let (unknown, bad) = (h.detail("unknown_frames"), h.detail("bad_frames"));
     eprintln!(
-        "{generation}: health errors {}, unknown {}, bad {}",
-        h.errors, h.detail[2], h.detail[3]
+        "{generation}: health errors {}, unknown {unknown:?}, bad {bad:?}",
+        h.errors
     );
     assert!(
-        h.detail[2] >= 10 && h.detail[3] >= 10,
+        unknown >= Some(10.0) && bad >= Some(10.0),
         "{generation}: {:?}",
-        h.detail
+        h.details().collect::<Vec<_>>()
     );
     rig.wait_state(Duration::from_secs(2), "still up", |s| s.link_up == 1);
 
@@ -668,9 +669,11 @@ fn v3_tells_state_answers_from_the_stream_with_either_payload() {
         }
         std::thread::sleep(Duration::from_millis(400));
         let h = rig.latest_health();
+        let frames =
+            |h: &teleop_msgs::NodeHealth| (h.detail("unknown_frames"), h.detail("bad_frames"));
         assert_eq!(
-            (h.detail[2], h.detail[3]),
-            (before.detail[2], before.detail[3]),
+            frames(&h),
+            frames(&before),
             "{payload}: state answers counted as unknown or bad frames\n{}",
             rig.log()
         );
@@ -730,15 +733,16 @@ fn v4_rides_out_a_loaded_host() {
     assert_eq!(down, 0, "hand states with the link down under load");
     std::thread::sleep(Duration::from_millis(300));
     let after = rig.latest_health();
+    let late = after.detail("late_periods");
     eprintln!(
-        "under load: health errors {} -> {}, late periods {}",
-        before.errors, after.errors, after.detail[6]
+        "under load: health errors {} -> {}, late periods {late:?}",
+        before.errors, after.errors
     );
-    // The load did delay frames (the waits the stamps cleared are counted in detail[6]).
+    // The load did delay frames (the waits the stamps cleared are counted as late periods).
     assert!(
-        after.detail[6] > 0,
+        late > Some(0.0),
         "no late period seen: {:?}",
-        after.detail
+        after.details().collect::<Vec<_>>()
     );
     rig.wait_state(Duration::from_secs(2), "still up", |s| s.link_up == 1);
 }

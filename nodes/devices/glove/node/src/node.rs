@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use teleop_glove_protocol::{reg, ErrorBits, Register, Request, Response};
 use teleop_msgs::{
-    device_kind, fixed_text, DeviceInfo, GloveDiagnostics, GloveForceCommand, GloveState,
+    device_model, fixed_text, link_kind, DeviceInfo, GloveDiagnostics, GloveForceCommand,
+    GloveState,
 };
 use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
 
@@ -182,9 +183,11 @@ pub fn run(runtime: &NodeRuntime, config: &GloveConfig) -> anyhow::Result<()> {
             Ok(mut link) => {
                 tracing::info!(%port, "port open");
                 l.connected = Some(DeviceInfo {
-                    kind: device_kind::GLOVE,
-                    id: u32::from(config.id),
-                    model: fixed_text("EH55BF1"),
+                    device_model: device_model::GLOVE,
+                    link_kind: link_kind::SERIAL,
+                    bus_address: u32::from(config.id),
+                    model_name: fixed_text("EH55BF1"),
+                    link: fixed_text(&port),
                     ..Default::default()
                 });
                 l.reported = LinkStats::default();

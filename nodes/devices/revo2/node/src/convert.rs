@@ -2,7 +2,7 @@
 //! outputs (with joint limits), the hold command, and inputs to hand state and tactile samples.
 
 use teleop_msgs::{
-    control_mode, fingertip_sensor, hand_model, link_kind, units, Fingertip, HandCommand,
+    control_mode, device_model, fingertip_sensor, link_kind, units, Fingertip, HandCommand,
     HandState, Tactile,
 };
 use teleop_revo2_protocol::{
@@ -32,7 +32,7 @@ pub fn outputs_for(
     units: UnitMode,
     measured: Option<&[f32; JOINTS]>,
 ) -> Option<(Outputs, u32)> {
-    if cmd.hand_model != hand_model::REVO2 || usize::from(cmd.joint_count) < JOINTS {
+    if cmd.hand_model != device_model::REVO2 || usize::from(cmd.joint_count) < JOINTS {
         return None;
     }
     if cmd.joints[..JOINTS]
@@ -189,7 +189,7 @@ pub fn normalised_position(raw: u16, joint: usize, unit_mode: UnitMode) -> f32 {
 /// The hand state message for these inputs (link fields are filled by the caller).
 pub fn hand_state(inputs: &Inputs, unit_mode: UnitMode, full_speed: f32) -> HandState {
     let mut state = HandState {
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         joint_count: JOINTS as u8,
         units: units::NORMALISED,
         link_kind: link_kind::ETHERCAT,
@@ -218,7 +218,7 @@ pub fn hand_state(inputs: &Inputs, unit_mode: UnitMode, full_speed: f32) -> Hand
 pub fn tactile(inputs: &Inputs) -> Option<Tactile> {
     let t = inputs.tactile.as_ref()?;
     let mut msg = Tactile {
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         fingertip_count: 5,
         ..Default::default()
     };
@@ -248,7 +248,7 @@ mod tests {
 
     fn cmd(targets: [f32; 6], speed: f32) -> HandCommand {
         let mut c = HandCommand {
-            hand_model: hand_model::REVO2,
+            hand_model: device_model::REVO2,
             joint_count: 6,
             control_mode: control_mode::POSITION,
             units: units::NORMALISED,
@@ -284,7 +284,7 @@ mod tests {
         let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent, None).unwrap();
         assert_eq!(out.multi.param2, [1000; 6], "no limit = full speed");
         let mut other = cmd([0.5; 6], 0.0);
-        other.hand_model = hand_model::ALLEGRO;
+        other.hand_model = device_model::ALLEGRO;
         assert!(outputs_for(&other, &config, UnitMode::Percent, None).is_none());
     }
 

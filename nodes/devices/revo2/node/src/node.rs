@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
 use teleop_msgs::{
-    bus_state, device_kind, fixed_text, link_kind, DeviceInfo, HandCommand, HandState,
+    bus_state, device_model, fixed_text, link_kind, DeviceInfo, HandCommand, HandState,
 };
 use teleop_revo2_protocol::Inputs;
 use teleop_runtime::{HandPorts, NodeRuntime};
@@ -44,13 +44,14 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
 /// The identity the device reported, for the recorder and `teleop echo device/info`.
 fn device_info(info: &FoundDevice) -> DeviceInfo {
     DeviceInfo {
-        kind: device_kind::REVO2,
-        id: info.serial,
-        model: fixed_text(teleop_revo2_protocol::DEVICE_NAME),
-        firmware_a: fixed_text(&info.control_fw),
-        firmware_b: fixed_text(&info.wrist_fw),
-        serial_a: fixed_text(&info.control_sn),
-        serial_b: fixed_text(&info.wrist_sn),
+        device_model: device_model::REVO2,
+        link_kind: link_kind::ETHERCAT,
+        identity_serial: info.serial,
+        model_name: fixed_text(teleop_revo2_protocol::DEVICE_NAME),
+        firmware_version: fixed_text(&info.control_fw),
+        serial_number: fixed_text(&info.control_sn),
+        second_board_firmware: fixed_text(&info.wrist_fw),
+        second_board_serial: fixed_text(&info.wrist_sn),
         ..Default::default()
     }
 }
@@ -112,7 +113,7 @@ impl Host<Revo2> for Ports {
 
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()> {
         let state = HandState {
-            hand_model: teleop_msgs::hand_model::REVO2,
+            hand_model: teleop_msgs::device_model::REVO2,
             joint_count: 6,
             link_up: 0,
             link_kind: link_kind::ETHERCAT,

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use ethercrab::{Command as EcatCommand, MainDevice};
 use teleop_ecat_master::{Driver, Found, Image, OwnLayout, PreOpGroup};
-use teleop_msgs::{control_mode, hand_model, units, HandCommand};
+use teleop_msgs::{control_mode, device_model, units, HandCommand};
 use teleop_shadow_protocol::data::{flags, tactile, EdcNumbering};
 use teleop_shadow_protocol::layout::{
     CanBridge, Command, Protocol, Status, MOTORS, PRODUCT_BRIDGE, TACTILE,
@@ -363,7 +363,7 @@ impl Driver for Shadow {
             command.control_mode,
             control_mode::POSITION | control_mode::POSITION_TIME
         );
-        if command.hand_model != hand_model::SHADOW
+        if command.hand_model != device_model::SHADOW
             || usize::from(command.joint_count) != JOINTS.len()
             || command.units != units::PHYSICAL
             || !position

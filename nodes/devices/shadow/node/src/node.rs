@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
 use teleop_msgs::{
-    bus_state, device_kind, fingertip_sensor, fixed_text, hand_model, link_kind, units, DeviceInfo,
+    bus_state, device_model, fingertip_sensor, fixed_text, link_kind, units, DeviceInfo,
     HandCommand, HandState, Tactile,
 };
 use teleop_runtime::{HandPorts, NodeRuntime};
@@ -48,7 +48,7 @@ pub fn run(
 /// `hand/state` of one exchange.
 pub fn hand_state(inputs: &Inputs) -> HandState {
     let mut state = HandState {
-        hand_model: hand_model::SHADOW,
+        hand_model: device_model::SHADOW,
         joint_count: 24,
         units: units::PHYSICAL,
         link_up: 1,
@@ -70,7 +70,7 @@ pub fn hand_state(inputs: &Inputs) -> HandState {
 pub fn tactile(inputs: &Inputs) -> Option<Tactile> {
     let pst = inputs.pst?;
     let mut t = Tactile {
-        hand_model: hand_model::SHADOW,
+        hand_model: device_model::SHADOW,
         fingertip_count: pst.len() as u8,
         ..Default::default()
     };
@@ -97,11 +97,12 @@ impl Host<Shadow> for Ports {
     fn connected(&mut self, driver: &Shadow) {
         let palm = driver.palm();
         self.0.connected(DeviceInfo {
-            kind: device_kind::SHADOW,
-            id: palm.serial,
-            model: fixed_text("Shadow Hand E (SR06 palm, 0220)"),
-            firmware_a: fixed_text(&format!("palm revision {}", palm.revision)),
-            serial_a: fixed_text(&palm.serial.to_string()),
+            device_model: device_model::SHADOW,
+            link_kind: link_kind::ETHERCAT,
+            identity_serial: palm.serial,
+            model_name: fixed_text("Shadow Hand E (SR06 palm, 0220)"),
+            hardware_revision: fixed_text(&palm.revision.to_string()),
+            serial_number: fixed_text(&palm.serial.to_string()),
             ..Default::default()
         });
     }
@@ -139,7 +140,7 @@ impl Host<Shadow> for Ports {
 
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()> {
         let state = HandState {
-            hand_model: hand_model::SHADOW,
+            hand_model: device_model::SHADOW,
             joint_count: 24,
             units: units::PHYSICAL,
             link_up: 0,

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use common::{serve, Sim};
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState, NodeHealth, Tactile};
+use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 use teleop_shadow::joints::JOINTS;
 use teleop_shadow_protocol::mapping::Mapping;
@@ -120,7 +120,7 @@ impl Rig {
     /// last hand state.
     fn command(&mut self, targets: &[(&str, f32)], d: Duration) -> HandState {
         let mut c = HandCommand {
-            hand_model: hand_model::SHADOW,
+            hand_model: device_model::SHADOW,
             joint_count: 24,
             control_mode: control_mode::POSITION,
             units: units::PHYSICAL,
@@ -201,7 +201,7 @@ fn bring_up_position_control_pst_contact_hold_and_link_loss() {
         "the emulated joint: {sim_ffj3}"
     );
     assert_eq!(s.holding, 0);
-    assert_eq!(s.hand_model, hand_model::SHADOW);
+    assert_eq!(s.hand_model, device_model::SHADOW);
 
     // The middle finger closes on the ball: it stops, and its fingertip's PST reads pressure.
     let grasp = [("MFJ3", 1.4), ("MFJ2", 0.6), ("MFJ1", 0.6), ("FFJ3", 1.2)];

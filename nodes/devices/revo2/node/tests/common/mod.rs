@@ -3,13 +3,13 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{control_mode, hand_model, units, HandCommand, HandState};
+use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState};
 use teleop_runtime::Subscriber;
 
 /// A normalised position command for the Revo2's six joints, speed limit 2.0 per second.
 pub fn position_command(targets: [f32; 6]) -> HandCommand {
     let mut c = HandCommand {
-        hand_model: hand_model::REVO2,
+        hand_model: device_model::REVO2,
         joint_count: 6,
         control_mode: control_mode::POSITION,
         units: units::NORMALISED,
