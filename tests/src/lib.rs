@@ -8,6 +8,8 @@
 //! Must not depend on: node internals. Tests talk to the pipeline only through its topics and
 //! its command line, as a user would.
 
+pub mod ecat;
+pub mod hand;
 pub mod netns;
 pub mod rig;
 pub mod stations;

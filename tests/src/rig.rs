@@ -14,10 +14,17 @@ use std::time::{Duration, Instant};
 
 use crate::Sandbox;
 
-/// Something whose output a failure message shows: a rig's processes, a session's launcher.
+/// Something whose output a failure message shows: a rig's processes, a session's launcher,
+/// or a closure that gathers it.
 pub trait Logs {
     /// The output so far, lossy UTF-8.
     fn logs(&self) -> String;
+}
+
+impl<F: Fn() -> String> Logs for F {
+    fn logs(&self) -> String {
+        self()
+    }
 }
 
 /// One started executable, its stdout and stderr in a log file.

@@ -85,7 +85,7 @@ impl Watcher {
             if ok(self) {
                 return;
             }
-            self.check_time(start, timeout, what, logs);
+            self.check_deadline(start, timeout, what, logs);
             std::thread::sleep(Duration::from_millis(5));
         }
     }
@@ -102,30 +102,18 @@ impl Watcher {
         self.wait_sample(&self.state, logs, timeout, what, ok)
     }
 
-    /// Receives samples of `topic` (one of this watcher's) every 2 ms until one satisfies `ok`
-    /// and returns it; panics after `timeout` naming `what`, with what it saw and `logs`.
+    /// Receives samples of `topic` every 2 ms until one satisfies `ok` and returns it; panics
+    /// after `timeout` naming `what`, with what the watcher saw and `logs`.
     pub fn wait_sample<M: Message>(
         &self,
         topic: &Subscriber<M>,
         logs: &dyn Logs,
         timeout: Duration,
         what: &str,
-        mut ok: impl FnMut(&M) -> bool,
+        ok: impl FnMut(&M) -> bool,
     ) -> M {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            topic.drain(|s| {
-                if found.is_none() && ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            self.check_time(start, timeout, what, logs);
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        let seen_and_logs = || format!("{}\n{}", self.seen(), logs.logs());
+        wait_sample(topic, &seen_and_logs, timeout, what, ok)
     }
 
     /// The health reports of the node `name` received since the last call (other nodes'
@@ -162,14 +150,45 @@ impl Watcher {
         out
     }
 
-    fn check_time(&self, start: Instant, timeout: Duration, what: &str, logs: &dyn Logs) {
-        assert!(
-            start.elapsed() < timeout,
-            "timed out after {timeout:?} waiting for {what}\n{}\n{}",
-            self.seen(),
-            logs.logs()
-        );
+    fn check_deadline(&self, start: Instant, timeout: Duration, what: &str, logs: &dyn Logs) {
+        check_time(start, timeout, what, &|| {
+            format!("{}\n{}", self.seen(), logs.logs())
+        });
     }
+}
+
+/// Receives samples of `topic` every 2 ms until one satisfies `ok` and returns it; panics after
+/// `timeout` naming `what`, with `logs`.
+pub fn wait_sample<M: Message>(
+    topic: &Subscriber<M>,
+    logs: &dyn Logs,
+    timeout: Duration,
+    what: &str,
+    mut ok: impl FnMut(&M) -> bool,
+) -> M {
+    let start = Instant::now();
+    loop {
+        let mut found = None;
+        topic.drain(|s| {
+            if found.is_none() && ok(s) {
+                found = Some(*s);
+            }
+        });
+        if let Some(s) = found {
+            return s;
+        }
+        check_time(start, timeout, what, logs);
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+/// Panics naming `what`, with `logs`, once `timeout` has passed since `start`.
+fn check_time(start: Instant, timeout: Duration, what: &str, logs: &dyn Logs) {
+    assert!(
+        start.elapsed() < timeout,
+        "timed out after {timeout:?} waiting for {what}\n{}",
+        logs.logs()
+    );
 }
 
 /// One topic's line in [`Watcher::seen`].

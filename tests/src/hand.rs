@@ -1,0 +1,96 @@
+//! A hand node under test: its executable started on a [`Rig`] with a configuration, and the
+//! test's ports to it (commands out; state, tactile and health in). Each hand's node tests add
+//! their device (a simulator process, or an emulated bus in the test process) and their
+//! commands; starting, waiting, health, logs and stopping are here once.
+
+use std::ffi::OsStr;
+use std::time::{Duration, Instant};
+
+use teleop_msgs::{HandCommand, HandState, NodeHealth, Tactile};
+use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
+
+use crate::rig::{Logs, Process, Rig};
+use crate::watch::wait_sample;
+
+/// A hand node's process and the test's ports to it. Fields drop in order: the ports before
+/// their node, the rig (processes stopped, logs printed on failure, the sandbox removed) last.
+pub struct HandNode {
+    /// `hand/command`, which the node follows.
+    pub commands: Publisher<HandCommand>,
+    /// `hand/state` from the node.
+    pub states: Subscriber<HandState>,
+    /// `hand/tactile` from the node.
+    pub tactile: Subscriber<Tactile>,
+    /// `health` (every node's; [`HandNode::node_health`] keeps the node's own).
+    pub health: Subscriber<NodeHealth>,
+    /// The test's iceoryx2 node (more ports may be opened on it).
+    pub runtime: NodeRuntime,
+    /// The node's name (its process and its health reports).
+    name: String,
+    /// The node and whatever else the test started (a simulator).
+    pub rig: Rig,
+}
+
+impl HandNode {
+    /// Starts `program --config` (with `config` written into the sandbox) as `name` on `rig`
+    /// and opens the test's ports as the iceoryx2 node `<name>-test`.
+    pub fn start(mut rig: Rig, name: &str, program: impl AsRef<OsStr>, config: &str) -> Self {
+        rig.start_node(name, program, config);
+        let runtime =
+            NodeRuntime::new(&format!("{name}-test"), &rig.sandbox.ipc).expect("test node");
+        Self {
+            commands: runtime.publisher().expect("hand/command"),
+            states: runtime.subscriber().expect("hand/state"),
+            tactile: runtime.subscriber().expect("hand/tactile"),
+            health: runtime.subscriber().expect("health"),
+            runtime,
+            name: name.to_string(),
+            rig,
+        }
+    }
+
+    /// Every process's log so far.
+    pub fn log(&self) -> String {
+        self.rig.logs()
+    }
+
+    /// The node's process.
+    pub fn node(&mut self) -> &mut Process {
+        let name = self.name.clone();
+        self.rig.process(&name)
+    }
+
+    /// Receives hand states every 2 ms until one satisfies `ok` and returns it; panics after
+    /// `timeout` naming `what`, with the logs.
+    pub fn wait_state(
+        &self,
+        timeout: Duration,
+        what: &str,
+        ok: impl FnMut(&HandState) -> bool,
+    ) -> HandState {
+        wait_sample(&self.states, &self.rig, timeout, what, ok)
+    }
+
+    /// Publishes `cmd` every 10 ms for `d`; returns the newest hand state.
+    pub fn send(&mut self, cmd: &HandCommand, d: Duration) -> HandState {
+        let start = Instant::now();
+        while start.elapsed() < d {
+            self.commands.publish(cmd).expect("publish hand/command");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.states
+            .poll_latest()
+            .unwrap_or_else(|| panic!("no hand state from {}\n{}", self.name, self.log()))
+    }
+
+    /// The node's health reports received since the last call (other nodes' are passed over).
+    pub fn node_health(&self) -> Vec<NodeHealth> {
+        let mut out = Vec::new();
+        self.health.drain(|h| {
+            if h.name() == self.name {
+                out.push(*h);
+            }
+        });
+        out
+    }
+}
