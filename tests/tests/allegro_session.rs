@@ -117,7 +117,7 @@ fn the_allegro_session_closes_the_loop_and_reprocesses() {
             .drain(|d| felt = d.force.iter().fold(felt, |m, &v| m.max(v)));
         std::thread::sleep(Duration::from_millis(5));
     }
-    let status = sandbox.control("teleop-sim-allegro.ctl", "status");
+    let status = sandbox.control("teleop-sim-allegro.ctl", "stats");
     eprintln!(
         "middle finger on the ball: effort {max_effort} N m, target - position {max_gap} rad; \
          glove force from effort (little, ring, middle, index, thumb) {force:?}; felt {felt}"

@@ -139,7 +139,7 @@ fn flash_both_boards_of_the_emulated_revo2() {
     );
     assert_eq!(
         sandbox.control("revo2.ctl", "versions").trim(),
-        "control 2.1.0 wrist 1.0.3"
+        "ok control 2.1.0 wrist 1.0.3"
     );
 
     // Refused before the device is touched.

@@ -304,7 +304,7 @@ fn device_faults_are_ridden_out() {
     let (session, watch) = start(&sandbox);
 
     // Glove unplugged: the glove reports its link down, the hand holds; replugged: it follows.
-    assert!(sandbox.control("glove.ctl", "unplug 1.0").starts_with("ok"));
+    assert!(sandbox.control("glove.ctl", "unplug 1000").starts_with("ok"));
     watch.until(
         &session,
         Duration::from_secs(3),
@@ -317,7 +317,7 @@ fn device_faults_are_ridden_out() {
 
     // EtherCAT link cut: the hand state reports the link down, glove force goes to zero; then back.
     assert!(sandbox
-        .control("revo2.ctl", "link-down 1.0")
+        .control("revo2.ctl", "unplug 1000")
         .starts_with("ok"));
     watch.until(
         &session,
@@ -336,7 +336,7 @@ fn device_faults_are_ridden_out() {
     let errors_before = watch.glove.latest().unwrap().errors;
     let lost_before = watch.state.latest().unwrap().lost_frames;
     assert!(sandbox
-        .control("glove.ctl", "fault corrupt=0.2")
+        .control("glove.ctl", "corrupt 0.2")
         .starts_with("ok"));
     assert!(sandbox.control("revo2.ctl", "drop 0.1").starts_with("ok"));
     std::thread::sleep(Duration::from_millis(1500));
@@ -466,7 +466,7 @@ fn a_grasp_survives_a_lost_glove_and_a_lost_operator() {
 
     // The glove is lost for 2 s: the retargeting node re-sends its last command as held, and
     // the Revo2 node holds its last target whenever that goes stale.
-    assert!(sandbox.control("glove.ctl", "unplug 2.0").starts_with("ok"));
+    assert!(sandbox.control("glove.ctl", "unplug 2000").starts_with("ok"));
     let mut holding = false;
     let lowest = lowest_index_force(&session, &watch, Duration::from_secs(2), &mut holding);
     assert!(

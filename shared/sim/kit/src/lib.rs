@@ -10,18 +10,20 @@
 //!   `teleop_runtime::control`'s socket;
 //! - [`process`]: the simulator process's `main` (logging, stop signals, the common
 //!   [`SimArgs`], the control socket, exit status);
+//! - [`ethercat`]: where an emulated EtherCAT device serves (a local socket or an interface);
 //! - [`pty`]: the pseudo-terminal device behind a stable link, unplugged and plugged back in;
 //! - [`outage`]: a fault that lasts a while (link down, bus off), a later one replacing the end;
 //! - [`dice`]: seedable fault dice;
 //! - [`plant`]: the joint plant's clock (fixed sub-steps up to a time) and first-order lags;
 //! - [`object`]: the virtual objects a simulated hand can hold, one name each.
 //!
-//! Must not depend on: any device protocol, any node (a driver bug must not hide behind code
+//! Must not depend on: any device protocol (buses only: `teleop-ecat-link`), any node (a driver bug must not hide behind code
 //! the simulator shares with it).
 
 pub mod command;
 pub mod control;
 pub mod dice;
+pub mod ethercat;
 pub mod object;
 pub mod outage;
 pub mod plant;

@@ -389,7 +389,7 @@ fn generation(generation: &str) {
         s.joints[5].speed
     );
     assert!(effort > 0.3, "{generation}: pressing: {effort} N m");
-    let status = rig.sim.control("status");
+    let status = rig.sim.control("stats");
     let contact: Vec<f64> = field(&status, "contact")
         .split(',')
         .map(|v| v.parse().unwrap())
@@ -425,7 +425,7 @@ fn generation(generation: &str) {
     assert!(rig.sim.control("stop-stream").starts_with("ok"));
     rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
     rig.wait_log(Duration::from_secs(2), "torque stopped, SYSTEM_OFF sent");
-    let status = rig.sim.control("status");
+    let status = rig.sim.control("stats");
     assert!(
         sim_pwm(&status).iter().all(|p| *p == 0),
         "{generation}: torque stopped: {status}"
@@ -475,7 +475,7 @@ fn generation(generation: &str) {
         "{}",
         rig.log()
     );
-    let status = rig.sim.control("status");
+    let status = rig.sim.control("stats");
     assert_eq!(field(&status, "system"), "off", "{status}");
     assert!(sim_pwm(&status).iter().all(|p| *p == 0), "{status}");
 }
@@ -523,7 +523,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     // Stale: the hold keeps sending torque, so the watchdog never trips and the pose stays.
     rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
     std::thread::sleep(Duration::from_millis(500));
-    let status = rig.sim.control("status");
+    let status = rig.sim.control("stats");
     assert_eq!(field(&status, "torque_timeouts"), "0", "{status}");
     let held = rig.states.poll_latest().unwrap();
     let worst = positions(&held)
@@ -535,7 +535,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     // The node stopped: the watchdog zeroes nothing it had not already zeroed.
     let status = rig.stop_node();
     assert!(status.success(), "{status:?}\n{}", rig.log());
-    let status = rig.sim.control("status");
+    let status = rig.sim.control("stats");
     assert!(sim_pwm(&status).iter().all(|p| *p == 0), "{status}");
 }
 
@@ -609,7 +609,7 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    let status = sim.control("status");
+    let status = sim.control("stats");
     let index_1: f64 = field(&status, "position")
         .split(',')
         .nth(1)
@@ -627,7 +627,7 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
     let deadline = Instant::now() + Duration::from_secs(2);
     while field(&status, "system") != "off" && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(10));
-        status = sim.control("status");
+        status = sim.control("stats");
     }
     assert_eq!(field(&status, "system"), "off", "released: {status}");
     drop(sim);

@@ -680,7 +680,7 @@ impl Firmware {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hand::{Ball, HandParams};
+    use crate::hand::{HandParams, VirtualObject};
 
     fn firmware(generation: Generation) -> Firmware {
         firmware_with(FirmwareOptions::new(generation))
@@ -1142,7 +1142,7 @@ mod tests {
 
     #[test]
     fn a_finger_driven_closed_stops_at_the_ball() {
-        let hand = Hand::allegro(HandParams::default(), Some(Ball::default_ball()))
+        let hand = Hand::allegro(HandParams::default(), Some(VirtualObject::ball()))
             .expect("builtin profile");
         let mut fw = Firmware::new(FirmwareOptions::new(Generation::V4), hand);
         send(

@@ -14,6 +14,8 @@
 //! [`HandParams::step_s`].
 
 use teleop_hand_profile::HandProfile;
+use teleop_sim_kit::plant::{lag, Clock};
+use teleop_sim_kit::Object;
 
 /// Joints: index 0-3, middle 4-7, ring 8-11, thumb 12-15 (the CAN order).
 pub const JOINTS: usize = 16;
@@ -155,7 +157,7 @@ pub enum Shape {
 
 /// The virtual object: a ball (or a bar) in the hand frame (metres).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Ball {
+pub struct VirtualObject {
     /// Its shape.
     pub shape: Shape,
     /// Centre, hand frame (for a cylinder, a point on its axis).
@@ -168,12 +170,12 @@ pub struct Ball {
     pub damping: f64,
 }
 
-impl Ball {
+impl VirtualObject {
     /// A ball of 8 cm under the palm, in front of the middle finger: the middle finger closing
     /// meets it about half closed and the opposed thumb presses on it from its side; the index
     /// and ring fingers only brush its sides (pushing their first joints outwards) and close
     /// beside it.
-    pub fn default_ball() -> Self {
+    pub fn ball() -> Self {
         Self {
             shape: Shape::Sphere,
             centre: [0.0, 0.11, -0.07],
@@ -188,7 +190,15 @@ impl Ball {
     pub fn bar() -> Self {
         Self {
             shape: Shape::Cylinder,
-            ..Self::default_ball()
+            ..Self::ball()
+        }
+    }
+
+    /// The geometry of the simulator kit's `object`.
+    pub fn of(object: Object) -> Self {
+        match object {
+            Object::Ball => Self::ball(),
+            Object::Bar => Self::bar(),
         }
     }
 }
@@ -242,14 +252,14 @@ pub struct Hand {
     params: HandParams,
     chains: [Chain; FINGERS],
     limits: [(f64, f64); JOINTS],
-    object: Option<Ball>,
+    object: Option<VirtualObject>,
     q: [f64; JOINTS],
     qd: [f64; JOINTS],
     motor: [f64; JOINTS],
     external: [f64; JOINTS],
     contact_n: [f64; FINGERS],
     temperature: [f64; JOINTS],
-    t: f64,
+    clock: Clock,
 }
 
 impl Hand {
@@ -258,7 +268,7 @@ impl Hand {
     pub fn new(
         profile: &HandProfile,
         params: HandParams,
-        object: Option<Ball>,
+        object: Option<VirtualObject>,
     ) -> Result<Self, String> {
         if profile.joints.len() != JOINTS || profile.fingers.len() != FINGERS {
             return Err(format!(
@@ -318,24 +328,24 @@ impl Hand {
             external: [0.0; JOINTS],
             contact_n: [0.0; FINGERS],
             temperature: [params.ambient_c; JOINTS],
-            t: 0.0,
+            clock: Clock::new(params.step_s),
         })
     }
 
     /// The builtin Allegro profile's hand.
-    pub fn allegro(params: HandParams, object: Option<Ball>) -> Result<Self, String> {
+    pub fn allegro(params: HandParams, object: Option<VirtualObject>) -> Result<Self, String> {
         let profile = HandProfile::builtin("allegro")
             .ok_or_else(|| "the builtin hand profile `allegro` is missing".to_string())?;
         Self::new(&profile, params, object)
     }
 
     /// Places or removes the object.
-    pub fn set_object(&mut self, object: Option<Ball>) {
+    pub fn set_object(&mut self, object: Option<VirtualObject>) {
         self.object = object;
     }
 
     /// The object.
-    pub fn object(&self) -> Option<Ball> {
+    pub fn object(&self) -> Option<VirtualObject> {
         self.object
     }
 
@@ -367,16 +377,14 @@ impl Hand {
 
     /// Advances the model to time `t` seconds (earlier times are ignored).
     pub fn advance_to(&mut self, t: f64) {
-        while self.t + 1e-12 < t {
-            let h = (t - self.t).min(self.params.step_s);
-            self.step(h);
-            self.t += h;
-        }
+        let mut clock = self.clock;
+        clock.advance_to(t, |_, h| self.step(h));
+        self.clock = clock;
     }
 
     /// The model's time, s.
     pub fn time(&self) -> f64 {
-        self.t
+        self.clock.time()
     }
 
     fn external_torques(&mut self) {
@@ -436,7 +444,7 @@ impl Hand {
             }
             let rise = p.heat_c_per_nm2 * self.motor[j] * self.motor[j];
             let target = p.ambient_c + rise;
-            self.temperature[j] += (target - self.temperature[j]) * (h / p.thermal_tau_s);
+            self.temperature[j] = lag(self.temperature[j], target, h, p.thermal_tau_s);
         }
     }
 
@@ -489,7 +497,7 @@ impl Hand {
 mod tests {
     use super::*;
 
-    fn hand(object: Option<Ball>) -> Hand {
+    fn hand(object: Option<VirtualObject>) -> Hand {
         Hand::allegro(HandParams::default(), object).expect("builtin profile")
     }
 
@@ -533,7 +541,7 @@ mod tests {
         assert!(h.tips()[0][2] < -0.05, "{:?}", h.tips()[0]);
     }
 
-    fn stops_at(object: Ball, f: usize) {
+    fn stops_at(object: VirtualObject, f: usize) {
         let mut free = hand(None);
         let mut held = hand(Some(object));
         flex(&mut free, f, 0.3, 0.0, 1.0);
@@ -566,14 +574,14 @@ mod tests {
 
     #[test]
     fn a_finger_flexing_with_constant_torque_stops_at_the_object_and_not_without() {
-        stops_at(Ball::default_ball(), 1);
+        stops_at(VirtualObject::ball(), 1);
         for f in 0..3 {
-            stops_at(Ball::bar(), f);
+            stops_at(VirtualObject::bar(), f);
         }
     }
 
     /// Closes every finger with a PD towards a fist (as the node does); returns the hand.
-    fn close_with_pd(object: Option<Ball>) -> Hand {
+    fn close_with_pd(object: Option<VirtualObject>) -> Hand {
         let target = [
             0.0, 1.2, 1.2, 1.2, 0.0, 1.2, 1.2, 1.2, 0.0, 1.2, 1.2, 1.2, 1.3, 0.6, 1.2, 1.2,
         ];
@@ -596,7 +604,7 @@ mod tests {
         let free = close_with_pd(None);
         assert!(free.positions()[5] > 1.15, "{:?}", free.positions());
         assert!(free.torques()[5].abs() < 0.05, "{:?}", free.torques());
-        let ball = close_with_pd(Some(Ball::default_ball()));
+        let ball = close_with_pd(Some(VirtualObject::ball()));
         let (q, t, c) = (ball.positions(), ball.torques(), ball.contact_forces());
         assert!(
             q[5] < 0.8 && t[5] > 0.2,
@@ -606,7 +614,7 @@ mod tests {
             c[1] > 2.0 && c[3] > 2.0,
             "middle and thumb press on it: {c:?}"
         );
-        let bar = close_with_pd(Some(Ball::bar()));
+        let bar = close_with_pd(Some(VirtualObject::bar()));
         let (q, t) = (bar.positions(), bar.torques());
         for f in 0..3 {
             let j = f * 4 + 1;
@@ -616,7 +624,7 @@ mod tests {
 
     #[test]
     fn pushing_harder_on_the_ball_takes_more_torque_and_presses_further() {
-        let mut h = hand(Some(Ball::bar()));
+        let mut h = hand(Some(VirtualObject::bar()));
         flex(&mut h, 1, 0.2, 0.0, 1.0);
         let (q1, n1) = (h.positions()[5], h.contact_forces()[1]);
         flex(&mut h, 1, 0.5, 0.0, 1.0);

@@ -9,12 +9,14 @@
 //!   device document's protocol with the version's torque joint order and PWM scale; v4):
 //!   period, SYSTEM_ON/OFF, streaming on its own clock, queries, torque frames (pure);
 //! - [`adapter`]: a USB slcan adapter (CANable or Lawicel acks) as a state machine (pure);
-//! - [`serve`]: the bus, the adapter on a pseudo-terminal behind a stable link, the socket bus,
-//!   and faults injected at run time.
+//! - [`serve`]: the bus, the adapter on the simulator kit's pseudo-terminal behind a stable
+//!   link, the socket bus, and faults injected at run time;
+//! - [`control`]: the control socket's commands (the kit's vocabulary and the hand's own).
 //!
 //! Must not depend on: the Allegro node (a driver bug must not hide behind shared driver code).
 
 pub mod adapter;
+pub mod control;
 pub mod firmware;
 pub mod hand;
 pub mod serve;

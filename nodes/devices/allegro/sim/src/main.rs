@@ -1,22 +1,20 @@
 //! `teleop-sim-allegro`: the simulated Allegro Hand as a process. Serves the hand's CAN bus
 //! through a simulated slcan adapter on a pty (`--slcan PATH`, the node's `slcan:PATH` link)
 //! and/or on a local socket (`--socket PATH`, the node's `local:PATH` link), prints one line
-//! saying where, and takes commands at run time on a control socket (one line each, answered
-//! `ok ...` or `error ...`):
+//! saying where, and takes commands at run time on a control socket (the simulator kit's
+//! vocabulary, one line each, answered `ok ...` or `error: ...`):
 //!
 //! ```text
 //! echo "drop 0.1" | socat - UNIX-CONNECT:/tmp/teleop-allegro.ctl
 //! ```
-//! `drop P` (frames from the hand lost), `drop-in P` (frames to the hand lost),
-//! `stop-stream`, `resume-stream`, `bus-off MS`, `unplug MS`, `generation v1|v2|v3|v4`,
-//! `overheat` (motors at 95 deg C: the firmware switches them off), `overheat off` (back to
-//! ambient), `inject ID#DATA` (the hand sends that frame, candump style, `ID#R` for a remote
-//! frame), `garbage` (the adapter sends an unparsable line), `object ball|bar|none`,
-//! `gravity on|off`, `status` (one line of `key=value` words, see [`Sim::status_line`]).
+//! Common: `unplug MS` (the adapter), `drop P` (frames from the hand lost), `clear`, `stats`
+//! (one line of `key=value` words, see [`Sim::stats_answer`]), `object ball|bar|none`. The
+//! hand's own: see [`teleop_sim_allegro::control`].
+//!
+//! [`Sim::stats_answer`]: teleop_sim_allegro::Sim::stats_answer
 
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixListener;
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Duration;
@@ -25,8 +23,10 @@ use clap::Parser;
 use teleop_allegro_protocol::{Generation, JointCalibration};
 use teleop_sim_allegro::adapter::AckStyle;
 use teleop_sim_allegro::firmware::{Firmware, FirmwareOptions, StateAnswer};
-use teleop_sim_allegro::hand::{Ball, Hand, HandParams, JOINTS};
-use teleop_sim_allegro::{parse_frame, Sim, SimOptions};
+use teleop_sim_allegro::hand::{Hand, HandParams, VirtualObject, JOINTS};
+use teleop_sim_allegro::{Sim, SimOptions};
+use teleop_sim_kit::process::{self, SimArgs};
+use teleop_sim_kit::Object;
 
 #[derive(Parser)]
 #[command(version, about = "Simulated Wonik Allegro Hand on a CAN bus")]
@@ -40,9 +40,6 @@ struct Args {
     /// Serve the bus on this Unix socket (the node's `local:PATH` link).
     #[arg(long)]
     socket: Option<PathBuf>,
-    /// Control socket (default: the slcan or socket path with `.ctl`).
-    #[arg(long)]
-    control: Option<PathBuf>,
     /// Virtual object: `ball` (a sphere under the middle finger), `bar` (a cylinder across
     /// the palm that the index, middle and ring fingers wrap) or `none`.
     #[arg(long, default_value = "ball")]
@@ -88,26 +85,12 @@ struct Args {
     /// Seed of the fault dice.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    #[command(flatten)]
+    sim: SimArgs,
 }
 
 fn main() -> ExitCode {
-    teleop_runtime::init_logging();
-    match run(Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            tracing::error!("{e:#}");
-            ExitCode::FAILURE
-        }
-    }
-}
-
-fn object(name: &str) -> anyhow::Result<Option<Ball>> {
-    match name {
-        "ball" => Ok(Some(Ball::default_ball())),
-        "bar" => Ok(Some(Ball::bar())),
-        "none" => Ok(None),
-        other => anyhow::bail!("unknown object {other:?}: use ball, bar or none"),
-    }
+    process::main(run)
 }
 
 /// 16 comma-separated values of `what`.
@@ -187,13 +170,12 @@ fn run(args: Args) -> anyhow::Result<()> {
         gravity: args.gravity,
         ..HandParams::default()
     };
-    let hand = Hand::allegro(params, object(&args.object)?).map_err(anyhow::Error::msg)?;
-    let control = match (&args.control, &args.slcan, &args.socket) {
-        (Some(c), _, _) => c.clone(),
-        (None, Some(p), _) | (None, None, Some(p)) => p.with_extension("ctl"),
-        (None, None, None) => anyhow::bail!("give --slcan PATH and/or --socket PATH"),
+    let object = Object::from_arg(&args.object).map_err(anyhow::Error::msg)?;
+    let hand = Hand::allegro(params, object.map(VirtualObject::of)).map_err(anyhow::Error::msg)?;
+    let default_control = match (&args.slcan, &args.socket) {
+        (Some(p), _) | (None, Some(p)) => p.with_extension("ctl"),
+        (None, None) => anyhow::bail!("give --slcan PATH and/or --socket PATH"),
     };
-    teleop_runtime::install_stop_handlers();
     let sim = Arc::new(
         Sim::start(
             Firmware::new(options, hand),
@@ -206,7 +188,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         )
         .map_err(|e| anyhow::anyhow!("cannot start the simulated hand: {e}"))?,
     );
-    let listener = bind_control(&control)?;
+    let control = args.sim.serve(sim, default_control)?;
     let show = |p: &Option<PathBuf>| {
         p.as_ref()
             .map_or("-".to_string(), |p| p.display().to_string())
@@ -216,141 +198,9 @@ fn run(args: Args) -> anyhow::Result<()> {
         args.generation,
         show(&args.slcan),
         show(&args.socket),
-        control.display()
+        control.path().display()
     );
     std::io::stdout().flush()?;
-    while teleop_runtime::stop_signal().is_none() {
-        match listener.accept() {
-            Ok((stream, _)) => {
-                let _ = stream.set_nonblocking(false);
-                let mut reply = stream.try_clone()?;
-                for line in BufReader::new(stream).lines() {
-                    let Ok(line) = line else { break };
-                    let answer = command(&sim, line.trim());
-                    let _ = writeln!(reply, "{answer}");
-                }
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(20));
-            }
-            Err(e) => return Err(e.into()),
-        }
-    }
-    let _ = std::fs::remove_file(&control);
-    tracing::info!("stopped");
+    process::wait_for_stop();
     Ok(())
-}
-
-fn bind_control(path: &Path) -> anyhow::Result<UnixListener> {
-    let _ = std::fs::remove_file(path);
-    let listener = UnixListener::bind(path)
-        .map_err(|e| anyhow::anyhow!("{}: cannot create control socket: {e}", path.display()))?;
-    listener.set_nonblocking(true)?;
-    Ok(listener)
-}
-
-/// Longest bus-off or unplug, ms.
-const MAX_FAULT_MS: u64 = 3_600_000;
-/// Temperature `overheat` puts the motors at, deg C.
-const OVERHEAT_TO_C: f64 = 95.0;
-
-fn command(sim: &Sim, line: &str) -> String {
-    let (word, rest) = line.split_once(' ').unwrap_or((line, ""));
-    let rest = rest.trim();
-    let prob = |s: &str| s.parse::<f64>().ok().filter(|p| (0.0..=1.0).contains(p));
-    let millis = |s: &str| {
-        s.parse::<u64>()
-            .ok()
-            .filter(|ms| *ms <= MAX_FAULT_MS)
-            .map(Duration::from_millis)
-    };
-    match word {
-        "drop" | "drop-in" => match prob(rest) {
-            Some(p) => {
-                let mut f = sim.faults();
-                if word == "drop" {
-                    f.drop_out = p;
-                } else {
-                    f.drop_in = p;
-                }
-                sim.set_faults(f);
-                tracing::warn!("{word} {p}");
-                format!("ok {word} {p}")
-            }
-            None => format!("error: {word} PROBABILITY (0..1)"),
-        },
-        "stop-stream" | "resume-stream" => {
-            let stop = word == "stop-stream";
-            sim.with_firmware(|fw| fw.stop_stream(stop));
-            tracing::warn!("{word}");
-            format!("ok {word}")
-        }
-        "bus-off" => match millis(rest) {
-            Some(d) => {
-                sim.bus_off(d);
-                tracing::warn!("bus off for {} ms", d.as_millis());
-                format!("ok bus-off {} ms", d.as_millis())
-            }
-            None => format!("error: bus-off MS (0..={MAX_FAULT_MS})"),
-        },
-        "unplug" => match millis(rest) {
-            Some(d) if sim.unplug(d) => format!("ok unplug {} ms", d.as_millis()),
-            Some(_) => "error: unplug: no slcan adapter (start with --slcan PATH)".into(),
-            None => format!("error: unplug MS (0..={MAX_FAULT_MS})"),
-        },
-        "generation" => match rest.parse::<Generation>() {
-            Ok(g) => {
-                sim.with_firmware(|fw| fw.set_generation(g));
-                tracing::warn!("protocol generation now {g}");
-                format!("ok generation {g}")
-            }
-            Err(_) => "error: generation v1|v2|v3|v4".into(),
-        },
-        "overheat" => match rest {
-            "" => {
-                sim.with_firmware(|fw| fw.heat(OVERHEAT_TO_C));
-                format!("ok overheat {OVERHEAT_TO_C} C")
-            }
-            "off" => {
-                let ambient = HandParams::default().ambient_c;
-                sim.with_firmware(|fw| fw.heat(ambient));
-                format!("ok overheat off {ambient} C")
-            }
-            _ => "error: overheat [off]".into(),
-        },
-        "inject" => match parse_frame(rest) {
-            Ok(frame) => {
-                sim.inject(frame);
-                format!("ok inject {frame}")
-            }
-            Err(e) => format!("error: inject: {e}"),
-        },
-        "garbage" => {
-            if sim.garbage() {
-                "ok garbage".into()
-            } else {
-                "error: garbage: no slcan adapter (start with --slcan PATH)".into()
-            }
-        }
-        "object" => match object(rest) {
-            Ok(o) => {
-                sim.with_firmware(|fw| fw.hand_mut().set_object(o));
-                format!("ok object {rest}")
-            }
-            Err(e) => format!("error: {e}"),
-        },
-        "gravity" => match rest {
-            "on" | "off" => {
-                sim.with_firmware(|fw| fw.hand_mut().set_gravity(rest == "on"));
-                format!("ok gravity {rest}")
-            }
-            _ => "error: gravity on|off".into(),
-        },
-        "status" => format!("ok {}", sim.status_line()),
-        _ => format!(
-            "error: unknown command {word:?}: drop P, drop-in P, stop-stream, resume-stream, \
-             bus-off MS, unplug MS, generation vN, overheat [off], inject ID#DATA, garbage, \
-             object ball|bar|none, gravity on|off, status"
-        ),
-    }
 }

@@ -8,8 +8,8 @@
 //!   and wakes when a stream frame is due or a frame arrives;
 //! - with `--socket`, a [`BusServer`] whose clients (the node's `local:PATH` link) are ends;
 //! - with `--slcan`, the simulated adapter ([`crate::adapter`]) on a pty whose device side is
-//!   published under a stable symlink (like a udev by-id link); unplugging removes the pty and
-//!   later plugs a new one in behind the same link (as sim-glove does). The adapter is two ends
+//!   published under a stable symlink (the simulator kit's pty and cable, as the glove's);
+//!   unplugging removes the pty and later plugs a new one in behind the same link. The adapter is two ends
 //!   of the bus (one sends the host's frames, one receives everyone else's), so it never hears
 //!   its own frames back.
 //!
@@ -24,10 +24,10 @@
 //! garbage lines.
 
 use std::collections::VecDeque;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -35,6 +35,11 @@ use serialport::{SerialPort, TTYPort};
 use teleop_can_link::local::{BusServer, LocalBus, LocalEnd};
 use teleop_can_link::slcan::CommandDecoder;
 use teleop_can_link::{Bitrate, BusState, CanFrame, CanLink};
+use teleop_sim_kit::dice::Dice;
+use teleop_sim_kit::lock;
+use teleop_sim_kit::outage::Outage;
+use teleop_sim_kit::pty::{self, Cable};
+use teleop_sim_kit::Stats;
 
 use crate::adapter::{AckStyle, Adapter};
 use crate::firmware::{Firmware, Status};
@@ -72,7 +77,7 @@ pub struct BusStats {
     pub pty_overruns: u64,
     /// Frames the adapter put on the bus from the host.
     pub pty_frames_in: u64,
-    /// Times the adapter was unplugged.
+    /// Times the adapter was unplugged (also counted while it is out).
     pub unplugs: u64,
 }
 
@@ -98,20 +103,15 @@ struct Shared {
     inject: Mutex<Vec<CanFrame>>,
     adapter: Mutex<Adapter>,
     ack_style: AckStyle,
-    unplug: Mutex<Option<Duration>>,
-    plugged: AtomicBool,
+    cable: Cable,
     garbage: AtomicU64,
-    bus_off_epoch: AtomicU64,
+    bus_off: Outage,
 }
 
 impl Shared {
     fn sim_now(&self) -> Duration {
         self.start.elapsed()
     }
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// A running simulated hand.
@@ -137,10 +137,9 @@ impl Sim {
             inject: Mutex::new(Vec::new()),
             adapter: Mutex::new(Adapter::new(options.ack_style)),
             ack_style: options.ack_style,
-            unplug: Mutex::new(None),
-            plugged: AtomicBool::new(options.slcan.is_some()),
+            cable: Cable::new(),
             garbage: AtomicU64::new(0),
-            bus_off_epoch: AtomicU64::new(0),
+            bus_off: Outage::new(),
         });
         let server = match &options.socket {
             Some(path) => Some(BusServer::serve(path, bus.clone())?),
@@ -158,7 +157,7 @@ impl Sim {
             );
         }
         if let Some(link) = &options.slcan {
-            let first = open_pair(link)?;
+            let first = pty::open(link, PTY_READ_TIMEOUT)?;
             let (shared, bus, link) = (shared.clone(), bus.clone(), link.clone());
             threads.push(
                 std::thread::Builder::new()
@@ -212,7 +211,10 @@ impl Sim {
 
     /// Bus counters.
     pub fn stats(&self) -> BusStats {
-        *lock(&self.shared.stats)
+        BusStats {
+            unplugs: self.shared.cable.unplugs(),
+            ..*lock(&self.shared.stats)
+        }
     }
 
     /// The hand sends `frame` (as soon as the firmware thread wakes).
@@ -235,13 +237,13 @@ impl Sim {
         if self.slcan.is_none() {
             return false;
         }
-        *lock(&self.shared.unplug) = Some(pause);
+        self.shared.cable.pull(pause);
         true
     }
 
     /// The adapter is plugged in (a pty behind the link).
     pub fn plugged(&self) -> bool {
-        self.shared.plugged.load(Ordering::SeqCst)
+        self.shared.cable.plugged()
     }
 
     /// The adapter's state, if serving one.
@@ -254,27 +256,20 @@ impl Sim {
     /// Takes the bus off for `duration` (every end sees bus-off; nothing passes; the adapter's
     /// status flags show it), then back on. A later call replaces the end time.
     pub fn bus_off(&self, duration: Duration) {
-        let epoch = self.shared.bus_off_epoch.fetch_add(1, Ordering::SeqCst) + 1;
-        self.bus.set_bus_state(BusState::BusOff);
-        lock(&self.shared.adapter).set_bus_off(true);
         let (shared, bus) = (self.shared.clone(), self.bus.clone());
-        let restore = move || {
-            std::thread::sleep(duration);
-            if shared.bus_off_epoch.load(Ordering::SeqCst) == epoch {
+        self.shared.bus_off.start(
+            "bus-on",
+            duration,
+            || {
+                self.bus.set_bus_state(BusState::BusOff);
+                lock(&self.shared.adapter).set_bus_off(true);
+            },
+            move || {
                 bus.set_bus_state(BusState::ErrorActive);
                 lock(&shared.adapter).set_bus_off(false);
                 tracing::info!("bus on again");
-            }
-        };
-        if std::thread::Builder::new()
-            .name("bus-on".into())
-            .spawn(restore)
-            .is_err()
-        {
-            // No thread for the timer: do not leave the bus off for good.
-            self.bus.set_bus_state(BusState::ErrorActive);
-            lock(&self.shared.adapter).set_bus_off(false);
-        }
+            },
+        );
     }
 
     /// The bus is off.
@@ -282,9 +277,9 @@ impl Sim {
         self.bus.bus_state() == BusState::BusOff
     }
 
-    /// The state in one line of `key=value` words (arrays comma-separated, joint order), as
-    /// the control socket's `status` answers it after `ok `.
-    pub fn status_line(&self) -> String {
+    /// The state and counters as `key=value` words (arrays comma-separated, joint order), as
+    /// the control socket's `stats` answers them after `ok `.
+    pub fn stats_answer(&self) -> Stats {
         let s = self.status();
         let b = self.stats();
         let yes = |v: bool| if v { "yes" } else { "no" };
@@ -296,41 +291,44 @@ impl Sim {
             Some(_) => "closed",
         };
         let c = s.counters;
-        format!(
-            "generation={} system={} streaming={} period_ms={} temperature_ms={} \
-             stream_stopped={} overheated={} mode={} frames_in={} frames_out={} ignored={} \
-             torque_frames={} torque_refused={} torque_timeouts={} dropped_out={} dropped_in={} \
-             lost_bus_off={} bus={} adapter={} pty_frames_out={} pty_frames_in={} unplugs={} \
-             pwm={} torque={} position={} velocity={} temperature={} contact={}",
-            s.generation,
-            if s.system_on { "on" } else { "off" },
-            yes(s.streaming),
-            ms(s.period),
-            ms(s.temperature_period),
-            yes(s.stream_stopped),
-            yes(s.overheated),
-            s.mode.unwrap_or("none"),
-            c.frames_in,
-            c.frames_out,
-            c.ignored,
-            c.torque_frames,
-            c.torque_refused,
-            c.torque_timeouts,
-            b.dropped_out,
-            b.dropped_in,
-            b.lost_bus_off,
-            self.bus.bus_state(),
-            adapter,
-            b.pty_frames,
-            b.pty_frames_in,
-            b.unplugs,
-            list(s.pwm.iter().map(|p| p.to_string())),
-            list(s.torque.iter().map(|v| format!("{v:.4}"))),
-            list(s.position.iter().map(|v| format!("{v:.4}"))),
-            list(s.velocity.iter().map(|v| format!("{v:.3}"))),
-            list(s.temperature.iter().map(|v| format!("{v:.1}"))),
-            list(s.contact.iter().map(|v| format!("{v:.3}"))),
-        )
+        Stats::new()
+            .field("generation", s.generation)
+            .field("system", if s.system_on { "on" } else { "off" })
+            .field("streaming", yes(s.streaming))
+            .field("period_ms", ms(s.period))
+            .field("temperature_ms", ms(s.temperature_period))
+            .field("stream_stopped", yes(s.stream_stopped))
+            .field("overheated", yes(s.overheated))
+            .field("mode", s.mode.unwrap_or("none"))
+            .field("frames_in", c.frames_in)
+            .field("frames_out", c.frames_out)
+            .field("ignored", c.ignored)
+            .field("torque_frames", c.torque_frames)
+            .field("torque_refused", c.torque_refused)
+            .field("torque_timeouts", c.torque_timeouts)
+            .field("dropped_out", b.dropped_out)
+            .field("dropped_in", b.dropped_in)
+            .field("lost_bus_off", b.lost_bus_off)
+            .field("bus", self.bus.bus_state())
+            .field("adapter", adapter)
+            .field("pty_frames_out", b.pty_frames)
+            .field("pty_frames_in", b.pty_frames_in)
+            .field("unplugs", b.unplugs)
+            .field("pwm", list(s.pwm.iter().map(|p| p.to_string())))
+            .field("torque", list(s.torque.iter().map(|v| format!("{v:.4}"))))
+            .field(
+                "position",
+                list(s.position.iter().map(|v| format!("{v:.4}"))),
+            )
+            .field(
+                "velocity",
+                list(s.velocity.iter().map(|v| format!("{v:.3}"))),
+            )
+            .field(
+                "temperature",
+                list(s.temperature.iter().map(|v| format!("{v:.1}"))),
+            )
+            .field("contact", list(s.contact.iter().map(|v| format!("{v:.3}"))))
     }
 }
 
@@ -350,26 +348,10 @@ impl Drop for Sim {
     }
 }
 
-/// xorshift64*: deterministic, seedable, good enough for fault dice.
-struct Dice(u64);
-
-impl Dice {
-    fn roll(&mut self, p: f64) -> bool {
-        if p <= 0.0 {
-            return false;
-        }
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((v >> 11) as f64 / (1u64 << 53) as f64) < p
-    }
-}
-
 /// The firmware's thread: runs the hand on the simulation's clock, sends what falls due,
 /// takes frames from the bus.
 fn run_firmware(shared: &Shared, mut end: LocalEnd, seed: u64) {
-    let mut dice = Dice(seed.max(1));
+    let mut dice = Dice::new(seed);
     let mut out = Vec::with_capacity(16);
     while !shared.stop.load(Ordering::SeqCst) {
         let due = {
@@ -423,71 +405,22 @@ fn send(shared: &Shared, end: &mut LocalEnd, out: &mut Vec<(Duration, CanFrame)>
     }
 }
 
-/// A pty pair with the device side linked at `link`. The simulator keeps the slave open too, so
-/// the master never sees a hang-up while the host closes and reopens the port (sim-glove's way).
-fn open_pair(link: &Path) -> std::io::Result<(TTYPort, TTYPort)> {
-    let (mut master, slave) = TTYPort::pair().map_err(std::io::Error::other)?;
-    let name = slave
-        .name()
-        .ok_or_else(|| std::io::Error::other("pty without a name"))?;
-    master
-        .set_timeout(PTY_READ_TIMEOUT)
-        .map_err(std::io::Error::other)?;
-    let tmp = link.with_extension("tmp-link");
-    let _ = std::fs::remove_file(&tmp);
-    std::os::unix::fs::symlink(&name, &tmp)?;
-    std::fs::rename(&tmp, link)?;
-    Ok((master, slave))
-}
-
-/// Plugs the adapter in (again) until stop: one pty per plugged-in period.
-fn serve_adapter(shared: &Shared, bus: &LocalBus, link: &Path, first: (TTYPort, TTYPort)) {
-    let mut pair = Some(first);
-    while !shared.stop.load(Ordering::SeqCst) {
-        let (mut master, slave) = match pair.take() {
-            Some(p) => p,
-            None => match open_pair(link) {
-                Ok(p) => p,
-                Err(e) => {
-                    tracing::warn!("{}: cannot create a pty: {e}; retrying", link.display());
-                    std::thread::sleep(Duration::from_millis(200));
-                    continue;
-                }
-            },
-        };
-        shared.plugged.store(true, Ordering::SeqCst);
-        tracing::info!(
-            "adapter plugged in: {} -> {}",
-            link.display(),
-            slave.name().unwrap_or_default()
-        );
-        let result = connection(shared, bus, &mut master);
-        let unplug = lock(&shared.unplug).take();
-        if unplug.is_some() {
-            // The link goes first: whoever sees the port fail finds no device behind it.
-            let _ = std::fs::remove_file(link);
-            shared.plugged.store(false, Ordering::SeqCst);
-        }
-        drop(master);
-        drop(slave);
-        if let Err(e) = result {
-            tracing::warn!("{}: adapter stopped: {e}", link.display());
-            std::thread::sleep(Duration::from_millis(100));
-        }
-        if let Some(pause) = unplug {
-            // Unplugged, the adapter loses power: it comes back closed, without a bit rate.
+/// Plugs the adapter in (again) until stop: one pty per plugged-in period; unplugged, the
+/// adapter loses power and comes back closed, without a bit rate.
+fn serve_adapter(shared: &Shared, bus: &LocalBus, link: &Path, first: pty::Pair) {
+    pty::serve(
+        link,
+        PTY_READ_TIMEOUT,
+        first,
+        &shared.cable,
+        &shared.stop,
+        |master| connection(shared, bus, master),
+        || {
             let mut adapter = Adapter::new(shared.ack_style);
             adapter.set_bus_off(bus.bus_state() == BusState::BusOff);
             *lock(&shared.adapter) = adapter;
-            lock(&shared.stats).unplugs += 1;
-            tracing::info!("adapter unplugged for {} ms", pause.as_millis());
-            let until = Instant::now() + pause;
-            while Instant::now() < until && !shared.stop.load(Ordering::SeqCst) {
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
-    }
-    let _ = std::fs::remove_file(link);
+        },
+    );
 }
 
 /// Frames this adapter put on the bus and has not yet heard back on its receiving end.
@@ -519,7 +452,7 @@ fn connection(shared: &Shared, bus: &LocalBus, master: &mut TTYPort) -> std::io:
         let mut buf = [0u8; 512];
         let mut reply = Vec::with_capacity(64);
         let result = loop {
-            if shared.stop.load(Ordering::SeqCst) || lock(&shared.unplug).is_some() {
+            if shared.stop.load(Ordering::SeqCst) || shared.cable.pulled() {
                 break Ok(());
             }
             // Nobody reads this end's queue otherwise (it only sends).
@@ -528,16 +461,7 @@ fn connection(shared: &Shared, bus: &LocalBus, master: &mut TTYPort) -> std::io:
             for _ in 0..pending {
                 let _ = lock(&writer).write_all(b"\x01?garbage#\r");
             }
-            let n = match master.read(&mut buf) {
-                Ok(n) => n,
-                Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
-                Err(_) => {
-                    // No reader on the device side right now (EIO): wait for the host.
-                    std::thread::sleep(PTY_READ_TIMEOUT);
-                    0
-                }
-            };
+            let n = pty::read(master, &mut buf, PTY_READ_TIMEOUT);
             let mut lines = Vec::new();
             decoder.push(&buf[..n], &mut |line| lines.push(line));
             for line in lines {

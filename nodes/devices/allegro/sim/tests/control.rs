@@ -1,5 +1,5 @@
 //! `teleop-sim-allegro` as a process: the control socket's commands act on the hand a node
-//! sees over the socket bus, `status` parses, bad arguments are refused.
+//! sees over the socket bus, `stats` parses, bad arguments are refused.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::HashMap;
@@ -54,7 +54,7 @@ impl Sim {
     }
 
     fn status(&self) -> HashMap<String, String> {
-        let reply = self.control("status");
+        let reply = self.control("stats");
         let rest = reply
             .strip_prefix("ok ")
             .unwrap_or_else(|| panic!("{reply}"));

@@ -4,9 +4,15 @@
 //!
 //! Units are the glove's: positions 0 (bent) .. 1000 (open), forces -1000..1000 (a positive
 //! command pushes the hand open; a positive measured force means the finger pushes towards a
-//! fist), currents in mA, temperatures in degrees Celsius. Pure: time comes in as seconds.
+//! fist), currents in mA, temperatures in degrees Celsius. Pure: time comes in as seconds, on
+//! the simulator kit's plant clock.
 
 use std::path::Path;
+
+use teleop_sim_kit::plant::{lag, Clock};
+
+/// Longest integration step, s.
+const STEP_S: f64 = 0.001;
 
 /// Channels: little, ring, middle, index, thumb, thumb rotation.
 pub const CHANNELS: usize = 6;
@@ -229,7 +235,7 @@ pub struct Hand {
     temperature: [f32; FINGERS],
     overload_for: [f32; FINGERS],
     errors: [u8; FINGERS],
-    t: f32,
+    clock: Clock,
 }
 
 impl Hand {
@@ -244,7 +250,7 @@ impl Hand {
             temperature: [model.ambient_c; FINGERS],
             overload_for: [0.0; FINGERS],
             errors: [0; FINGERS],
-            t: 0.0,
+            clock: Clock::new(STEP_S),
         }
     }
 
@@ -262,23 +268,21 @@ impl Hand {
 
     /// Advances the model to time `t` seconds.
     pub fn advance_to(&mut self, t: f32) {
-        let mut dt = t - self.t;
-        // Also false for NaN.
-        if dt.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
-            return;
-        }
-        self.t = t;
-        // Integrate in steps of at most 1 ms so that long gaps stay stable.
-        while dt > 0.0 {
-            let h = dt.min(0.001);
-            dt -= h;
-            self.step(h);
-        }
+        // The operator's intent is taken at `t` for every sub-step (the finger settles on
+        // where the hand is meant to be at the time asked).
+        let mut clock = self.clock;
+        clock.advance_to(f64::from(t), |_, h| self.step(t, h as f32));
+        self.clock = clock;
     }
 
-    fn step(&mut self, h: f32) {
+    /// The model's time, s.
+    fn time(&self) -> f32 {
+        self.clock.time() as f32
+    }
+
+    fn step(&mut self, now: f32, h: f32) {
         let m = self.model;
-        let intent = self.script.at(self.t);
+        let intent = self.script.at(now);
         for (ch, pos) in self.position.iter_mut().enumerate() {
             let target = match self.drive.get(ch) {
                 // The operator resists: the finger settles where the actuator's push balances
@@ -291,14 +295,14 @@ impl Hand {
             }
             .clamp(0.0, 1000.0);
             let step =
-                ((target - *pos) * (h / m.tau_s).min(1.0)).clamp(-m.max_speed * h, m.max_speed * h);
+                (lag(*pos, target, h, m.tau_s) - *pos).clamp(-m.max_speed * h, m.max_speed * h);
             *pos = (*pos + step).clamp(0.0, 1000.0);
         }
         for f in 0..FINGERS {
             let load = self.load(f, &intent).abs();
             let current = self.current(load);
             let steady = m.ambient_c + m.c_per_ma * current;
-            self.temperature[f] += (steady - self.temperature[f]) * (h / m.thermal_tau_s).min(1.0);
+            self.temperature[f] = lag(self.temperature[f], steady, h, m.thermal_tau_s);
             if load >= m.overload_force {
                 self.overload_for[f] += h;
             } else {
@@ -332,13 +336,13 @@ impl Hand {
 
     /// Measured finger forces (glove units).
     pub fn forces(&self) -> [i16; FINGERS] {
-        let intent = self.script.at(self.t);
+        let intent = self.script.at(self.time());
         core::array::from_fn(|f| self.load(f, &intent).round() as i16)
     }
 
     /// Actuator currents in mA.
     pub fn currents(&self) -> [u16; FINGERS] {
-        let intent = self.script.at(self.t);
+        let intent = self.script.at(self.time());
         core::array::from_fn(|f| self.current(self.load(f, &intent).abs()).round() as u16)
     }
 

@@ -11,10 +11,12 @@
 //!
 //! - [`hand`]: the operator's hand and the actuators (pure);
 //! - [`device`]: the firmware's behaviour on the wire (pure);
-//! - [`serve`]: the pty, timing and faults.
+//! - [`serve`]: the line timing and faults on the simulator kit's pty;
+//! - [`control`]: the control socket's commands (the kit's vocabulary and the glove's own).
 //!
 //! Must not depend on: the glove node (a driver bug must not hide behind shared driver code).
 
+pub mod control;
 pub mod device;
 pub mod hand;
 pub mod serve;

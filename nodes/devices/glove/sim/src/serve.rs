@@ -1,18 +1,20 @@
 //! The simulated glove on a pseudo-terminal: baud-rate timing, fault injection, unplug/replug.
 //!
-//! The device side of a pty pair is published under a stable path (a symlink, like a udev
-//! by-id link) so that a driver can reopen the same path after the simulated cable is pulled and
-//! put back (which creates a new pty).
+//! The pty, its stable link and the cable are the simulator kit's (`teleop_sim_kit::pty`), so
+//! that a driver can reopen the same path after the simulated cable is pulled and put back.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use serialport::{SerialPort, TTYPort};
+use serialport::TTYPort;
 use teleop_glove_protocol::{encode_response, wire_time, BaudRate, RequestDecoder, MAX_FRAME};
+use teleop_sim_kit::dice::Dice;
+use teleop_sim_kit::lock;
+use teleop_sim_kit::pty::{self, Cable};
 
 use crate::device::Device;
 use crate::hand::Hand;
@@ -21,40 +23,13 @@ use crate::hand::Hand;
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Faults {
     /// Send random bytes before the answer.
-    pub garbage: f32,
+    pub garbage: f64,
     /// Do not answer.
-    pub drop: f32,
+    pub drop: f64,
     /// Corrupt the answer's checksum.
-    pub corrupt: f32,
+    pub corrupt: f64,
     /// Answer as another device id instead.
-    pub other_id: f32,
-}
-
-impl Faults {
-    /// Applies `name=probability` (names: garbage, drop, corrupt, other-id).
-    pub fn set(&mut self, spec: &str) -> Result<(), String> {
-        let (name, value) = spec
-            .split_once('=')
-            .ok_or_else(|| format!("fault {spec:?}: expected NAME=PROBABILITY"))?;
-        let p: f32 = value
-            .trim()
-            .parse()
-            .ok()
-            .filter(|p: &f32| (0.0..=1.0).contains(p))
-            .ok_or_else(|| format!("fault {spec:?}: probability must be in 0..1"))?;
-        match name.trim() {
-            "garbage" => self.garbage = p,
-            "drop" => self.drop = p,
-            "corrupt" => self.corrupt = p,
-            "other-id" => self.other_id = p,
-            other => {
-                return Err(format!(
-                    "unknown fault {other:?}: use garbage, drop, corrupt or other-id"
-                ))
-            }
-        }
-        Ok(())
-    }
+    pub other_id: f64,
 }
 
 /// Counters of what the simulator did.
@@ -74,7 +49,7 @@ pub struct SimStats {
     pub other_id: u64,
     /// Requests the decoder rejected (bad checksum, garbage runs, ...).
     pub bad_requests: u64,
-    /// Times the cable was pulled.
+    /// Times the cable was pulled (also counted while it is out).
     pub unplugs: u64,
     /// Answers sent late on purpose ([`SimGlove::answer_late`]).
     pub late: u64,
@@ -100,13 +75,12 @@ pub struct SimOptions {
 #[derive(Default)]
 struct Shared {
     faults: Mutex<Faults>,
-    unplug: Mutex<Option<Duration>>,
+    cable: Cable,
     late: Mutex<Option<Duration>>,
     stop: AtomicBool,
     stats: Mutex<SimStats>,
     last_answer_ns: AtomicU64,
     device: Mutex<Option<DeviceView>>,
-    log: Mutex<Vec<String>>,
     record: AtomicBool,
     answers: Mutex<Vec<AnswerTiming>>,
     forces: Mutex<Vec<ForceTiming>>,
@@ -162,7 +136,7 @@ impl SimGlove {
         *lock(&shared.faults) = options.faults;
         let link = options.link.clone();
         // Create the first pty here so that errors reach the caller and the link exists on return.
-        let pair = open_pair(&link)?;
+        let pair = pty::open(&link, READ_TIMEOUT)?;
         let thread = {
             let shared = shared.clone();
             std::thread::Builder::new()
@@ -193,7 +167,7 @@ impl SimGlove {
 
     /// Pulls the cable for `duration`, then plugs it back in (as a new pty behind the same link).
     pub fn unplug(&self, duration: Duration) {
-        *lock(&self.shared.unplug) = Some(duration);
+        self.shared.cable.pull(duration);
     }
 
     /// Sends the next answer `by` later than usual, as a busy device would (for instance past
@@ -205,7 +179,10 @@ impl SimGlove {
 
     /// Counters so far.
     pub fn stats(&self) -> SimStats {
-        *lock(&self.shared.stats)
+        SimStats {
+            unplugs: self.shared.cable.unplugs(),
+            ..*lock(&self.shared.stats)
+        }
     }
 
     /// The device's state after the last exchange (None before the first).
@@ -232,11 +209,6 @@ impl SimGlove {
     pub fn take_force_timings(&self) -> Vec<ForceTiming> {
         std::mem::take(&mut *lock(&self.shared.forces))
     }
-
-    /// Takes the event log lines written since the last call (unplugs, baud changes, ...).
-    pub fn take_log(&self) -> Vec<String> {
-        std::mem::take(&mut *lock(&self.shared.log))
-    }
 }
 
 impl Drop for SimGlove {
@@ -249,91 +221,25 @@ impl Drop for SimGlove {
     }
 }
 
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
-}
+/// How long a read of the host's bytes waits before looking at unplug and stop requests.
+const READ_TIMEOUT: Duration = Duration::from_millis(5);
 
-fn note(shared: &Shared, line: String) {
-    tracing::info!("{line}");
-    lock(&shared.log).push(line);
-}
-
-/// A pty pair with the device side linked at `link`. The simulator keeps the slave open too, so
-/// the master never sees a hang-up while the driver closes and reopens the port.
-fn open_pair(link: &Path) -> std::io::Result<(TTYPort, TTYPort)> {
-    let (mut master, slave) = TTYPort::pair().map_err(std::io::Error::other)?;
-    let name = slave
-        .name()
-        .ok_or_else(|| std::io::Error::other("pty without a name"))?;
-    master
-        .set_timeout(Duration::from_millis(5))
-        .map_err(std::io::Error::other)?;
-    let tmp = link.with_extension("tmp-link");
-    let _ = std::fs::remove_file(&tmp);
-    std::os::unix::fs::symlink(&name, &tmp)?;
-    std::fs::rename(&tmp, link)?;
-    Ok((master, slave))
-}
-
-/// xorshift64*: deterministic, seedable, good enough for fault dice.
-struct Dice(u64);
-
-impl Dice {
-    fn roll(&mut self, p: f32) -> bool {
-        if p <= 0.0 {
-            return false;
-        }
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        let v = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
-        ((v >> 40) as f32 / (1u64 << 24) as f32) < p
-    }
-
-    fn byte(&mut self) -> u8 {
-        self.roll(1.0);
-        (self.0 >> 32) as u8
-    }
-}
-
-fn serve(options: SimOptions, hand: Hand, first: (TTYPort, TTYPort), shared: &Shared) {
+fn serve(options: SimOptions, hand: Hand, first: pty::Pair, shared: &Shared) {
     let start = Instant::now();
     let mut device = Device::new(options.id, options.baud, hand);
-    let mut dice = Dice(options.seed.max(1));
-    let mut pair = Some(first);
-    while !shared.stop.load(Ordering::SeqCst) {
-        let (mut master, slave) = match pair.take() {
-            Some(p) => p,
-            None => match open_pair(&options.link) {
-                Ok(p) => p,
-                Err(e) => {
-                    note(shared, format!("cannot create a pty: {e}; retrying"));
-                    std::thread::sleep(Duration::from_millis(200));
-                    continue;
-                }
-            },
-        };
-        note(
-            shared,
-            format!(
-                "plugged in: {} -> {}",
-                options.link.display(),
-                slave.name().unwrap_or_default()
-            ),
-        );
-        connection(&mut master, &mut device, &mut dice, &options, shared, start);
-        drop(slave);
-        drop(master);
-        if let Some(pause) = lock(&shared.unplug).take() {
-            let _ = std::fs::remove_file(&options.link);
-            lock(&shared.stats).unplugs += 1;
-            note(shared, format!("unplugged for {} ms", pause.as_millis()));
-            let until = Instant::now() + pause;
-            while Instant::now() < until && !shared.stop.load(Ordering::SeqCst) {
-                std::thread::sleep(Duration::from_millis(5));
-            }
-        }
-    }
+    let mut dice = Dice::new(options.seed);
+    pty::serve(
+        &options.link,
+        READ_TIMEOUT,
+        first,
+        &shared.cable,
+        &shared.stop,
+        |master| {
+            connection(master, &mut device, &mut dice, &options, shared, start);
+            Ok(())
+        },
+        || {},
+    );
 }
 
 /// Serves one plugged-in period: until stop or unplug.
@@ -351,19 +257,10 @@ fn connection(
     // When the host's bytes finish arriving at the current baud rate.
     let mut rx_line_free = Instant::now();
     loop {
-        if shared.stop.load(Ordering::SeqCst) || lock(&shared.unplug).is_some() {
+        if shared.stop.load(Ordering::SeqCst) || shared.cable.pulled() {
             return;
         }
-        let n = match master.read(&mut buf) {
-            Ok(n) => n,
-            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
-            Err(_) => {
-                // No reader on the device side right now (EIO): wait for the driver to reopen.
-                std::thread::sleep(Duration::from_millis(5));
-                0
-            }
-        };
+        let n = pty::read(master, &mut buf, READ_TIMEOUT);
         device.advance_to(start.elapsed().as_secs_f32());
         let seen = Instant::now();
         let bps = device.baud().bits_per_second();
@@ -448,10 +345,7 @@ fn connection(
                 }
                 rx_line_free = Instant::now();
                 if let Some(baud) = device.after_answer() {
-                    note(
-                        shared,
-                        format!("baud rate now {} bit/s", baud.bits_per_second()),
-                    );
+                    tracing::info!("baud rate now {} bit/s", baud.bits_per_second());
                 }
                 // The view before the counters: whoever sees an answer counted sees its state.
                 *lock(&shared.device) = Some(DeviceView {

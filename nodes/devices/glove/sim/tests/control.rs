@@ -1,5 +1,5 @@
 //! `teleop-sim-glove` as a process: its control socket's `late` command delays only the next
-//! answer, which still comes, and bad arguments are refused.
+//! answer, which still comes, bad arguments are refused, and `stats` answers `key=value` words.
 #![allow(clippy::unwrap_used)]
 
 use std::io::{BufRead, BufReader, Write};
@@ -78,20 +78,25 @@ fn late_makes_only_the_next_answer_late_and_refuses_bad_arguments() {
     let sim = Sim::start();
     for bad in ["late", "late soon", "late -5", "late 10001"] {
         let reply = sim.control(bad);
-        assert!(reply.starts_with("error: late MS"), "{bad}: {reply}");
+        assert!(
+            reply.starts_with("error: late: expected MS (0..=10000), got"),
+            "{bad}: {reply}"
+        );
     }
     let mut port = serialport::new(sim.dir.join("glove").display().to_string(), 115_200)
         .open()
         .unwrap();
     exchange(&mut *port, Duration::from_secs(5));
-    assert!(sim.control("stats").contains("late: 0"));
-    assert_eq!(sim.control("late 200"), "ok\n");
+    assert!(sim.control("stats").contains(" late=0"));
+    assert_eq!(sim.control("late 200"), "ok late 200 ms\n");
     exchange(&mut *port, Duration::from_secs(5));
-    assert!(sim.control("stats").contains("late: 1"));
+    assert!(sim.control("stats").contains(" late=1"));
     exchange(&mut *port, Duration::from_secs(5));
     let stats = sim.control("stats");
     assert!(
-        stats.contains("answers: 3") && stats.contains("late: 1"),
+        stats.starts_with("ok requests=")
+            && stats.contains(" answers=3")
+            && stats.contains(" late=1"),
         "{stats}"
     );
 }

@@ -218,7 +218,7 @@ impl Rig {
     /// interface reset itself: ethercrab's task's next send fails with ENETDOWN, and so do the
     /// pump's socket calls.
     fn reset_master_interface(&mut self) {
-        let answer = self.sim_control("link-down 1.5");
+        let answer = self.sim_control("unplug 1500");
         assert!(answer.starts_with("ok"), "{answer}");
         self.ns.ip(&["link", "set", "ecm0", "down"]);
         self.wait_state(Duration::from_secs(10), "the link reported down", |s| {

@@ -7,6 +7,11 @@
 //! Units inside the model are the device's percentage units: position 0 (open) .. 1000 (closed),
 //! speed in position units per second, current in mA. Pure: time comes in as seconds.
 
+use teleop_sim_kit::plant::{lag, Clock};
+
+/// Longest integration step, s.
+const STEP_S: f64 = 0.0005;
+
 /// Joints in Revo2 order: thumb flex, thumb abduct, index, middle, ring, pinky.
 pub const JOINTS: usize = 6;
 /// Fingertips in tactile order: thumb, index, middle, ring, pinky.
@@ -145,7 +150,7 @@ pub struct Hand {
     sensor: [Touch; FINGERTIPS],
     sensor_counter: u8,
     next_sensor_update: f32,
-    t: f32,
+    clock: Clock,
 }
 
 impl Hand {
@@ -161,7 +166,7 @@ impl Hand {
             sensor: [Touch::default(); FINGERTIPS],
             sensor_counter: 0,
             next_sensor_update: 0.0,
-            t: 0.0,
+            clock: Clock::new(STEP_S),
         }
     }
 
@@ -215,20 +220,19 @@ impl Hand {
 
     /// Advances the model to time `t` seconds.
     pub fn advance_to(&mut self, t: f32) {
-        let mut dt = t - self.t;
-        if dt.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
-            return;
-        }
-        self.t = t;
-        while dt > 0.0 {
-            let h = dt.min(0.0005);
-            dt -= h;
-            self.step(h);
-        }
-        if self.t >= self.next_sensor_update {
+        let mut clock = self.clock;
+        clock.advance_to(f64::from(t), |_, h| self.step(h as f32));
+        self.clock = clock;
+        let now = self.time();
+        if now >= self.next_sensor_update {
             self.update_sensor();
-            self.next_sensor_update = self.t + self.params.sensor_period_s;
+            self.next_sensor_update = now + self.params.sensor_period_s;
         }
+    }
+
+    /// The model's time, s.
+    fn time(&self) -> f32 {
+        self.clock.time() as f32
     }
 
     fn step(&mut self, h: f32) {
@@ -254,7 +258,7 @@ impl Hand {
             };
             let max_push = (p.max_ma - p.idle_ma) / p.ma_per_n;
             let push_n = push_n.clamp(-max_push, max_push);
-            self.speed[j] += (wanted - self.speed[j]) * (h / p.tau_s).min(1.0);
+            self.speed[j] = lag(self.speed[j], wanted, h, p.tau_s);
             let mut next = (pos + self.speed[j] * h).clamp(0.0, 1000.0);
             self.force[j] = 0.0;
             if let Some((c, k)) = contact {
@@ -333,7 +337,7 @@ mod tests {
     use super::*;
 
     fn run(hand: &mut Hand, seconds: f32) {
-        let start = hand.t;
+        let start = hand.time();
         let mut t = start;
         while t < start + seconds {
             t += 0.001;

@@ -7,11 +7,13 @@
 //! - [`firmware`]: the firmware upgrade over FoE in BOOT (section 6): checks with the FoE error
 //!   codes, simulated flash with its write time (BUSY), restart with the new version;
 //! - [`revo2_subdevice`]: the two inside the generic emulated ESC of `teleop-ecat-sim`, with the
-//!   Revo2's identity, CoE and FoE, and a bootstrap mailbox of its own ([`BOOTSTRAP_MAILBOX`]).
+//!   Revo2's identity, CoE and FoE, and a bootstrap mailbox of its own ([`BOOTSTRAP_MAILBOX`]);
+//! - [`control`]: its control socket's commands on the simulator kit (`teleop-sim-kit`).
 //!
 //! Must not depend on: the Revo2 node or ethercrab (a master bug must not hide behind shared
 //! master code).
 
+pub mod control;
 pub mod device;
 pub mod firmware;
 pub mod hand;

@@ -9,7 +9,8 @@
 //! - [`bootloader`]: a motor board's PIC18F CAN bootloader (flash memory, EEPROM, the
 //!   document's commands and the shipped bootloader's behaviour);
 //! - [`hand`]: the 24 joints the motors move (J1/J2 coupled), their ADCs, a virtual ball and
-//!   the fingertip pressure it causes.
+//!   the fingertip pressure it causes;
+//! - [`control`]: its control socket's commands on the simulator kit (`teleop-sim-kit`).
 //!
 //! It shares the codecs of `teleop-shadow-protocol` and nothing of the driver side.
 //!
@@ -17,6 +18,7 @@
 //! hide behind shared code).
 
 pub mod bootloader;
+pub mod control;
 pub mod ethercat;
 pub mod hand;
 pub mod palm;
