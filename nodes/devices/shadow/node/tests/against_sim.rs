@@ -6,14 +6,13 @@
 
 mod common;
 
-use std::process::{Child, Command};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::ops::{Deref, DerefMut};
 use std::time::{Duration, Instant};
 
 use common::{serve, Sim};
-use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth, Tactile};
-use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
+use teleop_e2e::hand::HandNode;
+use teleop_e2e::rig::Rig as TestRig;
+use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState};
 use teleop_shadow::joints::JOINTS;
 use teleop_shadow_protocol::mapping::Mapping;
 use teleop_sim_shadow::ethercat::ShadowBus;
@@ -21,99 +20,47 @@ use teleop_sim_shadow::hand::{Hand, Object};
 use teleop_sim_shadow::palm::{Palm, CUT_OUT_C};
 
 fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, ShadowBus> {
-    sim.lock().unwrap_or_else(|e| e.into_inner())
+    sim.lock()
 }
 
 fn joint(name: &str) -> usize {
     JOINTS.iter().position(|j| *j == name).unwrap()
 }
 
+/// The Shadow node against the emulated Hand E (a ball under its middle finger) served from
+/// this process. The node stops before the emulation.
 struct Rig {
-    commands: Publisher<HandCommand>,
-    states: Subscriber<HandState>,
-    tactile: Subscriber<Tactile>,
-    health: Subscriber<NodeHealth>,
-    _runtime: NodeRuntime,
-    node: Option<Child>,
+    hand: HandNode,
     sim: Sim,
-    stop: Arc<AtomicBool>,
-    server: Option<std::thread::JoinHandle<()>>,
-    ipc: IpcSettings,
-    dir: tempfile::TempDir,
+}
+
+impl Deref for Rig {
+    type Target = HandNode;
+    fn deref(&self) -> &HandNode {
+        &self.hand
+    }
+}
+
+impl DerefMut for Rig {
+    fn deref_mut(&mut self) -> &mut HandNode {
+        &mut self.hand
+    }
 }
 
 impl Rig {
+    /// The node up in OP.
     fn new() -> Self {
-        teleop_runtime::init_logging();
-        let dir = tempfile::tempdir().unwrap();
-        let ipc = IpcSettings::isolated(&dir.path().join("iox"));
-        let socket = dir.path().join("shadow.sock");
+        let rig = TestRig::new();
+        let socket = rig.path("shadow.sock");
         let hand = Hand::new(Mapping::EV3, Some(Object::ball()));
-        let (sim, stop, server) = serve(&socket, Palm::with_hand(hand));
-        let config = dir.path().join("shadow.toml");
-        std::fs::write(
-            &config,
-            format!("transport = \"sim:{}\"\n", socket.display()),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("node.log")).unwrap();
-        let node = Command::new(env!("CARGO_BIN_EXE_teleop-shadow"))
-            .arg("--config")
-            .arg(&config)
-            .envs(ipc.to_env())
-            .env("TELEOP_LOG", "info")
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let runtime = NodeRuntime::new("shadow-test", &ipc).unwrap();
-        let rig = Self {
-            commands: runtime.publisher().unwrap(),
-            states: runtime.subscriber().unwrap(),
-            tactile: runtime.subscriber().unwrap(),
-            health: runtime.subscriber().unwrap(),
-            _runtime: runtime,
-            node: Some(node),
-            sim,
-            stop,
-            server: Some(server),
-            ipc,
-            dir,
-        };
+        let sim = serve(&socket, Palm::with_hand(hand));
+        let config = format!("transport = \"sim:{}\"\n", socket.display());
+        let hand = HandNode::start(rig, "shadow", env!("CARGO_BIN_EXE_teleop-shadow"), &config);
+        let rig = Self { hand, sim };
         rig.wait_state(Duration::from_secs(30), "the hand in OP", |s| {
             s.link_up == 1
         });
         rig
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("node.log")).unwrap_or_default()
-    }
-
-    fn wait_state(
-        &self,
-        timeout: Duration,
-        what: &str,
-        mut ok: impl FnMut(&HandState) -> bool,
-    ) -> HandState {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            self.states.drain(|s| {
-                if found.is_none() && ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
     }
 
     /// Publishes joint targets (rad, by name; the others 0) every 10 ms for `d`; returns the
@@ -129,47 +76,7 @@ impl Rig {
         for (name, t) in targets {
             c.joints[joint(name)].target = *t;
         }
-        let start = Instant::now();
-        while start.elapsed() < d {
-            c.header.origin_ns = teleop_runtime::now_ns();
-            self.commands.publish(&c).unwrap();
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        self.states.poll_latest().unwrap()
-    }
-
-    /// The node's health reports received since the last call.
-    fn node_health(&self) -> Vec<NodeHealth> {
-        let mut out = Vec::new();
-        self.health.drain(|h| {
-            if h.name() == "shadow" {
-                out.push(*h);
-            }
-        });
-        out
-    }
-
-    fn pid(&self) -> u32 {
-        self.node.as_ref().unwrap().id()
-    }
-}
-
-impl Drop for Rig {
-    fn drop(&mut self) {
-        if let Some(mut node) = self.node.take() {
-            let _ = Command::new("kill")
-                .args(["-INT", &node.id().to_string()])
-                .status();
-            let _ = node.wait();
-        }
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(s) = self.server.take() {
-            let _ = s.join();
-        }
-        if std::thread::panicking() {
-            eprintln!("---- node log ----\n{}", self.log());
-        }
-        self.ipc.remove_shared_memory();
+        self.hand.send(&c, d)
     }
 }
 
@@ -236,13 +143,13 @@ fn bring_up_position_control_pst_contact_hold_and_link_loss() {
     assert!(rig.tactile.poll_latest().unwrap().fingertips[1].pressure > 100);
 
     // The link goes down for 300 ms: reported, then the same process brings the hand up again.
-    let pid = rig.pid();
+    let pid = rig.node().pid();
     lock(&rig.sim).bridge.faults().link_down = true;
     rig.wait_state(Duration::from_secs(3), "link down", |s| s.link_up == 0);
     std::thread::sleep(Duration::from_millis(300));
     lock(&rig.sim).bridge.faults().link_down = false;
     rig.wait_state(Duration::from_secs(10), "link up again", |s| s.link_up == 1);
-    assert_eq!(rig.pid(), pid);
+    assert_eq!(rig.node().pid(), pid);
     let s = rig.command(&[("FFJ3", 0.3)], Duration::from_millis(1500));
     assert!(
         (position(&s, "FFJ3") - 0.3).abs() < 0.05,

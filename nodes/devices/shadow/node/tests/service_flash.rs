@@ -7,8 +7,6 @@
 
 mod common;
 
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use common::{serve, Sim};
@@ -21,17 +19,17 @@ use teleop_sim_shadow::bootloader::{generated_application, Mode};
 use teleop_sim_shadow::palm::Palm;
 
 /// The emulated hand served on a socket in `dir`, and the service brought up on it.
-fn hand(dir: &std::path::Path) -> (Sim, Service, Arc<AtomicBool>, std::thread::JoinHandle<()>) {
+fn hand(dir: &std::path::Path) -> (Sim, Service) {
     teleop_runtime::init_logging();
     let socket = dir.join("shadow.sock");
-    let (sim, stop, server) = serve(&socket, Palm::new());
+    let sim = serve(&socket, Palm::new());
     let config = ShadowConfig {
         transport: format!("sim:{}", socket.display()),
         ..ShadowConfig::default()
     };
     let checked = config.validate().unwrap();
     let service = Service::open(&config, checked).unwrap();
-    (sim, service, stop, server)
+    (sim, service)
 }
 
 /// After normal mode the palm's bridge command sync manager still holds what the host wrote
@@ -40,7 +38,7 @@ fn hand(dir: &std::path::Path) -> (Sim, Service, Arc<AtomicBool>, std::thread::J
 #[test]
 fn can_send_after_normal_mode_gets_its_answer() {
     let dir = tempfile::tempdir().unwrap();
-    let (sim, mut service, stop, server) = hand(dir.path());
+    let (mut sim, mut service) = hand(dir.path());
     let magic = BootMessage::magic(3);
     let reply = service
         .can_send(&CanBridge {
@@ -51,24 +49,20 @@ fn can_send_after_normal_mode_gets_its_answer() {
         })
         .unwrap();
     service.close();
-    stop.store(true, Ordering::SeqCst);
-    server.join().unwrap();
+    sim.stop();
     let reply = reply.expect("the bootloader's MAGIC answer");
     assert_eq!((reply.can_bus, reply.id), (2, 0x600 | 3 << 5 | 0x1A));
-    assert_eq!(
-        sim.lock().unwrap().palm().boards[13].mode(),
-        Mode::Bootloader
-    );
+    assert_eq!(sim.lock().palm().boards[13].mode(), Mode::Bootloader);
 }
 
 #[test]
 fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
     let dir = tempfile::tempdir().unwrap();
-    let (sim, mut service, stop, server) = hand(dir.path());
+    let (mut sim, mut service) = hand(dir.path());
 
     // From now on one frame in 20 to the palm is lost (seeded: the same frames every run).
     {
-        let mut bus = sim.lock().unwrap();
+        let mut bus = sim.lock();
         let faults = bus.palm.faults();
         faults.seed = 20;
         faults.drop_probability = 0.05;
@@ -76,7 +70,7 @@ fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
     // And once, mid-transfer, the cable is out for 300 ms: every try of those exchanges fails,
     // the messages are sent again afterwards.
     let cable = {
-        let sim = sim.clone();
+        let sim = sim.shared();
         std::thread::spawn(move || {
             let start = Instant::now();
             while sim.lock().unwrap().palm.app().stats.bridged < 40 {
@@ -92,13 +86,12 @@ fn a_lost_exchange_during_a_flash_is_retried_and_the_flash_completes() {
     let image = hex::parse(&hex::write(APP_START, &app)).unwrap();
     let result = service.flash(13, image, &mut |_, _| {});
     cable.join().unwrap();
-    let dropped = sim.lock().unwrap().palm.stats().dropped_frames;
+    let dropped = sim.lock().palm.stats().dropped_frames;
     service.close();
-    stop.store(true, Ordering::SeqCst);
-    server.join().unwrap();
+    sim.stop();
     assert!(dropped > 0, "frames were lost");
     result.unwrap_or_else(|e| panic!("the flash failed after {dropped} lost frames: {e}"));
-    let bus = sim.lock().unwrap();
+    let bus = sim.lock();
     let board = &bus.palm().boards[13];
     assert_eq!(board.mode(), Mode::Application);
     let at = APP_START as usize;

@@ -2,34 +2,16 @@
 //! (the `sim:` transport), as `teleop-sim-shadow` serves it.
 
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use teleop_ecat_link::{serve_socket, StreamServer};
+use teleop_e2e::ecat::Served;
 use teleop_sim_shadow::ethercat::ShadowBus;
 use teleop_sim_shadow::palm::Palm;
 
-/// The emulated bus, shared with its server thread.
-pub type Sim = Arc<Mutex<ShadowBus>>;
+/// The emulated bus, served until dropped (or stopped).
+pub type Sim = Served<ShadowBus>;
 
-/// Serves `palm` (behind the bridge, 1 ms cycle) on `socket` until the returned flag is set;
-/// join the thread after setting it.
-pub fn serve(socket: &Path, palm: Palm) -> (Sim, Arc<AtomicBool>, JoinHandle<()>) {
-    let sim: Sim = Arc::new(Mutex::new(ShadowBus::new(
-        palm,
-        1178,
-        Duration::from_millis(1),
-    )));
-    let stop = Arc::new(AtomicBool::new(false));
-    let server = {
-        let (sim, stop) = (sim.clone(), stop.clone());
-        let listener = StreamServer::bind(socket).unwrap();
-        std::thread::spawn(move || {
-            let stopping = || stop.load(Ordering::SeqCst);
-            serve_socket(&listener, &*sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
-        })
-    };
-    (sim, stop, server)
+/// Serves `palm` (behind the bridge, 1 ms cycle) on `socket`.
+pub fn serve(socket: &Path, palm: Palm) -> Sim {
+    Served::start(socket, ShadowBus::new(palm, 1178, Duration::from_millis(1)))
 }
