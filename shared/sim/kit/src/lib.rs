@@ -15,7 +15,9 @@
 //! - [`outage`]: a fault that lasts a while (link down, bus off), a later one replacing the end;
 //! - [`dice`]: seedable fault dice;
 //! - [`plant`]: the joint plant's clock (fixed sub-steps up to a time) and first-order lags;
-//! - [`object`]: the virtual objects a simulated hand can hold, one name each.
+//! - [`object`]: the virtual objects a simulated hand can hold, one name each;
+//! - [`testing`]: a simulator process under test (its directory, announce line, control
+//!   socket, SIGINT at the end).
 //!
 //! Must not depend on: any device protocol (buses only: `teleop-ecat-link`), any node (a driver bug must not hide behind code
 //! the simulator shares with it).
@@ -29,6 +31,7 @@ pub mod outage;
 pub mod plant;
 pub mod process;
 pub mod pty;
+pub mod testing;
 
 pub use command::{Args, Command, Common, DeviceCommand, ParseError};
 pub use control::{answer, Simulator, Stats};

@@ -41,6 +41,22 @@ impl Object {
     }
 }
 
+/// The `--object` argument of a simulated hand.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ObjectArg {
+    /// The virtual object in the hand at start: `ball` (under the fingers), `bar` (across the
+    /// palm) or `none`; a simulator without that object refuses it.
+    #[arg(long = "object", default_value = "ball")]
+    pub name: String,
+}
+
+impl ObjectArg {
+    /// The object named, checked.
+    pub fn object(&self) -> anyhow::Result<Option<Object>> {
+        Object::from_arg(&self.name).map_err(anyhow::Error::msg)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,7 +10,7 @@ use std::time::Duration;
 use crate::control::{answer, Simulator};
 
 /// The arguments every simulator takes (flattened into its own).
-#[derive(Debug, Clone, Default, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct SimArgs {
     /// Unix socket for run-time commands (default: the device's path with `.ctl`).
     #[arg(long)]
@@ -19,6 +19,9 @@ pub struct SimArgs {
     /// (repeatable).
     #[arg(long = "fault", value_name = "COMMAND")]
     pub faults: Vec<String>,
+    /// Seed of the fault dice.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// The whole of a simulator's `main`: logging, the arguments `A`, the stop signals (SIGINT,

@@ -25,8 +25,8 @@ use teleop_sim_allegro::adapter::AckStyle;
 use teleop_sim_allegro::firmware::{Firmware, FirmwareOptions, StateAnswer};
 use teleop_sim_allegro::hand::{Hand, HandParams, VirtualObject, JOINTS};
 use teleop_sim_allegro::{Sim, SimOptions};
+use teleop_sim_kit::object::ObjectArg;
 use teleop_sim_kit::process::{self, SimArgs};
-use teleop_sim_kit::Object;
 
 #[derive(Parser)]
 #[command(version, about = "Simulated Wonik Allegro Hand on a CAN bus")]
@@ -40,10 +40,8 @@ struct Args {
     /// Serve the bus on this Unix socket (the node's `local:PATH` link).
     #[arg(long)]
     socket: Option<PathBuf>,
-    /// Virtual object: `ball` (a sphere under the middle finger), `bar` (a cylinder across
-    /// the palm that the index, middle and ring fingers wrap) or `none`.
-    #[arg(long, default_value = "ball")]
-    object: String,
+    #[command(flatten)]
+    object: ObjectArg,
     /// Gravity on the fingers (the hand palm down).
     #[arg(long)]
     gravity: bool,
@@ -82,9 +80,6 @@ struct Args {
     /// Largest PWM applied (default: the generation's).
     #[arg(long)]
     pwm_limit: Option<i16>,
-    /// Seed of the fault dice.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -170,7 +165,7 @@ fn run(args: Args) -> anyhow::Result<()> {
         gravity: args.gravity,
         ..HandParams::default()
     };
-    let object = Object::from_arg(&args.object).map_err(anyhow::Error::msg)?;
+    let object = args.object.object()?;
     let hand = Hand::allegro(params, object.map(VirtualObject::of)).map_err(anyhow::Error::msg)?;
     let default_control = match (&args.slcan, &args.socket) {
         (Some(p), _) | (None, Some(p)) => p.with_extension("ctl"),
@@ -183,7 +178,7 @@ fn run(args: Args) -> anyhow::Result<()> {
                 slcan: args.slcan.clone(),
                 socket: args.socket.clone(),
                 ack_style: args.ack_style,
-                seed: args.seed,
+                seed: args.sim.seed,
             },
         )
         .map_err(|e| anyhow::anyhow!("cannot start the simulated hand: {e}"))?,

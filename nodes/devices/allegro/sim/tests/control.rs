@@ -3,54 +3,40 @@
 #![allow(clippy::unwrap_used)]
 
 use std::collections::HashMap;
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixStream;
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::ffi::OsString;
+use std::path::Path;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use teleop_allegro_protocol::{doc, v4, Generation};
 use teleop_can_link::local::SocketLink;
 use teleop_can_link::{CanFrame, CanLink};
+use teleop_sim_kit::testing::SimProcess;
 
-struct Sim {
-    child: Child,
-    dir: PathBuf,
-}
+struct Sim(SimProcess);
 
 impl Sim {
     fn start(args: &[&str]) -> Self {
-        let dir = std::env::temp_dir().join(format!(
-            "sim-allegro-control-{}-{}",
-            std::process::id(),
-            args.join("_").replace(['/', ' '], "")
-        ));
-        std::fs::create_dir_all(&dir).unwrap();
-        let mut child = Command::new(env!("CARGO_BIN_EXE_teleop-sim-allegro"))
-            .arg("--slcan")
-            .arg(dir.join("can"))
-            .arg("--socket")
-            .arg(dir.join("bus.sock"))
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        assert!(line.starts_with("allegro: generation "), "{line}");
-        Self { child, dir }
+        let args: Vec<OsString> = args.iter().map(OsString::from).collect();
+        Self(SimProcess::start(
+            Path::new(env!("CARGO_BIN_EXE_teleop-sim-allegro")),
+            |dir| {
+                let mut all = vec![
+                    "--slcan".into(),
+                    dir.join("can").into(),
+                    "--socket".into(),
+                    dir.join("bus.sock").into(),
+                ];
+                all.extend(args);
+                all
+            },
+            "allegro: generation ",
+            "can.ctl",
+        ))
     }
 
     fn control(&self, command: &str) -> String {
-        let mut s = UnixStream::connect(self.dir.join("can.ctl")).unwrap();
-        writeln!(s, "{command}").unwrap();
-        s.shutdown(std::net::Shutdown::Write).unwrap();
-        let mut reply = String::new();
-        BufReader::new(s).read_line(&mut reply).unwrap();
-        reply.trim_end().to_string()
+        self.0.control(command)
     }
 
     fn status(&self) -> HashMap<String, String> {
@@ -69,17 +55,7 @@ impl Sim {
     }
 
     fn link(&self) -> SocketLink {
-        SocketLink::connect(&self.dir.join("bus.sock")).unwrap()
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = Command::new("kill")
-            .args(["-INT", &self.child.id().to_string()])
-            .status();
-        let _ = self.child.wait();
-        let _ = std::fs::remove_dir_all(&self.dir);
+        SocketLink::connect(&self.0.dir().join("bus.sock")).unwrap()
     }
 }
 

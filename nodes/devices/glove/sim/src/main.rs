@@ -42,9 +42,6 @@ struct Args {
     /// Device processing time per request, microseconds.
     #[arg(long, default_value_t = 200)]
     response_delay_us: u64,
-    /// Seed for the fault dice.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -68,7 +65,7 @@ fn run(args: Args) -> anyhow::Result<()> {
             baud,
             response_delay: Duration::from_micros(args.response_delay_us),
             faults: Faults::default(),
-            seed: args.seed,
+            seed: args.sim.seed,
         },
         Hand::new(script, HandModel::default()),
     )?);

@@ -7,12 +7,12 @@
 
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use clap::Parser;
-use teleop_sim_kit::ethercat::PlaceArgs;
+use teleop_sim_kit::ethercat::EthercatArgs;
+use teleop_sim_kit::object::ObjectArg;
 use teleop_sim_kit::process::{self, SimArgs};
-use teleop_sim_kit::Object;
 use teleop_sim_revo2::control::{virtual_object, Revo2Sim};
 use teleop_sim_revo2::revo2_subdevice_with_loop;
 
@@ -20,17 +20,12 @@ use teleop_sim_revo2::revo2_subdevice_with_loop;
 #[command(version, about = "Emulated BrainCo Revo2 EtherCAT SubDevice")]
 struct Args {
     #[command(flatten)]
-    place: PlaceArgs,
-    /// Virtual object in the hand: `ball` or `none`.
-    #[arg(long, default_value = "ball")]
-    object: String,
+    ethercat: EthercatArgs,
+    #[command(flatten)]
+    object: ObjectArg,
     /// Serial number in the identity object.
     #[arg(long, default_value_t = 42)]
     serial: u32,
-    /// Period of the firmware's main loop in microseconds: AL control is read once per loop,
-    /// as a slave firmware does (0: every write acted on at once).
-    #[arg(long, default_value_t = 1000)]
-    firmware_loop_us: u64,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -40,15 +35,11 @@ fn main() -> ExitCode {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    let object = Object::from_arg(&args.object)
-        .and_then(virtual_object)
-        .map_err(anyhow::Error::msg)?;
-    let device = Arc::new(Mutex::new(revo2_subdevice_with_loop(
-        object,
-        args.serial,
-        Duration::from_micros(args.firmware_loop_us),
-    )));
+    let object = virtual_object(args.object.object()?).map_err(anyhow::Error::msg)?;
+    let mut device = revo2_subdevice_with_loop(object, args.serial, args.ethercat.firmware_loop());
+    device.faults().seed = args.sim.seed;
+    let device = Arc::new(Mutex::new(device));
     let start = Instant::now();
     let sim = Arc::new(Revo2Sim::new(Arc::clone(&device), start));
-    args.place.serve("revo2", &args.sim, sim, &device, start)
+    args.ethercat.serve("revo2", &args.sim, sim, &device, start)
 }

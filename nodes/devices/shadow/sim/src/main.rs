@@ -7,13 +7,13 @@
 
 use std::process::ExitCode;
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use clap::Parser;
 use teleop_shadow_protocol::mapping::Mapping;
-use teleop_sim_kit::ethercat::PlaceArgs;
+use teleop_sim_kit::ethercat::EthercatArgs;
+use teleop_sim_kit::object::ObjectArg;
 use teleop_sim_kit::process::{self, SimArgs};
-use teleop_sim_kit::Object;
 use teleop_sim_shadow::control::{hand_object, ShadowSim};
 use teleop_sim_shadow::ethercat::ShadowBus;
 use teleop_sim_shadow::hand::Hand;
@@ -23,19 +23,15 @@ use teleop_sim_shadow::palm::Palm;
 #[command(version, about = "Emulated Shadow Hand E (EtherCAT bridge and palm)")]
 struct Args {
     #[command(flatten)]
-    place: PlaceArgs,
-    /// Virtual object: `ball` (under the middle finger) or `none`.
-    #[arg(long, default_value = "ball")]
-    object: String,
+    ethercat: EthercatArgs,
+    #[command(flatten)]
+    object: ObjectArg,
     /// Joint -> motor mapping of the hand: `E_v3`, `E_v4` or `E_v5`.
     #[arg(long, default_value = "E_v3")]
     mapping: String,
     /// Serial number of the palm (names the hand on a real system).
     #[arg(long, default_value_t = 1178)]
     serial: u32,
-    /// Period of the firmware's main loop in microseconds: AL control is read once per loop.
-    #[arg(long, default_value_t = 1000)]
-    firmware_loop_us: u64,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -54,16 +50,16 @@ fn mapping(name: &str) -> anyhow::Result<Mapping> {
 }
 
 fn run(args: Args) -> anyhow::Result<()> {
-    let object = Object::from_arg(&args.object)
-        .and_then(hand_object)
-        .map_err(anyhow::Error::msg)?;
+    let object = hand_object(args.object.object()?).map_err(anyhow::Error::msg)?;
     let hand = Hand::new(mapping(&args.mapping)?, object);
-    let bus = Arc::new(Mutex::new(ShadowBus::new(
+    let mut bus = ShadowBus::new(
         Palm::with_hand(hand),
         args.serial,
-        Duration::from_micros(args.firmware_loop_us),
-    )));
+        args.ethercat.firmware_loop(),
+    );
+    bus.bridge.faults().seed = args.sim.seed;
+    let bus = Arc::new(Mutex::new(bus));
     let start = Instant::now();
     let sim = Arc::new(ShadowSim::new(Arc::clone(&bus), start));
-    args.place.serve("shadow", &args.sim, sim, &bus, start)
+    args.ethercat.serve("shadow", &args.sim, sim, &bus, start)
 }
