@@ -12,10 +12,6 @@
 //!   does the same for loops that block on something else, such as a serial port);
 //! - [`EStopInput`]: the latched e-stop (a latch file per namespace that outlives every process,
 //!   the `estop` topic as its doorbell, `estop/ack` as the nodes' answer);
-//! - [`HandPorts`]: the ports of every hand node (fresh, e-stop-gated commands in; state,
-//!   tactile, device info and health out);
-//! - [`Resume`]: the ramp from a hand's held target back to the operator's pose after a hold
-//!   (pure; the EtherCAT hands' ports and the Allegro's loop use it);
 //! - [`Health`]: counters (timeouts, clamps, errors, drops) and the periodic [`NodeHealth`] report;
 //! - [`load_toml`]: configuration files whose errors name the file, line and field;
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
@@ -40,14 +36,12 @@ mod config_file;
 pub mod control;
 mod estop;
 mod event_loop;
-mod hand_ports;
 mod health;
 mod ipc;
 mod logging;
 pub mod node_main;
 mod ports;
 pub mod realtime;
-pub mod resume;
 pub mod schedule;
 mod signals;
 
@@ -58,7 +52,6 @@ pub use estop::{
     set_latch_by, EStopInput, LATCH_POLL,
 };
 pub use event_loop::{EventLoop, Flow, Input, StopReason, Wake};
-pub use hand_ports::HandPorts;
 pub use health::Health;
 pub use ipc::{
     clean_dead_nodes, discover_namespaces, IpcSettings, NodeRuntime, RuntimeError, SessionLock,
@@ -67,7 +60,6 @@ pub use ipc::{
 pub use logging::{dropped_log_lines, init_logging};
 pub use node_main::{node_main, NodeArgs, NodeMain};
 pub use ports::{sample_time, Publisher, Subscriber};
-pub use resume::Resume;
 pub use signals::{
     follow_supervisor, install_stop_handlers, stop_signal, take_over_stop_signals,
     ENV_SUPERVISOR_PID,

@@ -11,7 +11,6 @@ use std::time::{Duration, Instant};
 
 use teleop_allegro_protocol::{v4, Generation, Protocol, FINGERS, JOINTS};
 use teleop_can_link::{BusState, CanLink, LinkError};
-use teleop_runtime::Resume;
 
 use crate::bringup::{self, Hand, Identity};
 use crate::config::Settings;
@@ -23,10 +22,12 @@ use crate::wire::{Incoming, Wire};
 /// What the hand should do this cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Target {
-    /// Hold the last target (where the hand was at bring-up if there was none).
+    /// Hold the last target followed (where the hand was at its first cycle since bring-up if
+    /// there was none).
     Hold,
-    /// Go to these joint angles (rad, joint order); after a hold (and at the first command) the
-    /// target ramps there from the held one at `resume_speed` ([`Resume`]).
+    /// Go to these joint angles (rad, joint order) this cycle, as they are: the host has
+    /// admitted them and ramps them after a hold (the node: `teleop-hand-node`'s `HandPorts`;
+    /// a service command: its `Resume`).
     Follow([f64; JOINTS]),
 }
 
@@ -307,10 +308,8 @@ fn serve(
     })?;
     let mut identity = hand.identity.clone();
     let mut gather = Gather::new();
-    // The held target, and the ramp back to the commands after a hold: before any command the
-    // hand holds where it is (set at the first complete cycle), and the first command ramps
-    // from there too.
-    let mut resume = Resume::new(settings.resume_speed);
+    // The target held: the last one followed, or where the hand was at its first cycle.
+    let mut held: Option<[f64; JOINTS]> = None;
     let mut run = 0u32;
     let mut missed_since_complete = 0u32;
     let period = settings.period.as_secs_f64();
@@ -365,20 +364,12 @@ fn serve(
                             let q = *gather.positions();
                             let dt = period * f64::from(1 + missed_since_complete);
                             missed_since_complete = 0;
-                            resume.held_at(&q);
                             let (target, holding) = match host.target() {
-                                Target::Follow(mut t) => {
-                                    resume.follow(&mut t, dt);
+                                Target::Follow(t) => {
+                                    held = Some(t);
                                     (t, false)
                                 }
-                                Target::Hold => {
-                                    resume.hold();
-                                    let mut t = q;
-                                    for (t, h) in t.iter_mut().zip(resume.held().unwrap_or(&q)) {
-                                        *t = *h;
-                                    }
-                                    (t, true)
-                                }
+                                Target::Hold => (*held.get_or_insert(q), true),
                             };
                             let out = controller.step(&q, dt, &target);
                             counters.limited += u64::from(out.limited);

@@ -1,18 +1,14 @@
-//! The node: the torque loop ([`crate::driver`]) with the node's ports as its host: hand commands
-//! in (stale `stale_command_ms` after their stamp, none followed while the latched e-stop is
-//! engaged: the hand holds its last target), hand state out every cycle, the link state while
-//! the hand is down, health and device info periodically.
-
-use std::time::{Duration, Instant};
+//! The node: the torque loop ([`crate::driver`]) with the hand-node core's ports as its host
+//! (`teleop-hand-node`: admission by the hand profile, position targets in radians only; e-stop,
+//! stale -> hold, the ramp back, health and device info, also while the hand is down); hand
+//! state out every cycle, the link state while the hand is down, the loop's counters in health.
 
 use teleop_allegro_protocol::{v4, Generation, JOINTS};
 use teleop_can_link::{Bitrate, BusState};
+use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
 use teleop_hand_profile::HandProfile;
-use teleop_msgs::{
-    bus_state, control_mode, device_model, fixed_text, link_kind, units, DeviceInfo, HandCommand,
-    HandState,
-};
-use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, Subscriber};
+use teleop_msgs::{bus_state, device_model, fixed_text, link_kind, units, DeviceInfo, HandState};
+use teleop_runtime::NodeRuntime;
 
 use crate::config::Settings;
 use crate::driver::{self, Connected, Counters, Cycle, Down, Host, Target};
@@ -103,89 +99,30 @@ pub fn device_info(hand: &Connected<'_>, device_id: u8) -> DeviceInfo {
     }
 }
 
-/// Why a fresh hand command is not followed (None: it is).
-pub fn refusal(cmd: &HandCommand) -> Option<&'static str> {
-    if cmd.hand_model != device_model::ALLEGRO && cmd.hand_model != device_model::UNKNOWN {
-        return Some("hand/command is for another hand model");
-    }
-    if cmd.units != units::PHYSICAL {
-        return Some("hand/command is not in radians (units = physical), which the Allegro takes");
-    }
-    if cmd.control_mode != control_mode::POSITION {
-        return Some(
-            "hand/command is not a position command, the only mode the Allegro node follows",
-        );
-    }
-    if usize::from(cmd.joint_count) < JOINTS {
-        return Some("hand/command has fewer than the Allegro's 16 joints");
-    }
-    if cmd.joints[..JOINTS].iter().any(|j| !j.target.is_finite()) {
-        return Some("hand/command has a target that is not a number");
-    }
-    None
-}
-
-/// The targets of a command, clamped to the profile's joint limits; the count of clamped ones.
-pub fn targets(cmd: &HandCommand, limits: &[(f32, f32); JOINTS]) -> ([f64; JOINTS], u64) {
-    let mut out = [0.0; JOINTS];
-    let mut clamped = 0;
-    for (j, t) in out.iter_mut().enumerate() {
-        let v = cmd.joints[j].target;
-        let (lo, hi) = limits[j];
-        let c = v.clamp(lo, hi);
-        clamped += u64::from(c != v);
-        *t = f64::from(c);
-    }
-    (out, clamped)
-}
-
-/// The node's ports, the loop's host.
+/// The node's ports, the loop's host: the core's ports, and what the loop's counters add to
+/// health.
 struct Ports {
-    device: Publisher<DeviceInfo>,
-    connected: Option<DeviceInfo>,
-    commands: Subscriber<HandCommand>,
-    estop: EStopInput,
-    state: Publisher<HandState>,
-    health: Health,
-    limits: [(f32, f32); JOINTS],
+    hand: HandPorts,
     device_id: u8,
-    stale_after: Duration,
-    health_period: Duration,
-    last_health: Instant,
-    following: bool,
-    refused: Option<&'static str>,
+    /// Loop errors (unknown and bad frames, bus errors, missing cycles) counted in health so far.
     errors_counted: u64,
 }
 
 impl Ports {
-    /// Publishes health (and device info) when due.
-    fn health_due(&mut self, counters: &Counters) -> anyhow::Result<()> {
-        if self.last_health.elapsed() < self.health_period {
-            return Ok(());
-        }
-        self.last_health = Instant::now();
+    /// The loop's counters into health: its errors, and its frame counters as named details.
+    fn count(&mut self, counters: &Counters) {
         let errors = counters.unknown_frames
             + counters.bad_frames
             + counters.bus_errors
             + counters.missing_cycles;
-        self.health
-            .count_errors(errors.saturating_sub(self.errors_counted));
+        let health = self.hand.health();
+        health.count_errors(errors.saturating_sub(self.errors_counted));
         self.errors_counted = errors;
-        self.health.set_dropped(self.commands.dropped());
-        for (name, count) in [
-            ("unknown_frames", counters.unknown_frames),
-            ("bad_frames", counters.bad_frames),
-            ("reconnects", counters.reconnects),
-            // Waits the frames' stamps showed were a loaded host's, not the hand's.
-            ("late_periods", counters.late_periods),
-        ] {
-            self.health.set_detail(name, count as f64);
-        }
-        self.health.publish(&[self.commands.age(Instant::now())])?;
-        if let Some(d) = &self.connected {
-            self.device.publish(d)?;
-        }
-        Ok(())
+        health.set_detail("unknown_frames", counters.unknown_frames as f64);
+        health.set_detail("bad_frames", counters.bad_frames as f64);
+        health.set_detail("reconnects", counters.reconnects as f64);
+        // Waits the frames' stamps showed were a loaded host's, not the hand's.
+        health.set_detail("late_periods", counters.late_periods as f64);
     }
 }
 
@@ -195,56 +132,27 @@ impl Host for Ports {
     }
 
     fn target(&mut self) -> Target {
-        match self.estop.update() {
-            Ok(Some(true)) => tracing::warn!("e-stop engaged: the hand holds its last target"),
-            Ok(Some(false)) => tracing::info!("e-stop released: following hand commands"),
-            Ok(None) => {}
-            Err(e) => {
-                self.health.count_error();
-                tracing::warn!("e-stop acknowledgement: {e}");
+        match self.hand.command() {
+            Some(cmd) => {
+                let mut t = [0.0; JOINTS];
+                for (t, j) in t.iter_mut().zip(&cmd.joints) {
+                    *t = f64::from(j.target);
+                }
+                Target::Follow(t)
             }
+            None => Target::Hold,
         }
-        // Freshness counts from the command's stamp: one from the topic's history, sent
-        // before this node (re)started, is stale.
-        let cmd = self.commands.poll_latest();
-        let fresh = self.commands.is_fresh(Instant::now(), self.stale_after);
-        let Some(cmd) = cmd.filter(|_| fresh && !self.estop.engaged()) else {
-            if self.following {
-                self.following = false;
-                self.health.count_timeout();
-                tracing::info!("no fresh hand command: holding the last target");
-            }
-            return Target::Hold;
-        };
-        if let Some(why) = refusal(&cmd) {
-            if self.refused != Some(why) {
-                tracing::warn!("{why}: holding the last target");
-                self.refused = Some(why);
-            }
-            self.health.count_error();
-            return Target::Hold;
-        }
-        self.refused = None;
-        if !self.following {
-            self.following = true;
-            tracing::info!("hand commands fresh: following them");
-        }
-        let (t, clamped) = targets(&cmd, &self.limits);
-        self.health.count_clamps(clamped);
-        Target::Follow(t)
     }
 
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {
-        let info = device_info(hand, self.device_id);
-        self.device.publish(&info)?;
-        self.connected = Some(info);
+        self.hand.connected(device_info(hand, self.device_id))?;
         let generation = match hand.generation {
             Generation::V1 => 1.0,
             Generation::V2 => 2.0,
             Generation::V3 => 3.0,
             Generation::V4 => 4.0,
         };
-        self.health.set_detail("protocol_generation", generation);
+        self.hand.health().set_detail("protocol_generation", generation);
         tracing::info!(
             generation = %hand.generation,
             firmware = %firmware_text(hand.identity),
@@ -255,21 +163,26 @@ impl Host for Ports {
     }
 
     fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
-        self.state.publish(&hand_state(cycle))?;
-        self.health.count_loop();
-        self.health
-            .set_detail("bus_state", f64::from(bus_state_code(cycle.bus_state)));
         let hottest = cycle.temperatures.iter().filter_map(|t| *t).max();
-        self.health
-            .set_detail("max_temperature_c", f64::from(hottest.unwrap_or(0)));
-        self.health_due(&cycle.counters)
+        let health = self.hand.health();
+        health.set_detail("bus_state", f64::from(bus_state_code(cycle.bus_state)));
+        health.set_detail("max_temperature_c", f64::from(hottest.unwrap_or(0)));
+        self.count(&cycle.counters);
+        self.hand.publish(&hand_state(cycle), None)?;
+        Ok(())
     }
 
     fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
-        self.connected = None;
-        self.state.publish(&link_down_state(down.counters))?;
-        self.health_due(down.counters)
+        self.count(down.counters);
+        self.hand.publish_down(&link_down_state(down.counters))?;
+        Ok(())
     }
+}
+
+/// The Allegro's admission rule: its hand profile (radians, 16 joints and their limits) and
+/// position targets only (the host's PD controller follows positions).
+pub fn admission(profile: &HandProfile) -> Admission {
+    Admission::new(profile, Modes::POSITION)
 }
 
 /// Runs until SIGINT/SIGTERM, on this thread (which takes the launch file's real-time
@@ -287,25 +200,26 @@ pub fn run(
             profile.joints.len()
         );
     }
-    let mut limits = [(0.0f32, 0.0f32); JOINTS];
-    for (l, j) in limits.iter_mut().zip(&profile.joints) {
-        *l = (j.lower, j.upper);
+    if profile.model_id != device_model::ALLEGRO {
+        anyhow::bail!(
+            "hand profile {:?} is for device model {}, not the Allegro Hand ({})",
+            profile.name,
+            profile.model_id,
+            device_model::ALLEGRO
+        );
     }
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports {
-        device: runtime.publisher()?,
-        connected: None,
-        commands: runtime.subscriber()?,
-        estop: EStopInput::new(runtime)?,
-        state: runtime.publisher()?,
-        health: Health::new(runtime)?,
-        limits,
+        hand: HandPorts::new(
+            runtime,
+            admission(profile),
+            Timing {
+                stale_after: settings.stale_command,
+                health_period: settings.health_period,
+                resume_speed: settings.resume_speed,
+            },
+        )?,
         device_id: settings.device_id,
-        stale_after: settings.stale_command,
-        health_period: settings.health_period,
-        last_health: Instant::now(),
-        following: false,
-        refused: None,
         errors_counted: 0,
     };
     tracing::info!(link = %settings.link, protocol = %settings.protocol, "Allegro node starting");
@@ -321,44 +235,18 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
 
-    fn command(targets: [f32; JOINTS]) -> HandCommand {
-        let mut c = HandCommand {
-            hand_model: device_model::ALLEGRO,
-            joint_count: JOINTS as u8,
-            control_mode: control_mode::POSITION,
-            units: units::PHYSICAL,
-            ..Default::default()
-        };
-        for (j, t) in targets.iter().enumerate() {
-            c.joints[j].target = *t;
-        }
-        c
-    }
-
+    /// The profile's joint count and limits are the hand's: 16 joints in the loop's order, and
+    /// a command outside the limits is clamped into them by the one admission rule.
     #[test]
-    fn commands_are_checked_and_clamped() {
+    fn the_profile_is_the_hands() {
         let profile = HandProfile::builtin("allegro").unwrap();
-        let mut limits = [(0.0, 0.0); JOINTS];
-        for (l, j) in limits.iter_mut().zip(&profile.joints) {
-            *l = (j.lower, j.upper);
+        let admission = admission(&profile);
+        assert_eq!(admission.joints(), JOINTS);
+        assert_eq!(admission.model(), device_model::ALLEGRO);
+        assert_eq!(admission.units(), units::PHYSICAL);
+        for (l, j) in admission.limits().iter().zip(&profile.joints) {
+            assert_eq!(*l, (j.lower, j.upper), "{}", j.name);
         }
-        let mut c = command([0.3; JOINTS]);
-        assert_eq!(refusal(&c), None);
-        c.joints[0].target = 2.0; // index_0 is +-0.47
-        let (t, clamped) = targets(&c, &limits);
-        assert_eq!(clamped, 1);
-        assert!((t[0] - 0.47).abs() < 1e-6 && (t[1] - 0.3).abs() < 1e-6);
-        c.units = units::NORMALISED;
-        assert!(refusal(&c).unwrap().contains("radians"));
-        let mut c = command([0.3; JOINTS]);
-        c.joint_count = 6;
-        assert!(refusal(&c).is_some());
-        let mut c = command([0.3; JOINTS]);
-        c.joints[15].target = f32::NAN;
-        assert!(refusal(&c).is_some());
-        let mut c = command([0.3; JOINTS]);
-        c.hand_model = device_model::REVO2;
-        assert!(refusal(&c).is_some());
     }
 
     #[test]

@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use clap::Subcommand;
 use teleop_allegro_protocol::{v4, Generation, Protocol, JOINTS};
 use teleop_can_link::{CanLink, LinkError};
+use teleop_hand_node::Resume;
 use teleop_hand_profile::HandProfile;
 use teleop_runtime::args::parse_seconds;
 
@@ -281,9 +282,12 @@ enum Aim {
     Joint(usize, f64),
 }
 
-/// The CLI as the loop's host: the aim for `seconds` after the hand came up, then stop (the loop
+/// The CLI as the loop's host: the aim for `seconds` after the hand came up, ramped there from
+/// where the hand was at `resume_speed` (as the node ramps after a hold), then stop (the loop
 /// sends zero torque and SYSTEM_OFF).
 struct CliHost {
+    resume: Resume,
+    period_s: f64,
     aim: Aim,
     limits: [(f64, f64); JOINTS],
     seconds: Duration,
@@ -300,10 +304,13 @@ impl Host for CliHost {
     }
 
     fn target(&mut self) -> Goal {
-        if self.start.is_none() {
+        let Some(start) = self.start else {
             return Goal::Hold;
-        }
-        Goal::Follow(self.goal)
+        };
+        self.resume.held_at(&start);
+        let mut target = self.goal;
+        self.resume.follow(&mut target, self.period_s);
+        Goal::Follow(target)
     }
 
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {
@@ -349,6 +356,8 @@ fn drive(
         *l = (f64::from(j.lower), f64::from(j.upper));
     }
     let mut host = CliHost {
+        resume: Resume::new(settings.resume_speed),
+        period_s: settings.period.as_secs_f64(),
         aim,
         limits,
         seconds,

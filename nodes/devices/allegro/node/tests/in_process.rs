@@ -447,21 +447,21 @@ fn a_silent_bus_is_named() {
     );
 }
 
-/// Issue 20, item 12: when commands come back after a hold, the target does not jump to the
-/// operator's pose: it ramps from the held target at `resume_speed` (default 1 rad/s), then
-/// follows the commands as they are.
+/// The loop holds the last target it followed while the host has none, and follows the host's
+/// targets as they come: the ramp back after a hold is the host's (`teleop-hand-node`'s
+/// `HandPorts` for the node, `Resume` for a service command), not a second one in the loop.
 #[test]
-fn after_a_hold_the_target_ramps_back_at_the_resume_speed() {
+fn a_hold_keeps_the_last_target_and_targets_are_followed_as_the_host_gives_them() {
     let bus = LocalBus::new();
     let _hand = ScriptedHand::start(&bus, Generation::V4, start_pose());
     let mut far = start_pose();
-    far[1] += 1.0;
-    far[13] -= 0.5;
+    far[1] += 0.2;
+    far[13] -= 0.1;
     let mut host = TestHost {
         target: Some(start_pose()),
         on_cycle: Some(Box::new(move |c, target| match c.counters.cycles {
-            150 => *target = None,      // the command goes stale: hold
-            250 => *target = Some(far), // back, far away
+            150 => *target = None,      // the host has no command: hold
+            250 => *target = Some(far), // back
             _ => {}
         })),
         ..Default::default()
@@ -470,34 +470,21 @@ fn after_a_hold_the_target_ramps_back_at_the_resume_speed() {
         &bus,
         &settings(ProtocolSetting::Fixed(Generation::V4)),
         &mut host,
-        Duration::from_millis(2500),
+        Duration::from_millis(2000),
     );
     assert_eq!(host.connects, 1, "{:?}", host.downs);
+    let holds: Vec<&Cycle> = host.cycles.iter().filter(|c| c.holding).collect();
+    assert!(holds.len() >= 90, "{} holding cycles", holds.len());
+    assert!(
+        holds.iter().all(|c| c.target == start_pose()),
+        "the hold keeps the last target followed"
+    );
     let resumed = host
         .cycles
         .iter()
         .position(|c| c.counters.cycles > 250 && !c.holding)
         .unwrap();
-    let held = host.cycles[resumed - 1];
-    assert!(held.holding);
-    let mut steps = 0.0f64;
-    let mut caught_up = None;
-    for (i, w) in host.cycles[resumed - 1..].windows(2).enumerate() {
-        for j in 0..JOINTS {
-            steps = steps.max((w[1].target[j] - w[0].target[j]).abs());
-        }
-        if caught_up.is_none() && w[1].target == far {
-            caught_up = Some(i + 1);
-        }
-    }
-    // 1 rad at 1 rad/s in 3 ms cycles: about 333 cycles, at most 3 mrad a cycle (a missed cycle
-    // doubles it).
-    assert!(steps < 0.02, "the target jumped {steps} rad in one cycle");
-    let caught_up = caught_up.expect("the target reaches the commanded pose");
-    assert!(
-        (250..=400).contains(&caught_up),
-        "caught up after {caught_up} cycles"
-    );
+    assert_eq!(host.cycles[resumed].target, far, "followed as given");
     let last = host.cycles.last().unwrap();
     assert_eq!(last.target, far);
     assert!((last.q[1] - far[1]).abs() < 0.02, "{:?}", last.q);

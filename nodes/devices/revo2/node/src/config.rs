@@ -65,10 +65,6 @@ pub struct Revo2Config {
     /// Speed used when holding after a stale command, per mille of full speed (converted to
     /// degrees per second in physical units).
     pub hold_speed_per_mille: u16,
-    /// Joint limits, normalised (0 = open, 1 = closed), Revo2 order.
-    pub joint_min: [f32; 6],
-    /// See `joint_min`.
-    pub joint_max: [f32; 6],
     /// Health report period.
     pub health_period_ms: u64,
     /// After a hold (a stale command, the e-stop, a refused command), position targets move
@@ -90,8 +86,6 @@ impl Default for Revo2Config {
             tactile_poll_hz: 50.0,
             full_speed_travel_per_s: 2.0,
             hold_speed_per_mille: 300,
-            joint_min: [0.0; 6],
-            joint_max: [1.0; 6],
             health_period_ms: 500,
             resume_speed: 1.0,
             device: DeviceSettings::default(),
@@ -120,14 +114,6 @@ impl Revo2Config {
         }
         if self.hold_speed_per_mille == 0 || self.hold_speed_per_mille > 1000 {
             return Err("hold_speed_per_mille must be 1..=1000".into());
-        }
-        for j in 0..6 {
-            let (lo, hi) = (self.joint_min[j], self.joint_max[j]);
-            if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo >= hi {
-                return Err(format!(
-                    "joint_min[{j}] = {lo}, joint_max[{j}] = {hi}: need 0 <= min < max <= 1"
-                ));
-            }
         }
         let d = &self.device;
         for (name, v, max) in [
@@ -166,11 +152,13 @@ mod tests {
     #[test]
     fn validation_names_the_field() {
         assert!(Revo2Config::default().validate().is_ok());
-        let bad = Revo2Config {
-            joint_max: [1.0, 1.0, 0.0, 1.0, 1.0, 1.0],
-            ..Default::default()
-        };
-        assert!(bad.validate().unwrap_err().contains("joint_max[2]"));
+        // Joint limits are the hand profile's (config/hands/revo2.toml), never the node's.
+        let err =
+            teleop_runtime::parse_toml::<Revo2Config>("joint_max = [1.0]\n", "r.toml").unwrap_err();
+        assert!(
+            err.to_string().contains("unknown field `joint_max`"),
+            "{err}"
+        );
         for (text, field) in [
             ("stale_command_ms = 0\n", "stale_command_ms = 0"),
             ("stale_command_ms = 60001\n", "stale_command_ms = 60001"),

@@ -1,5 +1,5 @@
-//! Pure conversions between the message contract and the Revo2 process data: hand commands to
-//! outputs (with joint limits), the hold command, and inputs to hand state and tactile samples.
+//! Pure conversions between the message contract and the Revo2 process data: admitted hand
+//! commands to outputs, the hold command, and inputs to hand state and tactile samples.
 
 use teleop_msgs::{
     control_mode, device_model, fingertip_sensor, link_kind, units, Fingertip, HandCommand,
@@ -12,38 +12,16 @@ use teleop_revo2_protocol::{
 
 use crate::config::Revo2Config;
 
-/// Outputs for `cmd` in the device's `units`, and how many targets were clamped to the
-/// configured joint limits. `None` when the command is not for a Revo2, has a mode the Revo2
-/// lacks, or is no valid command: a NaN or infinite target or speed limit on any joint (the
-/// hand then holds; such a value never becomes a target).
-///
-/// Position targets are clamped to `joint_min`..`joint_max`. Velocity, effort and duty commands
-/// have no target to clamp: a joint `measured` (normalised, the latest reading) at or past a
-/// limit gets zero toward it (counted as clamped) and is free to move away; before the first
-/// reading (`None`) they move nothing.
+/// Outputs for `cmd`, a command admitted by `teleop-hand-node` (for the Revo2, normalised, a
+/// mode it has, every value finite, positions within the hand profile's limits and drives
+/// stopped at them), in the device's `units`. `None` when a value does not fit the unit mode's
+/// ranges.
 ///
 /// Normalised values become the unit mode's values (percent: per mille of travel, of full speed
 /// and of the maximum current; physical: degrees over the joint's range, degrees per second, mA)
 /// and go through the protocol crate's unit-aware builder ([`multi_command`]), which checks
 /// them against the ranges of that unit mode.
-pub fn outputs_for(
-    cmd: &HandCommand,
-    config: &Revo2Config,
-    units: UnitMode,
-    measured: Option<&[f32; JOINTS]>,
-) -> Option<(Outputs, u32)> {
-    if cmd.hand_model != device_model::REVO2 || usize::from(cmd.joint_count) < JOINTS {
-        return None;
-    }
-    if cmd.joints[..JOINTS]
-        .iter()
-        .any(|j| !(j.target.is_finite() && j.speed_limit.is_finite()))
-    {
-        return None;
-    }
-    if cmd.units != units::NORMALISED {
-        return None;
-    }
+pub fn outputs_for(cmd: &HandCommand, config: &Revo2Config, units: UnitMode) -> Option<Outputs> {
     let mode = match cmd.control_mode {
         control_mode::POSITION => ControlMode::PositionSpeed,
         control_mode::POSITION_TIME => ControlMode::PositionTime,
@@ -53,19 +31,6 @@ pub fn outputs_for(
         _ => return None,
     };
     let full = config.full_speed_travel_per_s;
-    let mut clamps = 0;
-    let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
-    // A non-position drive of joint `j` (positive closes): zero toward a limit the joint is at.
-    let limit_drive = |j: usize, v: f32| -> (f32, u32) {
-        let Some(at) = measured.map(|m| m[j]) else {
-            return (0.0, 0);
-        };
-        if (v > 0.0 && at >= config.joint_max[j]) || (v < 0.0 && at <= config.joint_min[j]) {
-            (0.0, 1)
-        } else {
-            (v, 0)
-        }
-    };
     let mut targets = [0.0; JOINTS];
     let mut seconds = [0.0; JOINTS];
     for (j, range) in DEFAULT_JOINT_RANGES.iter().enumerate() {
@@ -75,15 +40,9 @@ pub fn outputs_for(
             UnitMode::Percent => (0.0, f32::from(PERCENT_FULL)),
             UnitMode::Physical => (range.min_deg, range.max_deg - range.min_deg),
         };
-        let share = |x: f32| finite(x).clamp(-1.0, 1.0);
         match mode {
             ControlMode::PositionSpeed | ControlMode::PositionTime => {
-                let target = finite(joint.target);
-                let limited = target.clamp(config.joint_min[j], config.joint_max[j]);
-                if limited != target {
-                    clamps += 1;
-                }
-                targets[j] = offset + span * limited;
+                targets[j] = offset + span * joint.target;
                 seconds[j] = if mode == ControlMode::PositionSpeed {
                     // Speed limit in travel per second (0 = none), at least the smallest step.
                     let of_full = if joint.speed_limit > 0.0 {
@@ -96,40 +55,30 @@ pub fn outputs_for(
                         UnitMode::Physical => (of_full * full * span).round().max(1.0),
                     }
                 } else {
-                    finite(joint.speed_limit).clamp(0.0, 65535.0)
+                    joint.speed_limit.clamp(0.0, 65535.0)
                 };
             }
             ControlMode::Speed => {
-                let (v, c) = limit_drive(j, share(finite(joint.target) / full));
-                clamps += c;
+                let v = joint.target / full;
                 targets[j] = match units {
                     UnitMode::Percent => v * span,
                     UnitMode::Physical => v * full * span,
                 }
             }
             ControlMode::Current => {
-                let (v, c) = limit_drive(j, share(joint.target));
-                clamps += c;
                 targets[j] = match units {
-                    UnitMode::Percent => v * f32::from(PERCENT_FULL),
-                    UnitMode::Physical => v * MAX_CURRENT_MA,
+                    UnitMode::Percent => joint.target * f32::from(PERCENT_FULL),
+                    UnitMode::Physical => joint.target * MAX_CURRENT_MA,
                 }
             }
-            ControlMode::Pwm => {
-                let (v, c) = limit_drive(j, share(joint.target));
-                clamps += c;
-                targets[j] = v * f32::from(PERCENT_FULL);
-            }
+            ControlMode::Pwm => targets[j] = joint.target * f32::from(PERCENT_FULL),
         }
     }
     let multi = multi_command(mode, targets, seconds, units).ok()?;
-    Some((
-        Outputs {
-            multi,
-            ..Default::default()
-        },
-        clamps,
-    ))
+    Some(Outputs {
+        multi,
+        ..Default::default()
+    })
 }
 
 /// The raw position targets of `outputs` when they command positions (position + speed or
@@ -262,16 +211,12 @@ mod tests {
     }
 
     #[test]
-    fn position_commands_become_position_speed_outputs_with_limits() {
-        let config = Revo2Config {
-            joint_max: [1.0, 1.0, 0.6, 1.0, 1.0, 1.0],
-            ..Default::default()
-        };
-        let (out, clamps) = outputs_for(
-            &cmd([0.0, 0.5, 0.9, 1.0, 0.25, 0.0], 1.0),
+    fn position_commands_become_position_speed_outputs() {
+        let config = Revo2Config::default();
+        let out = outputs_for(
+            &cmd([0.0, 0.5, 0.6, 1.0, 0.25, 0.0], 1.0),
             &config,
             UnitMode::Percent,
-            None,
         )
         .unwrap();
         assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
@@ -280,111 +225,67 @@ mod tests {
             out.multi.param2, [500; 6],
             "1 travel/s of 2 travel/s full speed"
         );
-        assert_eq!(clamps, 1);
-        let (out, _) = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent, None).unwrap();
+        let out = outputs_for(&cmd([0.5; 6], 0.0), &config, UnitMode::Percent).unwrap();
         assert_eq!(out.multi.param2, [1000; 6], "no limit = full speed");
-        let mut other = cmd([0.5; 6], 0.0);
-        other.hand_model = device_model::ALLEGRO;
-        assert!(outputs_for(&other, &config, UnitMode::Percent, None).is_none());
     }
 
+    /// The Revo2's own joint ranges (the protocol's `DEFAULT_JOINT_RANGES`, 0..90 degrees) hold
+    /// the shipped profile's limits, and the profile's open and closed angles are the ends of
+    /// the device's travel (0 and 1000 per mille), so normalised commands span the travel.
     #[test]
-    fn a_non_finite_value_is_no_command() {
-        let config = Revo2Config::default();
-        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
-            for mode in [
-                control_mode::POSITION,
-                control_mode::POSITION_TIME,
-                control_mode::VELOCITY,
-                control_mode::EFFORT,
-                control_mode::DUTY,
-            ] {
-                let mut c = cmd([0.9, 0.9, 0.9, 0.9, 0.9, bad], 1.0);
-                c.control_mode = mode;
-                let at = Some(&[0.5; 6]);
-                assert!(outputs_for(&c, &config, UnitMode::Percent, at).is_none());
-                let mut c = cmd([0.9; 6], bad);
-                c.control_mode = mode;
-                assert!(outputs_for(&c, &config, UnitMode::Physical, at).is_none());
-            }
-        }
-    }
-
-    #[test]
-    fn drives_stop_toward_a_limit_the_joint_is_at() {
-        let config = Revo2Config {
-            joint_min: [0.0, 0.2, 0.0, 0.0, 0.0, 0.0],
-            joint_max: [1.0, 0.5, 1.0, 1.0, 1.0, 1.0],
-            ..Default::default()
-        };
-        for mode in [
-            control_mode::VELOCITY,
-            control_mode::EFFORT,
-            control_mode::DUTY,
-        ] {
-            let mut c = cmd([0.5, 0.5, -0.5, 0.5, 0.5, 0.5], 0.0);
-            c.control_mode = mode;
-            let at = [0.3, 0.5, 0.2, 0.2, 0.2, 0.2];
-            let (free, clamps) =
-                outputs_for(&c, &config, UnitMode::Percent, Some(&[0.3; 6])).unwrap();
-            assert_eq!(clamps, 0, "{mode}");
+    fn the_profile_limits_lie_within_the_devices_joint_ranges() {
+        let profile = teleop_hand_profile::HandProfile::builtin("revo2").unwrap();
+        assert_eq!(profile.joints.len(), JOINTS);
+        for (joint, range) in profile.joints.iter().zip(DEFAULT_JOINT_RANGES) {
+            let (lo, hi) = (joint.lower.to_degrees(), joint.upper.to_degrees());
             assert!(
-                free.multi.param1[1] > 0 && free.multi.param1[2] < 0,
-                "{mode}"
+                range.min_deg <= lo + 1e-3 && hi <= range.max_deg + 1e-3,
+                "{}: profile {lo}..{hi} degrees, device {}..{}",
+                joint.name,
+                range.min_deg,
+                range.max_deg
             );
-            let (out, clamps) = outputs_for(&c, &config, UnitMode::Percent, Some(&at)).unwrap();
-            assert_eq!(clamps, 1, "{mode}: joint 1 at its upper limit, closing");
-            assert_eq!(out.multi.param1[1], 0, "{mode}");
-            assert_eq!(out.multi.param1[0], free.multi.param1[0], "{mode}");
             assert!(
-                out.multi.param1[2] < 0,
-                "{mode}: joint 2 above its lower limit"
+                (joint.open.to_degrees() - range.min_deg).abs() < 1e-3,
+                "{}",
+                joint.name
             );
-            // Away from the limit: followed.
-            c.joints[1].target = -0.5;
-            let (out, clamps) = outputs_for(&c, &config, UnitMode::Percent, Some(&at)).unwrap();
-            assert_eq!((clamps, out.multi.param1[1] < 0), (0, true), "{mode}");
-            // At the lower limit, opening: stopped.
-            let (out, clamps) =
-                outputs_for(&c, &config, UnitMode::Percent, Some(&[0.1; 6])).unwrap();
-            assert_eq!((clamps, out.multi.param1[1]), (1, 0), "{mode}");
-            // Before the first reading nothing moves.
-            let (out, _) = outputs_for(&c, &config, UnitMode::Percent, None).unwrap();
-            assert_eq!(out.multi.param1, [0; 6], "{mode}");
+            assert!(
+                (joint.closed.to_degrees() - range.max_deg).abs() < 1e-3,
+                "{}",
+                joint.name
+            );
         }
     }
 
     #[test]
     fn physical_units_go_out_in_degrees_and_degrees_per_second() {
         let config = Revo2Config::default();
-        let (out, clamps) = outputs_for(
+        let out = outputs_for(
             &cmd([0.0, 0.5, 1.0, 0.25, 0.5, 0.5], 1.0),
             &config,
             UnitMode::Physical,
-            None,
         )
         .unwrap();
-        assert_eq!(clamps, 0);
         // 0..90 degrees per joint: half travel is 45 degrees (not 500 per mille).
         assert_eq!(out.multi.param1, [0, 45, 90, 23, 45, 45]);
         // 1 travel/s of 2 travel/s full speed over 90 degrees: 90 degrees per second.
         assert_eq!(out.multi.param2, [90; 6]);
         let mut effort = cmd([0.5; 6], 0.0);
         effort.control_mode = control_mode::EFFORT;
-        let (out, _) = outputs_for(&effort, &config, UnitMode::Physical, Some(&[0.5; 6])).unwrap();
+        let out = outputs_for(&effort, &config, UnitMode::Physical).unwrap();
         assert_eq!(
             out.multi.param1, [500; 6],
             "half the maximum current, in mA"
         );
         let mut velocity = cmd([-1.0; 6], 0.0);
         velocity.control_mode = control_mode::VELOCITY;
-        let (out, _) =
-            outputs_for(&velocity, &config, UnitMode::Physical, Some(&[0.5; 6])).unwrap();
+        let out = outputs_for(&velocity, &config, UnitMode::Physical).unwrap();
         assert_eq!(
             out.multi.param1, [-90; 6],
             "half of full speed over 90 degrees"
         );
-        let (out, _) = outputs_for(&velocity, &config, UnitMode::Percent, Some(&[0.5; 6])).unwrap();
+        let out = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
         assert_eq!(out.multi.param1, [-500; 6]);
     }
 
@@ -400,8 +301,7 @@ mod tests {
         assert_eq!(out.multi.param1, [10, 20, 30, 40, 50, 60]);
         assert_eq!(out.multi.param2, [300; 6]);
         // A grasp: the target lies past where the object stopped the fingers.
-        let (grasp, _) =
-            outputs_for(&cmd([0.8; 6], 1.0), &config, UnitMode::Percent, None).unwrap();
+        let grasp = outputs_for(&cmd([0.8; 6], 1.0), &config, UnitMode::Percent).unwrap();
         let target = position_targets(&grasp).unwrap();
         let out = hold_outputs(Some(&target), &joints, &speeds);
         assert_eq!(out.multi.mode, ControlMode::PositionSpeed as u8);
@@ -409,8 +309,7 @@ mod tests {
         assert_eq!(out.multi.param2, [300; 6], "at the hold speed");
         let mut velocity = cmd([0.5; 6], 0.0);
         velocity.control_mode = control_mode::VELOCITY;
-        let (moving, _) =
-            outputs_for(&velocity, &config, UnitMode::Percent, Some(&[0.5; 6])).unwrap();
+        let moving = outputs_for(&velocity, &config, UnitMode::Percent).unwrap();
         assert_eq!(position_targets(&moving), None, "no position to hold");
         // 300 per mille of 2 travel/s over 90 degrees.
         assert_eq!(hold_speeds(&config, UnitMode::Physical), [54; 6]);

@@ -12,15 +12,13 @@ use teleop_revo2_protocol::{obj, Inputs, TactileData, JOINTS};
 
 use crate::bus::{check_identity, configure, DeviceInfo};
 use crate::config::{Revo2Config, TactileSource};
-use crate::convert::{
-    hold_outputs, hold_speeds, normalised_position, outputs_for, position_targets,
-};
+use crate::convert::{hold_outputs, hold_speeds, outputs_for, position_targets};
 
 /// The Revo2's process data is the first SubDevice's.
 const REVO2: usize = 0;
 
 /// The Revo2 driver: its configuration, what bring-up learned about the device, and the last
-/// commanded position targets (what the hand holds on a stale command).
+/// commanded position targets (what the hand holds when it has no command).
 #[derive(Debug, Clone)]
 pub struct Revo2 {
     config: Revo2Config,
@@ -28,9 +26,6 @@ pub struct Revo2 {
     /// Position targets of the latest command packed since bring-up, in the device's units;
     /// `None` before the first or after a command of another mode.
     target: Option<[i16; JOINTS]>,
-    /// The latest measured joint positions, normalised (what velocity, effort and duty
-    /// commands are limited by); `None` before the first inputs since bring-up.
-    measured: Option<[f32; JOINTS]>,
 }
 
 impl Revo2 {
@@ -40,7 +35,6 @@ impl Revo2 {
             config,
             info: DeviceInfo::default(),
             target: None,
-            measured: None,
         }
     }
 
@@ -81,16 +75,16 @@ impl Driver for Revo2 {
         self.info = configure(md, group, &self.config).await?;
         // A device brought up (again) holds where it is until it is commanded.
         self.target = None;
-        self.measured = None;
         Ok(())
     }
 
-    fn pack(&mut self, command: &HandCommand, outputs: &mut Image) -> Option<u32> {
-        let units = self.info.units();
-        let (out, clamps) = outputs_for(command, &self.config, units, self.measured.as_ref())?;
+    fn pack(&mut self, command: &HandCommand, outputs: &mut Image) -> bool {
+        let Some(out) = outputs_for(command, &self.config, self.info.units()) else {
+            return false;
+        };
         self.target = position_targets(&out);
         let _ = out.pack(outputs.subdevice_mut(REVO2));
-        Some(clamps)
+        true
     }
 
     fn unpack(&mut self, inputs: &Image, polled: Option<&TactileData>) -> Option<Inputs> {
@@ -98,10 +92,6 @@ impl Driver for Revo2 {
         if self.poll_period().is_some() {
             decoded.tactile = polled.copied();
         }
-        let units = self.info.units();
-        self.measured = Some(core::array::from_fn(|j| {
-            normalised_position(decoded.joints.position[j], j, units)
-        }));
         Some(decoded)
     }
 

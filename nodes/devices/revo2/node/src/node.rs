@@ -1,19 +1,19 @@
 //! The Revo2 node: the master's cycle (`teleop-ecat-master`) with the [`Revo2`] driver, and the
-//! node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp; none
-//! followed while the latched e-stop is engaged, so the hand holds; after a hold, position
-//! targets ramp back to the operator's pose at `resume_speed`), hand state and tactile data out
-//! for every valid exchange, the link state while the hand is away, health and device info
-//! periodically (also while the hand is away). A refused command (a NaN target, another hand's)
-//! is counted as an error; the hand holds.
+//! hand-node core's ports (`teleop-hand-node`: admission by the Revo2's hand profile, e-stop,
+//! stale -> hold, the ramp back, health and device info, also while the hand is away) as its
+//! host; hand state and tactile data out for every valid exchange, the link state while the
+//! hand is away.
 
 use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
+use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     bus_state, device_model, fixed_text, link_kind, DeviceInfo, HandCommand, HandState,
 };
 use teleop_revo2_protocol::Inputs;
-use teleop_runtime::{HandPorts, NodeRuntime};
+use teleop_runtime::NodeRuntime;
 
 use crate::bus::DeviceInfo as FoundDevice;
 use crate::config::Revo2Config;
@@ -28,9 +28,12 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports(HandPorts::new(
         runtime,
-        Duration::from_millis(config.stale_command_ms),
-        Duration::from_millis(config.health_period_ms),
-        config.resume_speed,
+        admission(config)?,
+        Timing {
+            stale_after: Duration::from_millis(config.stale_command_ms),
+            health_period: Duration::from_millis(config.health_period_ms),
+            resume_speed: config.resume_speed,
+        },
     )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
@@ -39,6 +42,22 @@ pub fn run(runtime: &NodeRuntime, config: &Revo2Config, connect: Connect) -> any
     let bus = Bus::open(connect)?;
     let mut driver = Revo2::new(config.clone());
     teleop_ecat_master::run(&bus, &mut driver, &mut ports, &settings)
+}
+
+/// The Revo2's admission rule: its shipped hand profile (`config/hands/revo2.toml`: normalised
+/// commands, six joints and their limits) and every mode it has (velocity up to its full speed,
+/// effort and duty up to the whole range).
+pub fn admission(config: &Revo2Config) -> anyhow::Result<Admission> {
+    let profile = HandProfile::builtin("revo2")
+        .ok_or_else(|| anyhow::anyhow!("the shipped Revo2 hand profile does not load"))?;
+    let modes = Modes {
+        position: true,
+        position_time: true,
+        velocity: Some(config.full_speed_travel_per_s),
+        effort: Some(1.0),
+        duty: Some(1.0),
+    };
+    Ok(Admission::new(&profile, modes))
 }
 
 /// The identity the device reported, for the recorder and `teleop echo device/info`.
@@ -70,7 +89,10 @@ impl Host<Revo2> for Ports {
             tactile_in_pdo = driver.info().tactile_in_pdo(),
             "Revo2 tactile source"
         );
-        self.0.connected(device_info(driver.info()));
+        if let Err(e) = self.0.connected(device_info(driver.info())) {
+            self.0.health().count_error();
+            tracing::warn!("device/info: {e}");
+        }
     }
 
     fn exchanged(
@@ -101,27 +123,21 @@ impl Host<Revo2> for Ports {
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Stale => self.0.health().count_timeout(),
             Event::Refused => {
                 self.0.health().count_error();
                 self.0.refused();
             }
-            Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
             Event::Recovered | Event::Lost => self.0.health().count_error(),
         }
     }
 
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()> {
-        let state = HandState {
-            hand_model: teleop_msgs::device_model::REVO2,
-            joint_count: 6,
-            link_up: 0,
+        self.0.publish_down(&HandState {
             link_kind: link_kind::ETHERCAT,
             link_errors: counters.wkc_errors,
             lost_frames: counters.lost_frames,
             ..Default::default()
-        };
-        self.0.publish_down(&state)?;
+        })?;
         Ok(())
     }
 }

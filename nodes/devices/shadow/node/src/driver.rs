@@ -9,15 +9,15 @@ use std::time::Instant;
 
 use ethercrab::{Command as EcatCommand, MainDevice};
 use teleop_ecat_master::{Driver, Found, Image, OwnLayout, PreOpGroup};
-use teleop_msgs::{control_mode, device_model, units, HandCommand};
+use teleop_msgs::HandCommand;
 use teleop_shadow_protocol::data::{flags, tactile, EdcNumbering};
 use teleop_shadow_protocol::layout::{
     CanBridge, Command, Protocol, Status, MOTORS, PRODUCT_BRIDGE, TACTILE,
 };
-use teleop_shadow_protocol::mapping::{Dof, HAND_LIMITS};
+use teleop_shadow_protocol::mapping::Dof;
 
 use crate::config::{Checked, Gains, ShadowConfig};
-use crate::joints::{Calibration, JOINTS};
+use crate::joints::Calibration;
 use crate::motors::Motors;
 use crate::schedule::Schedule;
 
@@ -80,7 +80,7 @@ pub struct Shadow {
     palm_address: u16,
     clock: Instant,
     start_ms: u64,
-    /// The last commanded joint targets (rad); what the hand holds on a stale command.
+    /// The last commanded joint targets (rad); what the hand holds when it has no command.
     target: Option<[f64; 24]>,
     last: Option<(u64, [f64; 24])>,
     speeds: [f64; 24],
@@ -358,32 +358,16 @@ impl Driver for Shadow {
         })
     }
 
-    fn pack(&mut self, command: &HandCommand, outputs: &mut Image) -> Option<u32> {
-        let position = matches!(
-            command.control_mode,
-            control_mode::POSITION | control_mode::POSITION_TIME
-        );
-        if command.hand_model != device_model::SHADOW
-            || usize::from(command.joint_count) != JOINTS.len()
-            || command.units != units::PHYSICAL
-            || !position
-        {
-            return None;
-        }
-        let mut clamped = 0;
+    /// Takes the admitted command's targets (radians within the hand profile's limits, in its
+    /// joint order): the host's position control drives toward them from this cycle on.
+    fn pack(&mut self, command: &HandCommand, outputs: &mut Image) -> bool {
         let mut target = [0.0; 24];
-        for (j, t) in target.iter_mut().enumerate() {
-            let want = f64::from(command.joints[j].target);
-            let (lo, hi) = HAND_LIMITS[j];
-            if !want.is_finite() {
-                return None;
-            }
-            *t = want.clamp(lo, hi);
-            clamped += u32::from(*t != want);
+        for (t, j) in target.iter_mut().zip(&command.joints) {
+            *t = f64::from(j.target);
         }
         self.target = Some(target);
         self.write(outputs);
-        Some(clamped)
+        true
     }
 
     fn unpack(&mut self, inputs: &Image, _: Option<&()>) -> Option<Inputs> {

@@ -1,8 +1,7 @@
 //! The Shadow node: the master's cycle (`teleop-ecat-master`) with the [`Shadow`] driver, and
-//! the node's ports as its host: hand commands in (stale `stale_command_ms` after their stamp;
-//! none followed while the latched e-stop is engaged, so the hand holds its last target; after a
-//! hold, targets ramp back to the operator's pose at `resume_speed`; a refused command, e.g. a
-//! NaN target, is counted as an error and the hand holds),
+//! the hand-node core's ports (`teleop-hand-node`: admission by the Shadow Hand's profile,
+//! position modes only; e-stop, stale -> hold, the ramp back, health and device info, also
+//! while the hand is away) as its host;
 //! `hand/state` (24 joints, efforts from the strain gauges, each joint's motor flags as its
 //! status) and `hand/tactile` (PST pressure) out for every valid exchange, the link state while
 //! the hand is away, health and device info periodically (also while the hand is away).
@@ -10,11 +9,13 @@
 use std::time::Duration;
 
 use teleop_ecat_master::{Bus, Connect, Counters, Event, Exchange, Host, Settings};
+use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
+use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     bus_state, device_model, fingertip_sensor, fixed_text, link_kind, units, DeviceInfo,
     HandCommand, HandState, Tactile,
 };
-use teleop_runtime::{HandPorts, NodeRuntime};
+use teleop_runtime::NodeRuntime;
 
 use crate::config::{Checked, ShadowConfig};
 use crate::driver::{Inputs, Shadow};
@@ -32,9 +33,12 @@ pub fn run(
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports(HandPorts::new(
         runtime,
-        Duration::from_millis(config.stale_command_ms),
-        Duration::from_millis(config.health_period_ms),
-        config.resume_speed,
+        admission()?,
+        Timing {
+            stale_after: Duration::from_millis(config.stale_command_ms),
+            health_period: Duration::from_millis(config.health_period_ms),
+            resume_speed: config.resume_speed,
+        },
     )?);
     let settings = Settings {
         period: Duration::from_secs_f64(1.0 / config.cycle_hz),
@@ -43,6 +47,21 @@ pub fn run(
     let bus = Bus::open(connect)?;
     let mut driver = Shadow::new(config.clone(), checked);
     teleop_ecat_master::run(&bus, &mut driver, &mut ports, &settings)
+}
+
+/// The Shadow Hand's admission rule: its shipped hand profile (`config/hands/shadow.toml`:
+/// radians, 24 joints and their limits) and position targets (with or without a motion time;
+/// the host's position control takes both as positions).
+pub fn admission() -> anyhow::Result<Admission> {
+    let profile = HandProfile::builtin("shadow")
+        .ok_or_else(|| anyhow::anyhow!("the shipped Shadow Hand profile does not load"))?;
+    Ok(Admission::new(
+        &profile,
+        Modes {
+            position_time: true,
+            ..Modes::POSITION
+        },
+    ))
 }
 
 /// `hand/state` of one exchange.
@@ -96,7 +115,7 @@ impl Host<Shadow> for Ports {
 
     fn connected(&mut self, driver: &Shadow) {
         let palm = driver.palm();
-        self.0.connected(DeviceInfo {
+        let connected = self.0.connected(DeviceInfo {
             device_model: device_model::SHADOW,
             link_kind: link_kind::ETHERCAT,
             identity_serial: palm.serial,
@@ -105,6 +124,10 @@ impl Host<Shadow> for Ports {
             serial_number: fixed_text(&palm.serial.to_string()),
             ..Default::default()
         });
+        if let Err(e) = connected {
+            self.0.health().count_error();
+            tracing::warn!("device/info: {e}");
+        }
     }
 
     fn exchanged(
@@ -128,28 +151,48 @@ impl Host<Shadow> for Ports {
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Stale => self.0.health().count_timeout(),
             Event::Refused => {
                 self.0.health().count_error();
                 self.0.refused();
             }
-            Event::Clamped(n) => self.0.health().count_clamps(u64::from(n)),
             Event::Recovered | Event::Lost => self.0.health().count_error(),
         }
     }
 
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()> {
-        let state = HandState {
-            hand_model: device_model::SHADOW,
-            joint_count: 24,
-            units: units::PHYSICAL,
-            link_up: 0,
+        self.0.publish_down(&HandState {
             link_kind: link_kind::ETHERCAT,
             link_errors: counters.wkc_errors,
             lost_frames: counters.lost_frames,
             ..Default::default()
-        };
-        self.0.publish_down(&state)?;
+        })?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use teleop_shadow_protocol::mapping::{HAND_JOINTS, HAND_LIMITS};
+
+    /// The shipped profile names the Hand E's 24 joints in the order the node reports them, and
+    /// its limits, the only ones commands are held to, lie within the hand's published joint
+    /// ranges (`HAND_LIMITS`, which the simulator also moves within).
+    #[test]
+    fn the_profile_limits_lie_within_the_hands_joint_ranges() {
+        let profile = HandProfile::builtin("shadow").unwrap();
+        let names: Vec<&str> = profile.joint_names().collect();
+        assert_eq!(names, HAND_JOINTS);
+        let admission = admission().unwrap();
+        assert_eq!(admission.limits().len(), 24);
+        for ((name, &(lo, hi)), (dlo, dhi)) in
+            HAND_JOINTS.iter().zip(admission.limits()).zip(HAND_LIMITS)
+        {
+            assert!(
+                f64::from(lo) >= dlo - 1e-6 && f64::from(hi) <= dhi + 1e-6,
+                "{name}: profile {lo}..{hi} rad, hand {dlo}..{dhi} rad"
+            );
+        }
     }
 }

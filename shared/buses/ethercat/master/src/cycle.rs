@@ -1,5 +1,5 @@
 //! The cycle: bring-up to OP with a [`Driver`], then absolute-deadline scheduling; each cycle
-//! packs the latest command (or, when it is stale, the driver's hold, once), exchanges process
+//! packs the host's command (or, when it has none, the driver's hold, once), exchanges process
 //! data, checks the AL state of every SubDevice and the working counter computed from the bus,
 //! and hands the decoded inputs to the [`Host`]. Lost frames are counted and ridden out; an AL
 //! error is acknowledged and OP requested again; a lost link brings the bus up again without a
@@ -46,13 +46,9 @@ pub struct Counters {
 /// What the master tells its host about the cycle, to count (it logs them itself).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Event {
-    /// The command went stale: the device holds.
-    Stale,
-    /// A fresh command was refused by the driver (not for this device, or not a valid command,
-    /// e.g. a NaN target): the device holds. Reported every cycle it is refused.
+    /// The driver could not pack the host's command (e.g. a value outside what the device's
+    /// unit mode can express): the device holds. Reported every cycle it happens.
     Refused,
-    /// A fresh command was packed with this many values clamped.
-    Clamped(u32),
     /// A SubDevice dropped to SAFE-OP; its error was acknowledged and OP requested.
     Recovered,
     /// The device was lost (no valid exchange within the link timeout); bringing it up again.
@@ -64,7 +60,7 @@ pub enum Event {
 pub struct Exchange {
     /// CLOCK_MONOTONIC right after the answer came back (the origin of the samples made from it).
     pub origin_ns: u64,
-    /// True while the command is stale and the device holds.
+    /// True while the device holds (the host gave no command, or the driver could not take it).
     pub holding: bool,
     /// The counters so far.
     pub counters: Counters,
@@ -75,8 +71,8 @@ pub trait Host<D: Driver> {
     /// True once the master must stop (leaving OP cleanly).
     fn stop_requested(&self) -> bool;
 
-    /// The command to follow now: the latest one if it is fresh, `None` when it is stale or
-    /// there is none.
+    /// The command to follow now; `None`: the device holds (the host decides when: a stale
+    /// command, the e-stop, a refused command; see `teleop-hand-node`). Called once per cycle.
     fn command(&mut self) -> Option<D::Command>;
 
     /// The device is in OP, configured by `driver`.
@@ -324,9 +320,6 @@ fn cycle<D: Driver, H: Host<D>>(
         let result = (|| -> anyhow::Result<()> {
             let mut deadline = Instant::now();
             let mut last_inputs: Option<D::Inputs> = None;
-            let mut stale = true;
-            // No fresh command since the last timeout (none before the first command either).
-            let mut timed_out = true;
             let mut refused = false;
             let mut holding = false;
             let mut lost_in_a_row = 0u32;
@@ -341,52 +334,36 @@ fn cycle<D: Driver, H: Host<D>>(
                 } else if now - deadline > period * 10 {
                     deadline = now; // far behind (e.g. after a stall): re-anchor instead of bursting
                 }
-                // What to send.
+                // What to send: the host's command, or the driver's hold when it has none (the
+                // host's policy: stale, e-stop, refused) or the driver cannot take it.
                 let command = host.command();
                 let fresh = command.is_some();
-                if fresh {
-                    timed_out = false;
-                } else if !timed_out {
-                    tracing::warn!("hand command stale: the device holds");
-                    host.event(Event::Stale);
-                    timed_out = true;
-                }
-                let packed = command.and_then(|c| driver.pack(&c, &mut outputs));
-                let write = match packed {
-                    Some(clamps) => {
-                        if stale {
-                            tracing::info!("hand commands fresh: following them");
+                let packed = command.is_some_and(|c| driver.pack(&c, &mut outputs));
+                let write = if packed {
+                    refused = false;
+                    holding = false;
+                    true
+                } else {
+                    if fresh {
+                        if !refused {
+                            tracing::warn!(
+                                "the {} cannot take the hand command: the device holds",
+                                driver.name()
+                            );
+                            refused = true;
                         }
-                        stale = false;
+                        host.event(Event::Refused);
+                    } else {
                         refused = false;
-                        holding = false;
-                        host.event(Event::Clamped(clamps));
-                        true
                     }
-                    None => {
-                        if fresh {
-                            if !refused {
-                                tracing::warn!(
-                                    "hand command refused (not for the {}, or not a valid \
-                                     command): the device holds",
-                                    driver.name()
-                                );
-                                refused = true;
-                            }
-                            host.event(Event::Refused);
-                        } else {
-                            refused = false;
-                        }
-                        stale = true;
-                        if holding && !driver.hold_every_cycle() {
-                            false // keep sending the hold already in the outputs
-                        } else if last_inputs.is_some() || driver.hold_every_cycle() {
-                            driver.hold(last_inputs.as_ref(), &mut outputs);
-                            holding = true;
-                            true
-                        } else {
-                            false
-                        }
+                    if holding && !driver.hold_every_cycle() {
+                        false // keep sending the hold already in the outputs
+                    } else if last_inputs.is_some() || driver.hold_every_cycle() {
+                        driver.hold(last_inputs.as_ref(), &mut outputs);
+                        holding = true;
+                        true
+                    } else {
+                        false
                     }
                 };
                 if write {
@@ -478,7 +455,7 @@ fn cycle<D: Driver, H: Host<D>>(
                 };
                 let exchange = Exchange {
                     origin_ns,
-                    holding: stale,
+                    holding: !packed,
                     counters: *counters,
                 };
                 host.exchanged(driver, &decoded, &exchange)?;

@@ -200,8 +200,8 @@ impl OwnExchange {
 
 /// A device on the bus, as the master drives it: which SubDevices it is, how it is configured
 /// in PRE-OP, and how commands and inputs map to its process data. Everything else (the cycle,
-/// deadlines, working counter and AL-state checks, recovery, reconnect, stale command -> hold,
-/// counters) is the master's: see [`crate::run`].
+/// deadlines, working counter and AL-state checks, recovery, reconnect, hold when the host has
+/// no command, counters) is the master's: see [`crate::run`].
 ///
 /// `pack`, `unpack` and `hold` run inside the cycle: no allocation, no blocking, no logging
 /// that can block.
@@ -230,17 +230,18 @@ pub trait Driver {
         group: &PreOpGroup,
     ) -> impl Future<Output = anyhow::Result<()>>;
 
-    /// Writes `command` into the outputs and returns how many of its values were clamped;
-    /// `None` when the command is not for this device (the master then treats it as stale).
-    fn pack(&mut self, command: &Self::Command, outputs: &mut Image) -> Option<u32>;
+    /// Writes `command` into the outputs; false when the device cannot take it (the master then
+    /// holds and reports [`Event::Refused`](crate::Event::Refused)). Commands come admitted by
+    /// the host (checked and within the joint limits): a driver converts, it does not judge.
+    fn pack(&mut self, command: &Self::Command, outputs: &mut Image) -> bool;
 
     /// Decodes the inputs of a cycle whose working counter was right; `polled` is the side
     /// channel's latest reading when it runs and has read something. `None`: the inputs are
     /// unusable (counted with the wrong working counters).
     fn unpack(&mut self, inputs: &Image, polled: Option<&Self::Polled>) -> Option<Self::Inputs>;
 
-    /// Writes the outputs that hold the device: sent when the command goes stale (the operator
-    /// is lost, or the e-stop holds it), and for a few cycles before the master leaves OP. A
+    /// Writes the outputs that hold the device: sent when the host has no command (stale, the
+    /// e-stop, refused), and for a few cycles before the master leaves OP. A
     /// driver holds the last commanded target where it has one, so that a grasp keeps its
     /// grip; `last` (where the device is) is for when it has none. `last` is `None` only for a
     /// driver that holds [every cycle](Self::hold_every_cycle), before its first inputs.
@@ -248,7 +249,7 @@ pub trait Driver {
 
     /// True for a device the host closes the loop for (the Shadow palm: its demands come from
     /// the host's position control every cycle): [`hold`](Self::hold) is then called every
-    /// cycle the command is stale, not once, and also before the first inputs came.
+    /// cycle the host gives no command, not once, and also before the first inputs came.
     fn hold_every_cycle(&self) -> bool {
         false
     }

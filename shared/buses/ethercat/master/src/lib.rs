@@ -11,9 +11,10 @@
 //! - [`driver`]: what a device provides (identity check, PRE-OP configuration, pack, unpack,
 //!   hold, an optional side channel, and for a device without PDOs its own process data
 //!   layout, exchanged with one LRW of the master's);
-//! - [`cycle`]: bring-up with a driver and the cycle (absolute deadlines, stale command -> hold,
-//!   working-counter and AL-state checks of every SubDevice, recovery, reconnect, counters),
-//!   reporting to a [`Host`] (the node's ports);
+//! - [`cycle`]: bring-up with a driver and the cycle (absolute deadlines, the driver's hold
+//!   whenever the host gives no command (its policy: `teleop-hand-node`), working-counter and
+//!   AL-state checks of every SubDevice, recovery, reconnect, counters), reporting to a
+//!   [`Host`] (the node's ports);
 //! - [`mailbox`]: raw mailbox access on ethercrab's `Command` API (any device): the FoE mailbox
 //!   port of `teleop-foe` and the normal SDO download ethercrab lacks;
 //! - [`transport`]: where the bus is (`sim:`, `interface:`, `ethercrab:`).

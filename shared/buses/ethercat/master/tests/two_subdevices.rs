@@ -289,15 +289,14 @@ impl Driver for Gripper {
         Ok(())
     }
 
-    fn pack(&mut self, command: &u16, outputs: &mut Image) -> Option<u32> {
+    fn pack(&mut self, command: &u16, outputs: &mut Image) -> bool {
         let out = outputs.subdevice_mut(1);
         if out.len() < 4 {
-            return None;
+            return false;
         }
-        let clamped = (*command).min(1000);
-        out[..2].copy_from_slice(&clamped.to_le_bytes());
+        out[..2].copy_from_slice(&(*command).min(1000).to_le_bytes());
         out[2..4].copy_from_slice(&FOLLOW.to_le_bytes());
-        Some(u32::from(clamped != *command))
+        true
     }
 
     fn unpack(&mut self, inputs: &Image, polled: Option<&u16>) -> Option<PalmInputs> {
@@ -387,13 +386,12 @@ fn a_foreign_subdevice_is_refused_by_name() {
 struct Seen {
     connected: u32,
     link_down: u32,
-    stale: u32,
     recovered: u32,
     lost: u32,
     last: Option<(PalmInputs, Exchange)>,
 }
 
-/// Commands from the test (`None`: stale), everything seen kept for it.
+/// Commands from the test (`None`: hold), everything seen kept for it.
 #[derive(Clone, Default)]
 struct TestHost {
     stop: Arc<AtomicBool>,
@@ -436,10 +434,9 @@ impl Host<Gripper> for TestHost {
 
     fn event(&mut self, event: Event) {
         match event {
-            Event::Stale => self.seen().stale += 1,
             Event::Lost => self.seen().lost += 1,
             Event::Recovered => self.seen().recovered += 1,
-            Event::Clamped(_) | Event::Refused => {}
+            Event::Refused => {}
         }
     }
 
@@ -504,7 +501,6 @@ fn commands_followed_stale_holds_al_error_recovered_lost_link_brought_up_again()
         s.last
             .is_some_and(|(i, e)| e.holding && i.mode == HOLD && i.position == 1000)
     });
-    assert_eq!(host.seen().stale, 1);
     assert_eq!(lock(&palm).app().outputs, Some((1000, HOLD)));
 
     // The palm's watchdog drops it to SAFE-OP: acknowledged, OP again, and the command followed.

@@ -6,8 +6,9 @@
 //! one at a bounded joint speed (rad/s for physical units, travel per second for normalised
 //! ones), and lets the commands through unchanged once it has caught up.
 //!
-//! Pure: no clock, no I/O, no allocation (the caller gives the time step), so the EtherCAT
-//! hands (through [`HandPorts`](crate::HandPorts)) and the Allegro's own loop share it.
+//! Pure: no clock, no I/O, no allocation (the caller gives the time step): every hand node
+//! ramps through [`HandPorts`](crate::HandPorts), and a device's service command that moves
+//! the hand (the Allegro's `home` and `move`) can ramp the same way.
 
 /// Most joints a [`Resume`] ramps (the contract's `MAX_JOINTS`).
 pub const MAX_JOINTS: usize = teleop_msgs::MAX_JOINTS;

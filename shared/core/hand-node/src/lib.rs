@@ -1,0 +1,29 @@
+//! The hand-node core: the safety policy every hand node shares, written once.
+//!
+//! # What this crate owns
+//!
+//! - [`admission`]: the one rule by which a hand takes or refuses a `hand/command` (model,
+//!   units, mode, joint count, finiteness, then the hand profile's joint limits in every mode),
+//!   set up from the hand's profile, the only source of joint limits;
+//! - [`HandPorts`] ([`ports`]): the hand node's ports and policy around it: commands followed
+//!   only while fresh by their stamp and while the latched e-stop is released, stale -> hold
+//!   (counted once per loss), refusals and clamps counted once per command sample and logged
+//!   rate-limited, the ramp back after any hold, `hand/state` and `hand/tactile` out, health and
+//!   device info periodically, also while the link is down;
+//! - [`Resume`] ([`resume`]): the ramp from a held target back to the operator's pose (pure).
+//!
+//! A device plugs in below this: its transport (the EtherCAT master's cycle with a driver, the
+//! Allegro's loop on its CAN stream) asks [`HandPorts::command`] once per cycle for the command
+//! to follow (`None`: hold) and hands every cycle's state to [`HandPorts::publish`].
+//!
+//! # What it must not depend on
+//!
+//! Any device protocol, bus or transport; the retargeting and force-feedback logic.
+
+pub mod admission;
+pub mod ports;
+pub mod resume;
+
+pub use admission::{Admission, Modes, Refusal};
+pub use ports::{HandPorts, Timing, REFUSAL_LOG_PERIOD};
+pub use resume::Resume;
