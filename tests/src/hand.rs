@@ -12,9 +12,11 @@ use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
 use crate::rig::{Logs, Process, Rig};
 use crate::watch::wait_sample;
 
-/// A hand node's process and the test's ports to it. Fields drop in order: the ports before
-/// their node, the rig (processes stopped, logs printed on failure, the sandbox removed) last.
-pub struct HandNode {
+/// A hand node's process, the test's ports to it, and the device it drives when that lives in
+/// the test's process (`sim`, e.g. a [`Served`](crate::ecat::Served) bus; `()` for a simulator
+/// process on the rig). Fields drop in order: the ports before their node, the rig (processes
+/// stopped, logs printed on failure, the sandbox removed), the device last.
+pub struct HandNode<S = ()> {
     /// `hand/command`, which the node follows.
     pub commands: Publisher<HandCommand>,
     /// `hand/state` from the node.
@@ -29,12 +31,27 @@ pub struct HandNode {
     name: String,
     /// The node and whatever else the test started (a simulator).
     pub rig: Rig,
+    /// The device in the test's process.
+    pub sim: S,
 }
 
 impl HandNode {
     /// Starts `program --config` (with `config` written into the sandbox) as `name` on `rig`
     /// and opens the test's ports as the iceoryx2 node `<name>-test`.
-    pub fn start(mut rig: Rig, name: &str, program: impl AsRef<OsStr>, config: &str) -> Self {
+    pub fn start(rig: Rig, name: &str, program: impl AsRef<OsStr>, config: &str) -> Self {
+        Self::start_with(rig, name, program, config, ())
+    }
+}
+
+impl<S> HandNode<S> {
+    /// As [`HandNode::start`], the node driving `sim`, a device in the test's process.
+    pub fn start_with(
+        mut rig: Rig,
+        name: &str,
+        program: impl AsRef<OsStr>,
+        config: &str,
+        sim: S,
+    ) -> Self {
         rig.start_node(name, program, config);
         let runtime =
             NodeRuntime::new(&format!("{name}-test"), &rig.sandbox.ipc).expect("test node");
@@ -46,6 +63,7 @@ impl HandNode {
             runtime,
             name: name.to_string(),
             rig,
+            sim,
         }
     }
 

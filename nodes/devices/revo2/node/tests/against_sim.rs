@@ -3,170 +3,61 @@
 //! process so the test can inject faults and look at the device.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Child, Command};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use teleop_ecat_link::serve_socket;
-use teleop_ecat_link::StreamServer;
+use teleop_e2e::ecat::Served;
+use teleop_e2e::hand::HandNode;
+use teleop_e2e::rig::Rig as TestRig;
 use teleop_ecat_sim::{AlState, SubDevice};
 use teleop_sim_revo2::hand::VirtualObject;
 use teleop_sim_revo2::{revo2_subdevice_with_loop, Revo2};
 mod common;
 
 use common::{position_command, positions};
-use teleop_msgs::{control_mode, EStop, HandCommand, HandState, NodeHealth, Tactile};
-use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
+use teleop_msgs::{control_mode, EStop, HandState};
+use teleop_runtime::{NodeRuntime, Publisher};
 
-type Sim = Arc<Mutex<SubDevice<Revo2>>>;
+type Sim = Served<SubDevice<Revo2>>;
 
 fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, SubDevice<Revo2>> {
-    sim.lock().unwrap_or_else(|e| e.into_inner())
+    sim.lock()
 }
 
-/// Serves the emulated Revo2 on a socket until `stop`.
-fn serve(server: StreamServer, sim: Sim, stop: Arc<AtomicBool>) -> std::thread::JoinHandle<()> {
-    std::thread::spawn(move || {
-        let stopping = || stop.load(Ordering::SeqCst);
-        serve_socket(&server, &sim, Instant::now(), &stopping, &mut |_, _| {}).unwrap();
-    })
+/// The Revo2 node against the emulated Revo2 (a ball under its fingers) served from this
+/// process.
+type Rig = HandNode<Sim>;
+
+/// How the Revo2's tests start and command the node.
+trait Revo2Rig {
+    /// The node with `extra_config` after its transport and link timeout, up in OP.
+    fn new(extra_config: &str) -> Self;
+    /// Publishes position targets every 10 ms for `d`, returning the last hand state.
+    fn command(&mut self, targets: [f32; 6], d: Duration) -> HandState;
 }
 
-struct Rig {
-    commands: Publisher<HandCommand>,
-    states: Subscriber<HandState>,
-    tactile: Subscriber<Tactile>,
-    health: Subscriber<NodeHealth>,
-    _runtime: NodeRuntime,
-    node: Option<Child>,
-    sim: Sim,
-    stop: Arc<AtomicBool>,
-    server: Option<std::thread::JoinHandle<()>>,
-    ipc: IpcSettings,
-    dir: tempfile::TempDir,
-}
-
-impl Rig {
+impl Revo2Rig for Rig {
     fn new(extra_config: &str) -> Self {
-        teleop_runtime::init_logging();
-        let dir = tempfile::tempdir().unwrap();
-        let ipc = IpcSettings::isolated(&dir.path().join("iox"));
-        let socket = dir.path().join("revo2.sock");
+        let rig = TestRig::new();
+        let socket = rig.path("revo2.sock");
         // A firmware that reads AL control once per 1 ms loop, as the simulator process runs.
-        let sim: Sim = Arc::new(Mutex::new(revo2_subdevice_with_loop(
-            Some(VirtualObject::ball()),
-            7,
-            Duration::from_millis(1),
-        )));
-        let stop = Arc::new(AtomicBool::new(false));
-        let server = serve(
-            StreamServer::bind(&socket).unwrap(),
-            sim.clone(),
-            stop.clone(),
+        let sim = Served::start(
+            &socket,
+            revo2_subdevice_with_loop(Some(VirtualObject::ball()), 7, Duration::from_millis(1)),
         );
-        let config = dir.path().join("revo2.toml");
-        std::fs::write(
-            &config,
-            format!(
-                "transport = \"sim:{}\"\nlink_timeout_ms = 100\n{extra_config}",
-                socket.display()
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("node.log")).unwrap();
-        let node = Command::new(env!("CARGO_BIN_EXE_teleop-revo2"))
-            .arg("--config")
-            .arg(&config)
-            .envs(ipc.to_env())
-            .env("TELEOP_LOG", "info")
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let runtime = NodeRuntime::new("revo2-test", &ipc).unwrap();
-        let rig = Self {
-            commands: runtime.publisher().unwrap(),
-            states: runtime.subscriber().unwrap(),
-            tactile: runtime.subscriber().unwrap(),
-            health: runtime.subscriber().unwrap(),
-            _runtime: runtime,
-            node: Some(node),
-            sim,
-            stop,
-            server: Some(server),
-            ipc,
-            dir,
-        };
+        let config = format!(
+            "transport = \"sim:{}\"\nlink_timeout_ms = 100\n{extra_config}",
+            socket.display()
+        );
+        let program = env!("CARGO_BIN_EXE_teleop-revo2");
+        let rig = HandNode::start_with(rig, "revo2", program, &config, sim);
         rig.wait_state(Duration::from_secs(30), "the hand in OP", |s| {
             s.link_up == 1
         });
         rig
     }
 
-    fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("node.log")).unwrap_or_default()
-    }
-
-    fn wait_state(
-        &self,
-        timeout: Duration,
-        what: &str,
-        ok: impl FnMut(&HandState) -> bool,
-    ) -> HandState {
-        common::wait_state(&self.states, timeout, what, ok, || self.log())
-    }
-
-    /// Publishes position targets every 10 ms for `d`, returning the last hand state.
     fn command(&mut self, targets: [f32; 6], d: Duration) -> HandState {
-        let start = Instant::now();
-        while start.elapsed() < d {
-            self.commands.publish(&position_command(targets)).unwrap();
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        self.states.poll_latest().unwrap()
-    }
-
-    /// Publishes `cmd` every 10 ms for `d`, returning the last hand state.
-    fn send(&mut self, cmd: &HandCommand, d: Duration) -> HandState {
-        let start = Instant::now();
-        while start.elapsed() < d {
-            self.commands.publish(cmd).unwrap();
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        self.states.poll_latest().unwrap()
-    }
-
-    /// The node's health reports received since the last call (the test's own node publishes
-    /// none).
-    fn node_health(&self) -> Vec<NodeHealth> {
-        let mut out = Vec::new();
-        self.health.drain(|h| {
-            if h.name() == "revo2" {
-                out.push(*h);
-            }
-        });
-        out
-    }
-}
-
-impl Drop for Rig {
-    fn drop(&mut self) {
-        if let Some(mut node) = self.node.take() {
-            // SAFETY: kill(2) of our own child.
-            unsafe {
-                libc::kill(node.id() as libc::pid_t, libc::SIGINT);
-            }
-            let _ = node.wait();
-        }
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(s) = self.server.take() {
-            let _ = s.join();
-        }
-        if std::thread::panicking() {
-            eprintln!("---- node log ----\n{}", self.log());
-        }
-        self.ipc.remove_shared_memory();
+        self.send(&position_command(targets), d)
     }
 }
 
@@ -227,7 +118,9 @@ fn commanded_targets_move_the_hand_and_closing_on_the_object_gives_tactile_force
         "the grip stays: {grip} N (was {} N)",
         t.fingertips[1].normal_n
     );
-    assert!(rig.log().contains("hand command stale: the device holds"));
+    assert!(rig
+        .log()
+        .contains("no fresh hand command: the hand holds its last target"));
 }
 
 #[test]
@@ -261,7 +154,7 @@ fn watchdog_drop_is_acknowledged_and_frame_loss_ridden_out() {
     lock(&rig.sim).faults().drop_probability = 0.0;
     assert!(s.lost_frames > 0, "lost frames counted: {s:?}");
     assert_eq!(s.link_up, 1);
-    let pid_alive = rig.node.as_mut().unwrap().try_wait().unwrap().is_none();
+    let pid_alive = rig.node().is_running();
     assert!(pid_alive);
 }
 
@@ -275,10 +168,7 @@ fn link_loss_is_survived_without_a_restart() {
     rig.wait_state(Duration::from_secs(15), "link up again", |s| s.link_up == 1);
     let s = rig.command([0.6; 6], Duration::from_millis(800));
     assert!((positions(&s)[1] - 0.6).abs() < 0.05, "{:?}", positions(&s));
-    assert!(
-        rig.node.as_mut().unwrap().try_wait().unwrap().is_none(),
-        "same process"
-    );
+    assert!(rig.node().is_running(), "same process");
 }
 
 #[test]
@@ -352,14 +242,12 @@ fn non_finite_targets_hold_and_are_counted() {
     assert_eq!(s.holding, 0);
 }
 
-/// Issue 20, item 4: velocity and duty commands respect `joint_min`/`joint_max`: motion toward
-/// a limit stops once the joint reaches it (it used to run on to the end of travel), motion away
-/// from it is followed.
+/// Velocity and duty commands respect the hand profile's joint limits (`config/hands/revo2.toml`,
+/// the only source of limits: 0..1 of travel): motion toward a limit the joint is at is stopped
+/// and counted as a clamp, motion away from it is followed.
 #[test]
 fn velocity_and_duty_commands_stop_at_the_joint_limits() {
-    let mut rig = Rig::new(
-        "joint_min = [0.0, 0.2, 0.0, 0.0, 0.0, 0.0]\njoint_max = [1.0, 0.5, 1.0, 1.0, 1.0, 1.0]\n",
-    );
+    let mut rig = Rig::new("");
     let mut cmd = position_command([0.0; 6]);
     cmd.control_mode = control_mode::VELOCITY;
     for j in &mut cmd.joints {
@@ -369,26 +257,30 @@ fn velocity_and_duty_commands_stop_at_the_joint_limits() {
     let s = rig.send(&cmd, Duration::from_millis(1500));
     let p = positions(&s)[1];
     assert!(
-        (0.45..=0.55).contains(&p),
-        "velocity: thumb abduction stopped at its limit 0.5: {p}"
+        p >= 0.95,
+        "velocity: thumb abduction at its upper limit: {p}"
     );
-    let mut duty = cmd;
-    duty.control_mode = control_mode::DUTY;
-    duty.joints[1].target = -0.5; // opening, toward joint_min
-    let s = rig.send(&duty, Duration::from_millis(1500));
-    let p = positions(&s)[1];
-    assert!(
-        (0.15..=0.25).contains(&p),
-        "duty: thumb abduction stopped at its limit 0.2: {p}"
-    );
-    duty.joints[1].target = 0.5; // away from the lower limit: followed
-    let s = rig.send(&duty, Duration::from_millis(150));
-    assert!(positions(&s)[1] > p + 0.05, "{:?}", positions(&s));
-    let clamps = {
+    let _ = rig.node_health();
+    rig.send(&cmd, Duration::from_millis(600));
+    let clamps = |rig: &Rig| {
         std::thread::sleep(Duration::from_millis(600));
         rig.node_health().last().map_or(0, |h| h.clamps)
     };
-    assert!(clamps > 0, "limited commands counted as clamps");
+    let at_limit = clamps(&rig);
+    assert!(at_limit > 0, "closing at the upper limit counted as clamps");
+    let mut duty = cmd;
+    duty.control_mode = control_mode::DUTY;
+    duty.joints[1].target = -0.5; // opening, toward the lower limit
+    let s = rig.send(&duty, Duration::from_millis(1500));
+    let p = positions(&s)[1];
+    assert!(p <= 0.05, "duty: thumb abduction at its lower limit: {p}");
+    duty.joints[1].target = 0.5; // away from the lower limit: followed
+    let s = rig.send(&duty, Duration::from_millis(150));
+    assert!(positions(&s)[1] > p + 0.05, "{:?}", positions(&s));
+    assert!(
+        clamps(&rig) > at_limit,
+        "opening at the lower limit counted"
+    );
 }
 
 /// Issue 20, item 8: while the link is down the node keeps publishing its health, so the
@@ -442,9 +334,9 @@ fn fastest(track: &[(u64, f32)]) -> f32 {
 #[test]
 fn after_an_estop_release_the_hand_ramps_to_the_operators_pose() {
     let mut rig = Rig::new("");
-    let runtime = NodeRuntime::new("revo2-estop-test", &rig.ipc).unwrap();
+    let runtime = NodeRuntime::new("revo2-estop-test", &rig.rig.sandbox.ipc).unwrap();
     let mut doorbell: Publisher<EStop> = runtime.publisher().unwrap();
-    let latch = teleop_runtime::latch_path(&rig.ipc, None);
+    let latch = teleop_runtime::latch_path(&rig.rig.sandbox.ipc, None);
     let mut ring = |engaged: bool| {
         teleop_runtime::set_latch(&latch, engaged).unwrap();
         doorbell

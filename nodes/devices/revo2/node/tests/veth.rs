@@ -148,13 +148,14 @@ impl Rig {
         what: &str,
         ok: impl FnMut(&HandState) -> bool,
     ) -> HandState {
-        common::wait_state(&self.states, timeout, what, ok, || {
+        let logs = || {
             format!(
                 "---- node log ----\n{}\n---- emulator log ----\n{}",
                 self.log(),
                 self.sim_log()
             )
-        })
+        };
+        teleop_e2e::watch::wait_sample(&self.states, &logs, timeout, what, ok)
     }
 
     /// Publishes position targets every 10 ms until the hand state (link up) reports every

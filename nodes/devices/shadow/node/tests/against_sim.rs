@@ -6,7 +6,6 @@
 
 mod common;
 
-use std::ops::{Deref, DerefMut};
 use std::time::{Duration, Instant};
 
 use common::{serve, Sim};
@@ -28,43 +27,33 @@ fn joint(name: &str) -> usize {
 }
 
 /// The Shadow node against the emulated Hand E (a ball under its middle finger) served from
-/// this process. The node stops before the emulation.
-struct Rig {
-    hand: HandNode,
-    sim: Sim,
-}
+/// this process.
+type Rig = HandNode<Sim>;
 
-impl Deref for Rig {
-    type Target = HandNode;
-    fn deref(&self) -> &HandNode {
-        &self.hand
-    }
-}
-
-impl DerefMut for Rig {
-    fn deref_mut(&mut self) -> &mut HandNode {
-        &mut self.hand
-    }
-}
-
-impl Rig {
+/// How the Shadow Hand's tests start and command the node.
+trait ShadowRig {
     /// The node up in OP.
+    fn new() -> Self;
+    /// Publishes joint targets (rad, by name; the others 0) every 10 ms for `d`; returns the
+    /// last hand state.
+    fn command(&mut self, targets: &[(&str, f32)], d: Duration) -> HandState;
+}
+
+impl ShadowRig for Rig {
     fn new() -> Self {
         let rig = TestRig::new();
         let socket = rig.path("shadow.sock");
         let hand = Hand::new(Mapping::EV3, Some(Object::ball()));
         let sim = serve(&socket, Palm::with_hand(hand));
         let config = format!("transport = \"sim:{}\"\n", socket.display());
-        let hand = HandNode::start(rig, "shadow", env!("CARGO_BIN_EXE_teleop-shadow"), &config);
-        let rig = Self { hand, sim };
+        let program = env!("CARGO_BIN_EXE_teleop-shadow");
+        let rig = HandNode::start_with(rig, "shadow", program, &config, sim);
         rig.wait_state(Duration::from_secs(30), "the hand in OP", |s| {
             s.link_up == 1
         });
         rig
     }
 
-    /// Publishes joint targets (rad, by name; the others 0) every 10 ms for `d`; returns the
-    /// last hand state.
     fn command(&mut self, targets: &[(&str, f32)], d: Duration) -> HandState {
         let mut c = HandCommand {
             hand_model: device_model::SHADOW,
@@ -76,7 +65,7 @@ impl Rig {
         for (name, t) in targets {
             c.joints[joint(name)].target = *t;
         }
-        self.hand.send(&c, d)
+        self.send(&c, d)
     }
 }
 
