@@ -16,8 +16,7 @@ use teleop_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
 use teleop_runtime::{
-    node_main, now_ns, EStopInput, EventLoop, Flow, Health, Input, NodeArgs, NodeRuntime,
-    Publisher, Wake,
+    node_main, now_ns, EStopInput, EventLoop, Health, Input, NodeArgs, NodeRuntime, Publisher, Wake,
 };
 
 /// The health details of the force feedback: per glove finger (`GLOVE_FINGERS` order), where
@@ -114,11 +113,10 @@ fn run(
     }
     tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
 
-    let mut failure: Option<anyhow::Error> = None;
     // The ticks fall every tick_ms from here (the loop's tick, attached just after, is the
     // wake-up for them; the inputs' deadlines for their watchdogs).
     engine.start(now_ns());
-    let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
+    let on_wake = |wake: Wake| -> anyhow::Result<()> {
         // The engine's ticks and watchdogs, whatever woke the loop: what fell due by now, in
         // time order, before any newer sample.
         while let Some((_, out)) = engine.poll(now_ns()) {
@@ -147,7 +145,7 @@ fn run(
         }
         Ok(())
     };
-    let stop = EventLoop::new(Duration::from_millis(config.tick_ms.max(1))).run(
+    let stopped = EventLoop::new(Duration::from_millis(config.tick_ms.max(1))).try_run(
         &[
             Input::with_deadline(
                 tactile.listener(),
@@ -160,24 +158,18 @@ fn run(
             Input::new(command.listener()),
             Input::new(estop.listener()),
         ],
-        |wake| match on_wake(wake) {
-            Ok(()) => Flow::Continue(()),
-            Err(e) => {
-                failure = Some(e);
-                Flow::Break(())
-            }
-        },
+        on_wake,
     )?;
     // Leave the glove unloaded.
     forces.publish(&GloveForceCommand {
         flags: force_flags::STALE,
         ..Default::default()
     })?;
-    match failure {
+    match stopped {
         // An error in the loop is a failure: the process exits non-zero and its supervisor
         // restarts it.
-        Some(e) => Err(e.context("force feedback loop failed; published zero force")),
-        None => {
+        Err(e) => Err(e.context("force feedback loop failed; published zero force")),
+        Ok(stop) => {
             tracing::info!(?stop, "stopped; published zero force");
             Ok(())
         }

@@ -16,7 +16,7 @@ use teleop_hand_profile::HandProfile;
 use teleop_msgs::{GloveState, HandCommand};
 use teleop_retarget::{load, Loaded, NodeConfig, Output, RetargetEngine};
 use teleop_runtime::{
-    node_main, now_ns, EventLoop, Flow, Health, Input, NodeArgs, NodeRuntime, Publisher, Wake,
+    node_main, now_ns, EventLoop, Health, Input, NodeArgs, NodeRuntime, Publisher, Wake,
 };
 
 #[derive(Parser)]
@@ -97,8 +97,7 @@ fn run(
         }
         Ok(())
     };
-    let mut failure: Option<anyhow::Error> = None;
-    let mut on_wake = |wake: Wake| -> anyhow::Result<()> {
+    let on_wake = |wake: Wake| -> anyhow::Result<()> {
         // The engine's glove watchdog, whatever woke the loop (the input's deadline is the
         // wake-up for it): what fell due by now, in time order, before any newer sample.
         while let Some((_, out)) = engine.poll(now_ns()) {
@@ -119,21 +118,11 @@ fn run(
         }
         Ok(())
     };
-    let stop = EventLoop::new(health_period).run(
-        &[Input::with_deadline(glove.listener(), timeout)],
-        |wake| match on_wake(wake) {
-            Ok(()) => Flow::Continue(()),
-            Err(e) => {
-                failure = Some(e);
-                Flow::Break(())
-            }
-        },
-    )?;
-    // An error in the loop is a failure: the process exits non-zero and its supervisor
-    // restarts it.
-    if let Some(e) = failure {
-        return Err(e.context("retargeting loop failed"));
-    }
+    let stop = EventLoop::new(health_period)
+        .try_run(&[Input::with_deadline(glove.listener(), timeout)], on_wake)?
+        // An error in the loop is a failure: the process exits non-zero and its supervisor
+        // restarts it.
+        .map_err(|e| e.context("retargeting loop failed"))?;
     tracing::info!(?stop, "stopped");
     Ok(())
 }

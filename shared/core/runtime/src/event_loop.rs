@@ -92,6 +92,25 @@ impl EventLoop {
         result
     }
 
+    /// [`run`](Self::run) for a node whose handling of a wake-up can fail: the first error
+    /// stops the loop and comes back as the inner `Err` (the node then exits non-zero, and its
+    /// supervisor restarts it); `Ok` says why the loop stopped otherwise.
+    pub fn try_run<E>(
+        &self,
+        inputs: &[Input<'_>],
+        mut on_wake: impl FnMut(Wake) -> Result<(), E>,
+    ) -> Result<Result<StopReason, E>, RuntimeError> {
+        let mut failure = None;
+        let stop = self.run(inputs, |wake| match on_wake(wake) {
+            Ok(()) => Flow::Continue(()),
+            Err(e) => {
+                failure = Some(e);
+                Flow::Break(())
+            }
+        })?;
+        Ok(failure.map_or(Ok(stop), Err))
+    }
+
     fn wait(
         &self,
         inputs: &[Input<'_>],
