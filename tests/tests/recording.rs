@@ -179,9 +179,12 @@ fn info_says_which_topics_of_a_contract_version_1_recording_are_converted() {
         .collect();
     assert_eq!(
         converted,
+        // Version 1's device identities and health reports have version 2's layout.
         [
-            "converted  hand/state: recorded with contract version 1, read as version 2",
-            "converted  hand/tactile: recorded with contract version 1, read as version 2",
+            "converted  device/info: recorded in the layout of contract version 2, read as version 3",
+            "converted  hand/state: recorded in the layout of contract version 1, read as version 3",
+            "converted  hand/tactile: recorded in the layout of contract version 1, read as version 3",
+            "converted  health: recorded in the layout of contract version 2, read as version 3",
         ],
         "{text}"
     );

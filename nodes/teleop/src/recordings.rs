@@ -84,7 +84,7 @@ pub fn info_cmd(path: &Path) -> anyhow::Result<ExitCode> {
     }
     for t in info.topics.iter().filter(|t| t.converted_from.is_some()) {
         out!(
-            "converted  {}: recorded with contract version {}, read as version {}",
+            "converted  {}: recorded in the layout of contract version {}, read as version {}",
             t.topic,
             t.converted_from.unwrap_or_default(),
             teleop_msgs::CONTRACT_VERSION
