@@ -614,37 +614,16 @@ pub fn reprocess_cmd(
         }
         let event = match msg.topic.as_str() {
             "glove/state" => {
-                let s: GloveState = msg
-                    .decode()
-                    .ok_or_else(|| anyhow::anyhow!("bad glove/state payload"))?;
-                rec.write(glove_id, &RecordedMessage::from_sample(&s, t))?;
+                let s: GloveState = copy_input(&mut rec, glove_id, msg)?;
                 if let Some(c) = retarget.on_glove(&s, t).command {
                     let c = outputs.command(&mut rec, c, t)?;
                     feedback.handle(&Event::Command(c), t);
                 }
                 continue;
             }
-            "hand/state" => {
-                let s: HandState = msg
-                    .decode()
-                    .ok_or_else(|| anyhow::anyhow!("bad hand/state payload"))?;
-                rec.write(state_id, &RecordedMessage::from_sample(&s, t))?;
-                Event::State(s)
-            }
-            "hand/tactile" => {
-                let s: Tactile = msg
-                    .decode()
-                    .ok_or_else(|| anyhow::anyhow!("bad hand/tactile payload"))?;
-                rec.write(tactile_id, &RecordedMessage::from_sample(&s, t))?;
-                Event::Tactile(s)
-            }
-            "estop" => {
-                let s: EStop = msg
-                    .decode()
-                    .ok_or_else(|| anyhow::anyhow!("bad estop payload"))?;
-                rec.write(estop_id, &RecordedMessage::from_sample(&s, t))?;
-                Event::EStop(s)
-            }
+            "hand/state" => Event::State(copy_input(&mut rec, state_id, msg)?),
+            "hand/tactile" => Event::Tactile(copy_input(&mut rec, tactile_id, msg)?),
+            "estop" => Event::EStop(copy_input(&mut rec, estop_id, msg)?),
             _ => continue,
         };
         if let Some(c) = feedback.handle(&event, t).command {
@@ -678,6 +657,19 @@ pub fn reprocess_cmd(
     }
     let _ = summary;
     Ok(ExitCode::SUCCESS)
+}
+
+/// A recorded input, decoded and written to the reprocessed recording at its log time.
+fn copy_input<M: Message>(
+    rec: &mut Recorder,
+    id: TopicId,
+    msg: &OwnedMessage,
+) -> anyhow::Result<M> {
+    let sample: M = msg
+        .decode()
+        .ok_or_else(|| anyhow::anyhow!("bad {} payload", M::TOPIC))?;
+    rec.write(id, &RecordedMessage::from_sample(&sample, msg.log_time_ns))?;
+    Ok(sample)
 }
 
 /// Reprocessing's outputs: stamped as their node stamps them, written as they are made (the file
