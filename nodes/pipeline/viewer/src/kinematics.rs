@@ -366,6 +366,23 @@ mod tests {
     }
 
     #[test]
+    fn a_model_number_draws_the_shipped_profile_of_that_name() {
+        // One numbering: each shipped profile's number is the contract's for its name, so a
+        // sample's `hand_model` finds the hand it names.
+        for name in HandProfile::builtin_names() {
+            let profile = HandProfile::builtin(name).unwrap();
+            let model = teleop_msgs::device_model::from_name(name);
+            assert_eq!(Some(profile.model_id), model, "{name}");
+            let drawn = RobotHand::builtin_for_model(profile.model_id).unwrap();
+            assert_eq!(drawn.profile().name, name);
+        }
+        let unknown = teleop_msgs::device_model::UNKNOWN;
+        assert!(RobotHand::builtin_for_model(unknown).is_none());
+        let glove = teleop_msgs::device_model::GLOVE;
+        assert!(RobotHand::builtin_for_model(glove).is_none());
+    }
+
+    #[test]
     fn open_operator_hand_points_straight_out() {
         let hand = OperatorHand::default();
         let open = OperatorPose::from_glove(&[1.0; 6]);
