@@ -97,13 +97,28 @@ pub trait Host<D: Driver> {
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()>;
 }
 
-/// Finds the device on the bus (identity check by `identify`) and leaves it in PRE-OP.
+/// The first bring-up back-off; it doubles after each failure up to [`MAX_BACKOFF`].
+pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+
+/// The longest wait between bring-ups, and the wait after a [`WrongDevice`].
+pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
+
+/// The bus holds another device than the driver's: its identity check refused what it found
+/// (the refusal names both). Not a link that comes back by retrying fast: [`run`] logs it as an
+/// error, once per distinct refusal, and looks again every [`MAX_BACKOFF`] (a device swapped
+/// for the right one is still found).
+#[derive(Debug, thiserror::Error)]
+#[error("wrong device: {0:#}")]
+pub struct WrongDevice(pub anyhow::Error);
+
+/// Finds the device on the bus (identity check by `identify`, whose refusal becomes a
+/// [`WrongDevice`]) and leaves it in PRE-OP.
 pub async fn discover(
     md: &MainDevice<'static>,
     identify: impl FnOnce(&[Found]) -> anyhow::Result<()>,
 ) -> anyhow::Result<PreOpGroup> {
     let (group, found) = scan(md).await?;
-    identify(&found)?;
+    identify(&found).map_err(|e| anyhow::Error::new(WrongDevice(e)))?;
     Ok(group)
 }
 
@@ -122,9 +137,10 @@ pub async fn bring_up<D: Driver>(
 }
 
 /// Brings the device up and cycles until the host asks to stop; brings it up again (backing off
-/// up to 2 s) whenever bring-up fails or the device is lost (a failing host, e.g. a publish
-/// error inside the cycle, counts as lost too). Returns an error only when the host fails to
-/// report the link down.
+/// from [`FIRST_BACKOFF`] up to [`MAX_BACKOFF`]) whenever bring-up fails or the device is lost
+/// (a failing host, e.g. a publish error inside the cycle, counts as lost too); a
+/// [`WrongDevice`] is looked at again every [`MAX_BACKOFF`]. Returns an error only when the
+/// host fails to report the link down.
 pub fn run<D: Driver, H: Host<D>>(
     bus: &Bus,
     driver: &mut D,
@@ -132,7 +148,9 @@ pub fn run<D: Driver, H: Host<D>>(
     settings: &Settings,
 ) -> anyhow::Result<()> {
     let mut counters = Counters::default();
-    let mut backoff = Duration::from_millis(100);
+    let mut backoff = FIRST_BACKOFF;
+    // The last wrong device logged (each distinct one is logged once).
+    let mut wrong_logged: Option<String> = None;
     while !host.stop_requested() {
         let bus = bus.current(); // a fresh bus once ethercrab's own task has ended (ethercrab:)
         match block_on(bring_up(bus.md(), driver)) {
@@ -145,7 +163,8 @@ pub fn run<D: Driver, H: Host<D>>(
                     "{} in OP",
                     driver.name()
                 );
-                backoff = Duration::from_millis(100);
+                backoff = FIRST_BACKOFF;
+                wrong_logged = None;
                 host.connected(driver);
                 match cycle(&bus, &group, driver, host, settings, &mut counters) {
                     Ok(()) => {
@@ -162,6 +181,19 @@ pub fn run<D: Driver, H: Host<D>>(
                     }
                 }
             }
+            Err(e) if e.is::<WrongDevice>() => {
+                let text = format!("{e:#}");
+                if wrong_logged.as_ref() != Some(&text) {
+                    tracing::error!(
+                        "{} bring-up refused: {text}; looking again every {} ms",
+                        driver.name(),
+                        MAX_BACKOFF.as_millis()
+                    );
+                    wrong_logged = Some(text);
+                }
+                host.link_down(&counters)?;
+                wait_link_down(MAX_BACKOFF, host, &counters)?;
+            }
             Err(e) => {
                 tracing::warn!(
                     "{} bring-up failed: {e:#}; retrying in {} ms",
@@ -170,7 +202,7 @@ pub fn run<D: Driver, H: Host<D>>(
                 );
                 host.link_down(&counters)?;
                 wait_link_down(backoff, host, &counters)?;
-                backoff = (backoff * 2).min(Duration::from_secs(2));
+                backoff = (backoff * 2).min(MAX_BACKOFF);
             }
         }
     }

@@ -37,7 +37,8 @@ pub use bus::{
     MAX_PDI, MAX_SUBDEVICES,
 };
 pub use cycle::{
-    bring_up, discover, leave_op, run, Counters, Event, Exchange, Host, Settings, LINK_DOWN_REPORT,
+    bring_up, discover, leave_op, run, Counters, Event, Exchange, Host, Settings, WrongDevice,
+    FIRST_BACKOFF, LINK_DOWN_REPORT, MAX_BACKOFF,
 };
 pub use driver::{Driver, Image, OwnExchange, OwnLayout};
 pub use pump::{Connect, Pump, PumpStatus};

@@ -14,7 +14,7 @@ use futures_lite::future::block_on;
 use teleop_ecat_link::{FrameLink, InProcessLink};
 use teleop_ecat_master::{
     bring_up, expected_wkc, Bus, Counters, Driver, Event, Exchange, Found, Host, Image, OpGroup,
-    PreOpGroup, Settings,
+    PreOpGroup, Settings, WrongDevice,
 };
 use teleop_ecat_sim::{AlState, Application, EscConfig, Identity, SdoAbort, SubDevice};
 
@@ -366,10 +366,12 @@ fn a_foreign_subdevice_is_refused_by_name() {
         outputs: true,
         parameter: 0,
     };
-    let err = block_on(bring_up(rig.bus.md(), &mut driver))
-        .err()
-        .unwrap()
-        .to_string();
+    let err = block_on(bring_up(rig.bus.md(), &mut driver)).err().unwrap();
+    assert!(
+        err.is::<WrongDevice>(),
+        "a wrong device is its own error, not a lost link: {err:#}"
+    );
+    let err = err.to_string();
     assert!(
         err.contains("SubDevice 1") && err.contains("0x00000bad") && err.contains("test palm"),
         "{err}"
