@@ -1,92 +1,19 @@
-//! The default simulated session end to end, and its fault suite: each process killed in turn,
-//! the glove unplugged, the EtherCAT link cut, corrupted serial frames and lost EtherCAT frames.
-//! Every case ends in the documented safe state (hand holds, glove force zero) and recovers.
+//! The default simulated session's fault suite (the session itself, as every hand's, is tested
+//! in `hand_session`): each process killed in turn, the glove unplugged, the EtherCAT link cut,
+//! corrupted serial frames and lost EtherCAT frames. Every case ends in the documented safe
+//! state (hand holds, glove force zero) and recovers.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
+use teleop_e2e::watch::{fresh, Watcher};
 use teleop_e2e::{Sandbox, Session};
-use teleop_msgs::{
-    command_flags, contact_source, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand,
-    HandState, Tactile,
-};
-use teleop_runtime::{NodeRuntime, Subscriber};
-
-struct Watch {
-    glove: Subscriber<GloveState>,
-    diag: Subscriber<GloveDiagnostics>,
-    cmd: Subscriber<HandCommand>,
-    state: Subscriber<HandState>,
-    tactile: Subscriber<Tactile>,
-    force: Subscriber<GloveForceCommand>,
-    _node: NodeRuntime,
-}
-
-impl Watch {
-    fn new(sandbox: &Sandbox) -> Self {
-        let node = NodeRuntime::new("session-test", &sandbox.ipc).unwrap();
-        Self {
-            glove: node.subscriber().unwrap(),
-            diag: node.subscriber().unwrap(),
-            cmd: node.subscriber().unwrap(),
-            state: node.subscriber().unwrap(),
-            tactile: node.subscriber().unwrap(),
-            force: node.subscriber().unwrap(),
-            _node: node,
-        }
-    }
-
-    /// Waits until `ok` holds for the samples of the last poll.
-    fn until(
-        &self,
-        session: &Session,
-        timeout: Duration,
-        what: &str,
-        mut ok: impl FnMut(&Self) -> bool,
-    ) {
-        let start = Instant::now();
-        loop {
-            for s in [
-                &self.glove as &dyn Drain,
-                &self.diag,
-                &self.cmd,
-                &self.state,
-                &self.tactile,
-                &self.force,
-            ] {
-                s.drain_all();
-            }
-            if ok(self) {
-                return;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n{}",
-                session.log()
-            );
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
-}
-
-trait Drain {
-    fn drain_all(&self);
-}
-
-impl<M: teleop_msgs::Message> Drain for Subscriber<M> {
-    fn drain_all(&self) {
-        self.drain(|_| {});
-    }
-}
-
-fn fresh<M: teleop_msgs::Message>(s: &Subscriber<M>) -> bool {
-    s.is_fresh(Instant::now(), Duration::from_millis(150))
-}
+use teleop_msgs::command_flags;
 
 /// The hand holds: the Revo2 node holds on a stale command, or the retargeting node sends the
 /// last command again flagged as held (its glove input is stale or the glove's link is down).
-fn hand_holds(w: &Watch) -> bool {
+fn hand_holds(w: &Watcher) -> bool {
     w.state
         .latest()
         .is_some_and(|s| s.holding == 1 && s.link_up == 1)
@@ -96,10 +23,10 @@ fn hand_holds(w: &Watch) -> bool {
                 .is_some_and(|c| c.flags & command_flags::HELD != 0))
 }
 
-fn start(sandbox: &Sandbox) -> (Session, Watch) {
+fn start(sandbox: &Sandbox) -> (Session, Watcher) {
     let launch = sandbox.default_session(|t| t);
     let session = sandbox.launch(&launch);
-    let watch = Watch::new(sandbox);
+    let watch = Watcher::new(sandbox, "session-test");
     watch.until(
         &session,
         Duration::from_secs(30),
@@ -113,61 +40,6 @@ fn start(sandbox: &Sandbox) -> (Session, Watch) {
         },
     );
     (session, watch)
-}
-
-#[test]
-fn the_default_session_closes_the_loop_and_ends_with_a_summary() {
-    let sandbox = Sandbox::new();
-    let (mut session, watch) = start(&sandbox);
-    // The scripted operator grasps the ball: tactile force, force feedback from tactile, and the
-    // operator's fingers feel it (measured forces in the glove's diagnostics).
-    let (mut max_normal, mut max_force, mut felt) = (0.0f32, 0i16, 0i16);
-    let start = Instant::now();
-    while start.elapsed() < Duration::from_secs(7)
-        && !(max_normal > 1.0 && max_force > 100 && felt > 50)
-    {
-        watch.tactile.drain(|t| {
-            max_normal = t
-                .fingertips
-                .iter()
-                .fold(max_normal, |m, f| m.max(f.normal_n))
-        });
-        watch.force.drain(|f| {
-            for (i, &v) in f.force.iter().enumerate() {
-                if f.source[i] == contact_source::TACTILE {
-                    max_force = max_force.max(v);
-                }
-            }
-        });
-        watch
-            .diag
-            .drain(|d| felt = d.force.iter().fold(felt, |m, &v| m.max(v)));
-        std::thread::sleep(Duration::from_millis(5));
-    }
-    assert!(
-        max_normal > 1.0,
-        "tactile force on the ball: {max_normal} N\n{}",
-        session.log()
-    );
-    assert!(max_force > 100, "glove force from tactile: {max_force}");
-    assert!(felt > 50, "the simulated operator feels it: {felt}");
-    let status = session.stop();
-    assert!(status.success());
-    let log = session.log();
-    assert!(
-        log.contains("session summary") && log.contains("hand/tactile"),
-        "{log}"
-    );
-    let recording = log
-        .lines()
-        .find_map(|l| l.strip_prefix("recording: "))
-        .expect("the summary says where the recording is");
-    let info = teleop_recording::info(&sandbox.dir.path().join(recording)).unwrap();
-    assert!(
-        info.complete && info.messages > 2_000,
-        "{} messages",
-        info.messages
-    );
 }
 
 /// Log times of every sample per (topic, source), to look for gaps.
@@ -231,7 +103,7 @@ fn killing_each_process_in_turn_ends_safe_and_recovers() {
                 hand_holds,
             ),
             "feedback" | "revo2" | "sim-revo2" => {
-                let cmd_zero = |w: &Watch| {
+                let cmd_zero = |w: &Watcher| {
                     victim != "feedback" && w.force.latest().is_some_and(|f| f.force == [0; 5])
                 };
                 let device_zero = || {
@@ -304,7 +176,9 @@ fn device_faults_are_ridden_out() {
     let (session, watch) = start(&sandbox);
 
     // Glove unplugged: the glove reports its link down, the hand holds; replugged: it follows.
-    assert!(sandbox.control("glove.ctl", "unplug 1000").starts_with("ok"));
+    assert!(sandbox
+        .control("glove.ctl", "unplug 1000")
+        .starts_with("ok"));
     watch.until(
         &session,
         Duration::from_secs(3),
@@ -409,13 +283,13 @@ fn short_soak_without_drops_or_restarts() {
 }
 
 /// The latest index fingertip force on the hand, newtons.
-fn index_force(w: &Watch) -> f32 {
+fn index_force(w: &Watcher) -> f32 {
     w.tactile.latest().map_or(0.0, |t| t.fingertips[1].normal_n)
 }
 
 /// Lowest index force over `outage`, sampled while it lasts; `holding` is set when the Revo2
 /// node reported holding meanwhile.
-fn lowest_index_force(session: &Session, w: &Watch, outage: Duration, holding: &mut bool) -> f32 {
+fn lowest_index_force(session: &Session, w: &Watcher, outage: Duration, holding: &mut bool) -> f32 {
     let start = Instant::now();
     let mut lowest = f32::MAX;
     w.until(
@@ -454,7 +328,7 @@ fn a_grasp_survives_a_lost_glove_and_a_lost_operator() {
         .unwrap()
         .contains("restart_delay_ms = 2000"));
     let session = sandbox.launch(&launch);
-    let watch = Watch::new(&sandbox);
+    let watch = Watcher::new(&sandbox, "session-test");
     watch.until(&session, Duration::from_secs(30), "the ball gripped", |w| {
         fresh(&w.cmd) && fresh(&w.state) && index_force(w) > 1.0
     });
@@ -466,7 +340,9 @@ fn a_grasp_survives_a_lost_glove_and_a_lost_operator() {
 
     // The glove is lost for 2 s: the retargeting node re-sends its last command as held, and
     // the Revo2 node holds its last target whenever that goes stale.
-    assert!(sandbox.control("glove.ctl", "unplug 2000").starts_with("ok"));
+    assert!(sandbox
+        .control("glove.ctl", "unplug 2000")
+        .starts_with("ok"));
     let mut holding = false;
     let lowest = lowest_index_force(&session, &watch, Duration::from_secs(2), &mut holding);
     assert!(
