@@ -13,7 +13,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
-use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, NodeHealth, TopicVisitor};
+use teleop_msgs::{
+    text_of, visit_topic, DeviceInfo, EStop, EStopAck, Message, NodeHealth, TopicVisitor,
+};
 use teleop_runtime::{
     discover_namespaces, latch_path, latched_namespaces, now_ns, qualified, set_latch, split,
     EventLoop, Flow, Input, IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber,
@@ -154,7 +156,7 @@ pub fn echo(
             let done = || printed.get() >= limit || failed.borrow().is_some();
             let print = |m: &M| {
                 if !done() {
-                    match out!("{m:?}") {
+                    match out!("{}", shown_sample(m)) {
                         Ok(()) => printed.set(printed.get() + 1),
                         Err(e) => *failed.borrow_mut() = Some(e),
                     }
@@ -191,6 +193,42 @@ pub fn echo(
     )
     .ok_or_else(|| unknown_topic(topic))??;
     Ok(ExitCode::SUCCESS)
+}
+
+/// A sample as `echo` prints it: a device identity and a health report's details by name
+/// (their text fields are otherwise bytes), any other payload as its fields.
+fn shown_sample<M: Message>(m: &M) -> String {
+    let by_name = |fields: Vec<(String, String)>| -> String {
+        let fields: Vec<String> = fields.iter().map(|(k, v)| format!("{k}: {v:?}")).collect();
+        fields.join(", ")
+    };
+    if M::TOPIC == DeviceInfo::TOPIC {
+        if let Ok(d) = DeviceInfo::from_bytes(m.as_bytes()) {
+            let fields = d.named_fields().into_iter();
+            let fields = fields.map(|(k, v)| (k.to_string(), v)).collect();
+            return format!(
+                "DeviceInfo {{ header: {:?}, {} }}",
+                d.header,
+                by_name(fields)
+            );
+        }
+    }
+    if M::TOPIC == NodeHealth::TOPIC {
+        if let Ok(h) = NodeHealth::from_bytes(m.as_bytes()) {
+            let details = h.details().map(|(k, v)| (k, v.to_string())).collect();
+            let counters = NodeHealth {
+                details: Default::default(),
+                detail_count: 0,
+                ..h
+            };
+            return format!(
+                "{counters:?}; node {:?}, details {{ {} }}",
+                h.name(),
+                by_name(details)
+            );
+        }
+    }
+    format!("{m:?}")
 }
 
 /// What `stats` keeps per topic.
@@ -631,5 +669,37 @@ mod tests {
         assert!(row.ends_with("  reconnects=2 rtt_ms=0.25"), "{table}");
         let counters: Vec<&str> = row.split_whitespace().skip(1).take(4).collect();
         assert_eq!(counters, ["0", "3", "0", "0"], "{table}");
+    }
+
+    #[test]
+    fn echo_shows_identities_and_details_by_name() {
+        let device = DeviceInfo {
+            device_model: teleop_msgs::device_model::GLOVE,
+            link_kind: teleop_msgs::link_kind::SERIAL,
+            bus_address: 1,
+            model_name: teleop_msgs::fixed_text("EH55BF1"),
+            ..Default::default()
+        };
+        let shown = shown_sample(&device);
+        assert!(
+            shown.ends_with(
+                "device_model: \"glove\", link_kind: \"serial\", bus_address: \"1\", \
+                 model_name: \"EH55BF1\" }"
+            ),
+            "{shown}"
+        );
+        let mut h = NodeHealth::default();
+        h.set_name("bridge");
+        h.set_detail("rtt_ms", 0.25);
+        let shown = shown_sample(&h);
+        assert!(
+            shown.ends_with("node \"bridge\", details { rtt_ms: \"0.25\" }"),
+            "{shown}"
+        );
+        // Other payloads as their fields.
+        assert_eq!(
+            shown_sample(&EStop::default()),
+            format!("{:?}", EStop::default())
+        );
     }
 }
