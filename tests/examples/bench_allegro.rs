@@ -40,7 +40,7 @@ use teleop_msgs::{GloveForceCommand, GloveState, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 use teleop_sim_allegro::adapter::AckStyle;
 use teleop_sim_allegro::firmware::{Firmware, FirmwareOptions};
-use teleop_sim_allegro::hand::{Ball, Hand, HandParams};
+use teleop_sim_allegro::hand::{Hand, HandParams, VirtualObject};
 use teleop_sim_allegro::{Sim, SimOptions};
 
 const WARM_UP: Duration = Duration::from_secs(2);
@@ -73,7 +73,7 @@ fn main() {
         .replace("beta = 0.5", "beta = 0.0");
     sandbox.write("config/allegro/retarget-bench.toml", &retarget);
 
-    let hand = Hand::allegro(HandParams::default(), Some(Ball::default_ball())).unwrap();
+    let hand = Hand::allegro(HandParams::default(), Some(VirtualObject::ball())).unwrap();
     let sim = Sim::start(
         Firmware::new(FirmwareOptions::new(Generation::V4), hand),
         SimOptions {
