@@ -21,8 +21,9 @@
 //! Contract versions: every file starts with a [`CONTRACT_METADATA`] record naming the message
 //! contract version it was written with, and each topic's schema text fixes its layout. Readers
 //! accept the current schema texts and those of earlier versions that [`legacy`] converts
-//! (contract version 1's `HandState` and `Tactile`, e.g. `recordings/grasp.sample.mcap`): such
-//! messages are read as the current payloads. Any other schema text of a contract topic is
+//! (contract version 1's `HandState` and `Tactile`, e.g. `recordings/grasp.sample.mcap`; the
+//! `DeviceInfo` and `NodeHealth` of versions 1 and 2, e.g. `recordings/allegro-v2.sample.mcap`):
+//! such messages are read as the current payloads. Any other schema text of a contract topic is
 //! refused as [`RecordingError::WrongSchemaVersion`], naming the file, topic and schema.
 //!
 //! ```

@@ -472,7 +472,7 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
 ///
 /// Channels of contract topics are checked against the contract: a different schema name or
 /// encoding is [`RecordingError::UnknownSchema`]; the schema text of an earlier contract
-/// version that this build converts (version 1's `HandState` and `Tactile`) is read and each
+/// version that this build converts (see [`crate::legacy`]) is read and each
 /// message converted to the current payload; any other schema text is
 /// [`RecordingError::WrongSchemaVersion`]. Each message must carry the CDR little-endian
 /// header and the exact size of its recorded type. For finished files the channels selected by
