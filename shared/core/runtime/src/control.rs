@@ -1,5 +1,6 @@
-//! A simulator's control socket: a Unix stream socket taking one command per line and answering
-//! each with one line, served on threads of its own (`socat - UNIX-CONNECT:PATH`, or a test's
+//! A control socket (a simulator's, whose vocabulary is `teleop-sim-kit`'s; the bridge's fault
+//! injection): a Unix stream socket taking one command per line and answering each with one
+//! line, served on threads of its own (`socat - UNIX-CONNECT:PATH`, or a test's
 //! `UnixStream`). Each client has its own thread, so an idle one does not block the others; at
 //! most [`MAX_CLIENTS`] at once, and one silent for [`IDLE`] is disconnected.
 

@@ -17,7 +17,8 @@
 //! - [`now_ns`]: the CLOCK_MONOTONIC stamp used in every header; [`sleep_until`]: absolute
 //!   deadlines (`clock_nanosleep`, `TIMER_ABSTIME`); [`init_logging`]: `tracing` through a
 //!   bounded queue that drops (and counts) instead of blocking a loop;
-//! - [`control`]: a simulator's line-based control socket;
+//! - [`control`]: a line-based control socket served on threads of its own (the simulators',
+//!   whose commands and answers are `teleop-sim-kit`'s, and the bridge's fault injection);
 //! - [`node_main`]: the opening of every node's `main` (logging, arguments, configuration file,
 //!   exit status) and [`NodeArgs`], the arguments every node with a configuration file takes;
 //! - [`schedule`]: when a pipeline engine's inputs go stale (by their samples' stamps) and when
