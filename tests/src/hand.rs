@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use teleop_msgs::{HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
 
-use crate::rig::{Logs, Process, Rig};
+use crate::rig::{wait_text, Logs, Process, Rig};
 use crate::watch::wait_sample;
 
 /// A hand node's process, the test's ports to it, and the device it drives when that lives in
@@ -76,6 +76,11 @@ impl<S> HandNode<S> {
     pub fn node(&mut self) -> &mut Process {
         let name = self.name.clone();
         self.rig.process(&name)
+    }
+
+    /// Waits (up to `timeout`) until the logs of the rig's processes contain `text`.
+    pub fn wait_log(&self, timeout: Duration, text: &str) {
+        wait_text(&self.rig, &self.name, timeout, text);
     }
 
     /// Receives hand states every 2 ms until one satisfies `ok` and returns it; panics after

@@ -143,19 +143,10 @@ impl Sandbox {
         self.write(launch, &relocate(text))
     }
 
-    /// Sends one command to a simulator's control socket and returns its one-line answer.
+    /// Sends one command to a simulator's control socket (a path inside the sandbox) and
+    /// returns its one-line answer.
     pub fn control(&self, socket: &str, command: &str) -> String {
-        use std::io::{BufRead, BufReader, Write};
-        let path = self.dir.path().join(socket);
-        let mut stream = std::os::unix::net::UnixStream::connect(&path)
-            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        writeln!(stream, "{command}").expect("send command");
-        stream
-            .shutdown(std::net::Shutdown::Write)
-            .expect("shutdown");
-        let mut reply = String::new();
-        BufReader::new(stream).read_line(&mut reply).expect("reply");
-        reply
+        control(&self.dir.path().join(socket), command)
     }
 
     /// Sends one command to a simulator's control socket and returns its answer, asserting it
@@ -312,6 +303,21 @@ impl Drop for Session {
             eprintln!("---- teleop launch output ----\n{}", self.log());
         }
     }
+}
+
+/// Sends one command to the simulator's control socket at `path` and returns its one-line
+/// answer.
+pub fn control(path: &Path, command: &str) -> String {
+    use std::io::{BufRead, BufReader, Write};
+    let mut stream = std::os::unix::net::UnixStream::connect(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    writeln!(stream, "{command}").expect("send command");
+    stream
+        .shutdown(std::net::Shutdown::Write)
+        .expect("shutdown");
+    let mut reply = String::new();
+    BufReader::new(stream).read_line(&mut reply).expect("reply");
+    reply
 }
 
 /// A node configuration for a test's sandbox: `text` naming the repository's Revo2 profile.

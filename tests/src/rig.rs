@@ -93,16 +93,21 @@ impl Process {
 
     /// Waits (up to `timeout`) until its log contains `text`; panics naming it, with the log.
     pub fn wait_log(&self, timeout: Duration, text: &str) {
-        let start = Instant::now();
-        while !self.log().contains(text) {
-            assert!(
-                start.elapsed() < timeout,
-                "timed out after {timeout:?} waiting for {text:?} in the log of {}\n{}",
-                self.name,
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        wait_text(&|| self.log(), &self.name, timeout, text);
+    }
+}
+
+/// Waits (up to `timeout`) until `logs` (those of `whose`) contain `text`; panics saying so,
+/// with the logs.
+pub fn wait_text(logs: &dyn Logs, whose: &str, timeout: Duration, text: &str) {
+    let start = Instant::now();
+    while !logs.logs().contains(text) {
+        assert!(
+            start.elapsed() < timeout,
+            "timed out after {timeout:?} waiting for {text:?} in the log of {whose}\n{}",
+            logs.logs()
+        );
+        std::thread::sleep(Duration::from_millis(20));
     }
 }
 

@@ -6,247 +6,103 @@
 //! generation named; `teleop allegro info` against the simulator and its error for a missing
 //! adapter.
 //!
-//! Both executables must be built (`cargo build -p teleop-sim-allegro -p teleop` besides this crate):
-//! they are looked for next to this test's target folder.
+//! Both executables must be built (`cargo build --workspace --bins` besides this crate): they
+//! are looked for next to this test's target folder.
 #![allow(clippy::unwrap_used)]
 
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixStream;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
-use std::sync::Mutex;
+use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use teleop_e2e::hand::HandNode;
+use teleop_e2e::rig::Rig as TestRig;
+use teleop_e2e::{bin, Sandbox};
 use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth};
-use teleop_runtime::{IpcSettings, NodeRuntime, Publisher, Subscriber};
 
 /// The simulations run one at a time: two 333 Hz hands over pseudo-terminals at once on a small
 /// machine would test the machine.
 static SERIAL: Mutex<()> = Mutex::new(());
 
-/// A workspace executable next to this test's target folder.
-fn binary(name: &str, package: &str) -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    // target/<profile>/deps/against_sim-HASH -> target/<profile>/<name>
-    let path = exe
-        .parent()
-        .and_then(Path::parent)
-        .map(|dir| dir.join(name))
-        .unwrap();
-    assert!(
-        path.exists(),
-        "{} is missing: run `cargo build -p {package}` first (a test builds only its own \
-         crate's executables)",
-        path.display()
-    );
-    path
-}
-
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../..")
-}
-
-/// The simulator process.
+/// The simulator process's handles: its slcan adapter and control socket, and this test's turn.
 struct Sim {
-    child: Child,
     slcan: PathBuf,
     control: PathBuf,
-    log: PathBuf,
+    _serial: MutexGuard<'static, ()>,
 }
 
 impl Sim {
-    /// `extra`: more simulator options (the hand behaviours no document gives).
-    fn start(dir: &Path, generation: &str, object: &str, extra: &[&str]) -> Self {
-        let slcan = dir.join("allegro-slcan");
-        let control = dir.join("allegro.ctl");
-        let log = dir.join("sim.log");
-        let out = std::fs::File::create(&log).unwrap();
-        let child = Command::new(binary("teleop-sim-allegro", "sim-allegro"))
-            .args(["--generation", generation, "--object", object])
-            .args(extra)
-            .arg("--slcan")
-            .arg(&slcan)
-            .arg("--control")
-            .arg(&control)
-            .env("TELEOP_LOG", "info")
-            .stdout(out.try_clone().unwrap())
-            .stderr(out)
-            .spawn()
-            .unwrap();
-        let sim = Self {
-            child,
+    /// Starts `teleop-sim-allegro` as `generation` with `object` on `rig`, with `extra` options
+    /// (the hand behaviours no document gives), once no other simulation runs.
+    fn start(rig: &mut TestRig, generation: &str, object: &str, extra: &[&str]) -> Self {
+        let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+        let (slcan, control) = (rig.path("allegro-slcan"), rig.path("allegro.ctl"));
+        let (slcan_arg, control_arg) = (slcan.display().to_string(), control.display().to_string());
+        let args = [
+            &["--generation", generation, "--object", object][..],
+            extra,
+            &["--slcan", &slcan_arg, "--control", &control_arg],
+        ]
+        .concat();
+        rig.start_sim(
+            "sim-allegro",
+            bin("teleop-sim-allegro"),
+            &args,
+            "allegro: generation",
+        );
+        Self {
             slcan,
             control,
-            log,
-        };
-        let start = Instant::now();
-        while !(sim.slcan.exists() && sim.control.exists()) {
-            assert!(
-                start.elapsed() < Duration::from_secs(10),
-                "the simulator did not come up\n{}",
-                sim.log()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        sim
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    /// One control command and its one-line answer.
-    fn control(&self, command: &str) -> String {
-        let mut s = UnixStream::connect(&self.control).unwrap();
-        writeln!(s, "{command}").unwrap();
-        s.shutdown(std::net::Shutdown::Write).unwrap();
-        let mut reply = String::new();
-        BufReader::new(s).read_to_string_lossy(&mut reply);
-        reply
-    }
-}
-
-trait ReadAll {
-    fn read_to_string_lossy(self, out: &mut String);
-}
-
-impl<R: std::io::Read> ReadAll for BufReader<R> {
-    fn read_to_string_lossy(mut self, out: &mut String) {
-        let mut line = String::new();
-        while self.read_line(&mut line).unwrap_or(0) > 0 {
-            out.push_str(&line);
-            line.clear();
-        }
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        // SAFETY: kill(2) of our own child.
-        unsafe {
-            libc::kill(self.child.id() as libc::pid_t, libc::SIGINT);
-        }
-        let _ = self.child.wait();
-    }
-}
-
-struct Rig {
-    commands: Publisher<HandCommand>,
-    states: Subscriber<HandState>,
-    health: Subscriber<NodeHealth>,
-    _runtime: NodeRuntime,
-    node: Option<Child>,
-    sim: Sim,
-    ipc: IpcSettings,
-    dir: tempfile::TempDir,
-    _serial: std::sync::MutexGuard<'static, ()>,
-}
-
-impl Rig {
-    /// The simulator as `generation` with `object`, the node set to `protocol`.
-    fn new(generation: &str, protocol: &str, object: &str) -> Self {
-        Self::with_sim_options(generation, protocol, object, &[])
-    }
-
-    /// As [`Rig::new`], the simulator started with `extra` options.
-    fn with_sim_options(generation: &str, protocol: &str, object: &str, extra: &[&str]) -> Self {
-        let serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-        teleop_runtime::init_logging();
-        let dir = tempfile::tempdir().unwrap();
-        let ipc = IpcSettings::isolated(&dir.path().join("iox"));
-        let sim = Sim::start(dir.path(), generation, object, extra);
-        let config = dir.path().join("allegro.toml");
-        std::fs::write(
-            &config,
-            format!(
-                "link = \"slcan:{}\"\nprotocol = \"{protocol}\"\nhealth_period_ms = 100\n\
-                 hand_profile = \"{}\"\n",
-                sim.slcan.display(),
-                repo().join("config/hands/allegro.toml").display()
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("node.log")).unwrap();
-        let node = Command::new(env!("CARGO_BIN_EXE_teleop-allegro"))
-            .arg("--config")
-            .arg(&config)
-            .envs(ipc.to_env())
-            .env("TELEOP_LOG", "info")
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let runtime = NodeRuntime::new("allegro-test", &ipc).unwrap();
-        Self {
-            commands: runtime.publisher().unwrap(),
-            states: runtime.subscriber().unwrap(),
-            health: runtime.subscriber().unwrap(),
-            _runtime: runtime,
-            node: Some(node),
-            sim,
-            ipc,
-            dir,
             _serial: serial,
         }
     }
 
-    fn log(&self) -> String {
-        format!(
-            "---- node log ----\n{}\n---- simulator log ----\n{}",
-            std::fs::read_to_string(self.dir.path().join("node.log")).unwrap_or_default(),
-            self.sim.log()
-        )
+    /// One control command and its one-line answer.
+    fn control(&self, command: &str) -> String {
+        teleop_e2e::control(&self.control, command)
     }
+}
 
-    fn wait_state(
-        &self,
-        timeout: Duration,
-        what: &str,
-        mut ok: impl FnMut(&HandState) -> bool,
-    ) -> HandState {
-        let start = Instant::now();
-        loop {
-            let mut found = None;
-            self.states.drain(|s| {
-                if found.is_none() && ok(s) {
-                    found = Some(*s);
-                }
-            });
-            if let Some(s) = found {
-                return s;
-            }
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {what}\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
+/// The node against the simulator process; the simulation's turn ends after both stopped.
+type Rig = HandNode<Sim>;
 
-    fn wait_log(&self, timeout: Duration, text: &str) {
-        let start = Instant::now();
-        while !self.log().contains(text) {
-            assert!(
-                start.elapsed() < timeout,
-                "timed out waiting for {text:?} in the log\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
+/// How the Allegro's tests start, command and look at the node.
+trait AllegroRig {
+    /// The simulator as `generation` with `object`, the node set to `protocol`.
+    fn new(generation: &str, protocol: &str, object: &str) -> Self;
+    /// As [`AllegroRig::new`], the simulator started with `extra` options.
+    fn with_sim_options(generation: &str, protocol: &str, object: &str, extra: &[&str]) -> Self;
     /// Publishes `targets` every 10 ms for `d`; returns the last state.
-    fn command(&mut self, targets: &[f32; 16], d: Duration) -> HandState {
-        let start = Instant::now();
-        while start.elapsed() < d {
-            self.commands.publish(&command(targets)).unwrap();
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        self.states.poll_latest().unwrap()
+    fn command(&mut self, targets: &[f32; 16], d: Duration) -> HandState;
+    /// States received within `d` (draining every 2 ms).
+    fn count_states(&self, d: Duration) -> u64;
+    /// The newest health report, waiting up to 3 s for the first.
+    fn latest_health(&self) -> NodeHealth;
+    /// Stops the node with SIGINT; its exit status.
+    fn stop_node(&mut self) -> std::process::ExitStatus;
+}
+
+impl AllegroRig for Rig {
+    fn new(generation: &str, protocol: &str, object: &str) -> Self {
+        Self::with_sim_options(generation, protocol, object, &[])
     }
 
-    /// States received within `d` (draining every 2 ms).
+    fn with_sim_options(generation: &str, protocol: &str, object: &str, extra: &[&str]) -> Self {
+        let mut rig = TestRig::new();
+        let sim = Sim::start(&mut rig, generation, object, extra);
+        let config = format!(
+            "link = \"slcan:{}\"\nprotocol = \"{protocol}\"\nhealth_period_ms = 100\n\
+             hand_profile = \"{}\"\n",
+            sim.slcan.display(),
+            Sandbox::repo().join("config/hands/allegro.toml").display()
+        );
+        let program = env!("CARGO_BIN_EXE_teleop-allegro");
+        HandNode::start_with(rig, "allegro", program, &config, sim)
+    }
+
+    fn command(&mut self, targets: &[f32; 16], d: Duration) -> HandState {
+        self.send(&command(targets), d)
+    }
+
     fn count_states(&self, d: Duration) -> u64 {
         self.states.drain(|_| {});
         let start = Instant::now();
@@ -273,30 +129,8 @@ impl Rig {
         }
     }
 
-    /// Stops the node with SIGINT; its exit status.
     fn stop_node(&mut self) -> std::process::ExitStatus {
-        let mut node = self.node.take().unwrap();
-        // SAFETY: kill(2) of our own child.
-        unsafe {
-            libc::kill(node.id() as libc::pid_t, libc::SIGINT);
-        }
-        node.wait().unwrap()
-    }
-}
-
-impl Drop for Rig {
-    fn drop(&mut self) {
-        if let Some(mut node) = self.node.take() {
-            // SAFETY: kill(2) of our own child.
-            unsafe {
-                libc::kill(node.id() as libc::pid_t, libc::SIGINT);
-            }
-            let _ = node.wait();
-        }
-        if std::thread::panicking() {
-            eprintln!("{}", self.log());
-        }
-        self.ipc.remove_shared_memory();
+        self.node().stop()
     }
 }
 
@@ -544,10 +378,7 @@ fn the_other_generation_is_named_and_the_node_waits_for_the_right_one() {
     let rig = Rig::new("v4", "v3", "none");
     rig.wait_log(Duration::from_secs(10), "saw v4 IDs; set protocol = v4");
     let mut rig = rig;
-    assert!(
-        rig.node.as_mut().unwrap().try_wait().unwrap().is_none(),
-        "the node keeps trying"
-    );
+    assert!(rig.node().is_running(), "the node keeps trying");
     // The hand becomes the generation set: the node comes up without a restart.
     rig.sim.control("generation v3");
     rig.wait_state(Duration::from_secs(10), "the hand up", |s| s.link_up == 1);
@@ -560,20 +391,12 @@ fn the_other_generation_is_named_and_the_node_waits_for_the_right_one() {
     );
 }
 
-fn teleop(args: &[&str]) -> std::process::Output {
-    Command::new(binary("teleop", "teleop"))
-        .args(args)
-        .stdin(Stdio::null())
-        .output()
-        .unwrap()
-}
-
 #[test]
 fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
-    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = tempfile::tempdir().unwrap();
-    let sim = Sim::start(dir.path(), "v4", "ball", &[]);
+    let mut rig = TestRig::new();
+    let sim = Sim::start(&mut rig, "v4", "ball", &[]);
     let link = format!("slcan:{}", sim.slcan.display());
+    let teleop = |args: &[&str]| rig.sandbox.run_teleop(args);
     let out = teleop(&["allegro", "--link", &link, "info"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -630,9 +453,10 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         status = sim.control("stats");
     }
     assert_eq!(field(&status, "system"), "off", "released: {status}");
-    drop(sim);
+    rig.process("sim-allegro").stop();
 
-    let missing = dir.path().join("ttyACM9");
+    let missing = rig.path("ttyACM9");
+    let teleop = |args: &[&str]| rig.sandbox.run_teleop(args);
     let out = teleop(&[
         "allegro",
         "--link",
