@@ -94,6 +94,30 @@ impl<S> HandNode<S> {
         wait_sample(&self.states, &self.rig, timeout, what, ok)
     }
 
+    /// The command having stopped: waits (up to 2 s) until the node holds, lets the hand settle
+    /// for 300 ms, and checks that over the next 500 ms it still holds and no joint moves more
+    /// than `tolerance` (in the command's units). Returns the last state.
+    pub fn holds_still(&self, tolerance: f32) -> HandState {
+        self.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
+        std::thread::sleep(Duration::from_millis(300));
+        let positions =
+            |s: &HandState| -> Vec<f32> { s.active_joints().iter().map(|j| j.position).collect() };
+        let held = self.states.poll_latest().expect("a hand state");
+        std::thread::sleep(Duration::from_millis(500));
+        let later = self.states.poll_latest().expect("a hand state");
+        assert_eq!(later.holding, 1, "{}: the hand holds", self.name);
+        for (a, b) in positions(&held).iter().zip(positions(&later)) {
+            assert!(
+                (a - b).abs() < tolerance,
+                "{}: held: {:?} -> {:?}",
+                self.name,
+                positions(&held),
+                positions(&later)
+            );
+        }
+        later
+    }
+
     /// Publishes `cmd` every 10 ms for `d`; returns the newest hand state.
     pub fn send(&mut self, cmd: &HandCommand, d: Duration) -> HandState {
         let start = Instant::now();

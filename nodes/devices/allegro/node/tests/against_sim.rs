@@ -234,20 +234,7 @@ fn generation(generation: &str) {
     );
 
     // The command goes stale: the hand holds the last target, still pressing.
-    rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
-    std::thread::sleep(Duration::from_millis(300));
-    let held = rig.states.poll_latest().unwrap();
-    std::thread::sleep(Duration::from_millis(500));
-    let later = rig.states.poll_latest().unwrap();
-    assert_eq!(later.holding, 1);
-    for (a, b) in positions(&held).iter().zip(positions(&later)) {
-        assert!(
-            (a - b).abs() < 0.01,
-            "held: {:?} -> {:?}",
-            positions(&held),
-            positions(&later)
-        );
-    }
+    let later = rig.holds_still(0.01);
     let still: f32 = (5..8).map(|j| later.joints[j].effort).sum();
     assert!(
         still > effort / 2.0,

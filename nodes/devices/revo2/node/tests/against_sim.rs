@@ -98,20 +98,7 @@ fn commanded_targets_move_the_hand_and_closing_on_the_object_gives_tactile_force
 
     // The command goes stale: the hand holds the last target, flagged, and does not drift; the
     // fingers in contact keep squeezing the ball.
-    rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
-    std::thread::sleep(Duration::from_millis(300));
-    let held = rig.states.poll_latest().unwrap();
-    std::thread::sleep(Duration::from_millis(500));
-    let later = rig.states.poll_latest().unwrap();
-    assert_eq!(later.holding, 1);
-    for (a, b) in positions(&held).iter().zip(positions(&later)) {
-        assert!(
-            (a - b).abs() < 0.005,
-            "held: {:?} -> {:?}",
-            positions(&held),
-            positions(&later)
-        );
-    }
+    rig.holds_still(0.005);
     let grip = rig.tactile.poll_latest().unwrap().fingertips[1].normal_n;
     assert!(
         grip > t.fingertips[1].normal_n / 2.0,
