@@ -42,12 +42,17 @@ impl DeviceCommand for GloveCommand {
 }
 
 impl SimGlove {
-    fn change_faults(&self, change: impl FnOnce(&mut Faults)) -> Result<String, String> {
+    /// Changes the fault probabilities; `done` says what changed.
+    fn change_faults(
+        &self,
+        done: String,
+        change: impl FnOnce(&mut Faults),
+    ) -> Result<String, String> {
         let mut faults = self.faults();
         change(&mut faults);
         self.set_faults(faults);
         tracing::warn!("fault injection now {faults:?}");
-        Ok(format!("{faults:?}"))
+        Ok(done)
     }
 }
 
@@ -60,11 +65,11 @@ impl Simulator for SimGlove {
     }
 
     fn set_drop(&self, p: f64) -> Result<String, String> {
-        self.change_faults(|f| f.drop = p)
+        self.change_faults(format!("drop {p}"), |f| f.drop = p)
     }
 
     fn clear(&self) -> Result<String, String> {
-        self.change_faults(|f| *f = Faults::default())
+        self.change_faults(String::new(), |f| *f = Faults::default())
     }
 
     fn stats(&self) -> Stats {
@@ -73,9 +78,15 @@ impl Simulator for SimGlove {
 
     fn command(&self, command: GloveCommand) -> Result<String, String> {
         match command {
-            GloveCommand::Garbage(p) => self.change_faults(|f| f.garbage = p),
-            GloveCommand::Corrupt(p) => self.change_faults(|f| f.corrupt = p),
-            GloveCommand::OtherId(p) => self.change_faults(|f| f.other_id = p),
+            GloveCommand::Garbage(p) => {
+                self.change_faults(format!("garbage {p}"), |f| f.garbage = p)
+            }
+            GloveCommand::Corrupt(p) => {
+                self.change_faults(format!("corrupt {p}"), |f| f.corrupt = p)
+            }
+            GloveCommand::OtherId(p) => {
+                self.change_faults(format!("other-id {p}"), |f| f.other_id = p)
+            }
             GloveCommand::Late(by) => {
                 self.answer_late(by);
                 Ok(format!("late {} ms", by.as_millis()))
