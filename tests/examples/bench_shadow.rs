@@ -43,7 +43,7 @@ use teleop_shadow_protocol::can::APP_START;
 use teleop_shadow_protocol::hex;
 use teleop_shadow_protocol::mapping::Mapping;
 use teleop_sim_shadow::ethercat::ShadowBus;
-use teleop_sim_shadow::hand::{Hand, Object};
+use teleop_sim_shadow::hand::{Hand, VirtualObject};
 use teleop_sim_shadow::palm::Palm;
 
 const WARM_UP: Duration = Duration::from_secs(2);
@@ -79,7 +79,7 @@ fn main() {
     let socket = dir.join("teleop-shadow.sock");
 
     let mfj3 = usize::from(Mapping::EV3.motor_of_joint("MFJ3").unwrap());
-    let hand = Hand::new(Mapping::EV3, Some(Object::ball()));
+    let hand = Hand::new(Mapping::EV3, Some(VirtualObject::ball()));
     let sim = Arc::new(Mutex::new(ShadowBus::new(
         Palm::with_hand(hand),
         1178,

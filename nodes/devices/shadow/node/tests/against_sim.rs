@@ -15,7 +15,7 @@ use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState};
 use teleop_shadow::joints::JOINTS;
 use teleop_shadow_protocol::mapping::Mapping;
 use teleop_sim_shadow::ethercat::ShadowBus;
-use teleop_sim_shadow::hand::{Hand, Object};
+use teleop_sim_shadow::hand::{Hand, VirtualObject};
 use teleop_sim_shadow::palm::{Palm, CUT_OUT_C};
 
 fn lock(sim: &Sim) -> std::sync::MutexGuard<'_, ShadowBus> {
@@ -43,7 +43,7 @@ impl ShadowRig for Rig {
     fn new() -> Self {
         let rig = TestRig::new();
         let socket = rig.path("shadow.sock");
-        let hand = Hand::new(Mapping::EV3, Some(Object::ball()));
+        let hand = Hand::new(Mapping::EV3, Some(VirtualObject::ball()));
         let sim = serve(&socket, Palm::with_hand(hand));
         let config = format!("transport = \"sim:{}\"\n", socket.display());
         let program = env!("CARGO_BIN_EXE_teleop-shadow");

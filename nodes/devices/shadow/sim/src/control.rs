@@ -82,10 +82,10 @@ impl ShadowSim {
 }
 
 /// The hand's geometry of `object` (it has no bar).
-pub fn hand_object(object: Option<Object>) -> Result<Option<hand::Object>, String> {
+pub fn hand_object(object: Option<Object>) -> Result<Option<hand::VirtualObject>, String> {
     match object {
         None => Ok(None),
-        Some(Object::Ball) => Ok(Some(hand::Object::ball())),
+        Some(Object::Ball) => Ok(Some(hand::VirtualObject::ball())),
         Some(other) => Err(format!(
             "object: the Shadow simulator has no {}: use ball or none",
             other.name()

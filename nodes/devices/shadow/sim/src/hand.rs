@@ -30,14 +30,14 @@ pub const PST_IDLE: u16 = 10;
 
 /// A virtual object: it stops a finger whose closure (J3 + J0 / 2) reaches `closure` rad.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Object {
+pub struct VirtualObject {
     /// The finger (0 FF, 1 MF, 2 RF, 3 LF).
     pub finger: usize,
     /// Closure at contact, rad.
     pub closure: f64,
 }
 
-impl Object {
+impl VirtualObject {
     /// The default: a ball under the middle finger.
     pub fn ball() -> Self {
         Self {
@@ -55,7 +55,7 @@ pub struct Hand {
     /// What each motor drives.
     dofs: [Option<Dof>; MOTORS],
     /// The object, if any.
-    pub object: Option<Object>,
+    pub object: Option<VirtualObject>,
     /// Contact force on each fingertip (FF, MF, RF, LF, TH), N.
     pub contact_n: [f64; TACTILE],
 }
@@ -65,7 +65,7 @@ const FINGER_J1: [usize; 4] = [0, 4, 8, 12];
 
 impl Hand {
     /// An open hand with the motors of `mapping` and `object`.
-    pub fn new(mapping: Mapping, object: Option<Object>) -> Self {
+    pub fn new(mapping: Mapping, object: Option<VirtualObject>) -> Self {
         Self {
             angles: [0.0; 24],
             dofs: mapping.dofs(),
@@ -180,7 +180,7 @@ mod tests {
 
     #[test]
     fn the_ball_stops_the_middle_finger_and_presses_its_fingertip() {
-        let mut hand = Hand::new(Mapping::EV4, Some(Object::ball()));
+        let mut hand = Hand::new(Mapping::EV4, Some(VirtualObject::ball()));
         let mut t = torque_on(Mapping::EV4, "MFJ3", 3000.0);
         t[usize::from(Mapping::EV4.motor_of_joint("FFJ3").unwrap())] = 3000.0;
         for _ in 0..3000 {

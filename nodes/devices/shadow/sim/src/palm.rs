@@ -27,7 +27,7 @@ use teleop_shadow_protocol::layout::{CanBridge, Command, MotorPacket, Status, MO
 use teleop_shadow_protocol::mapping::Mapping;
 
 use crate::bootloader::{Board, Mode};
-use crate::hand::{Hand, Object};
+use crate::hand::{Hand, VirtualObject};
 
 /// One motor's application state.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -179,7 +179,7 @@ impl Palm {
     /// A palm whose 20 boards run an application (revision 2035), in a hand of the E v3 mapping with the
     /// ball under its middle finger.
     pub fn new() -> Self {
-        Self::with_hand(Hand::new(Mapping::EV3, Some(Object::ball())))
+        Self::with_hand(Hand::new(Mapping::EV3, Some(VirtualObject::ball())))
     }
 
     /// A palm whose 20 boards run an application, in `hand`.
