@@ -176,6 +176,21 @@ impl Rig {
         process
     }
 
+    /// Starts an EtherCAT hand's simulator on a local socket, `teleop-sim-<device> --socket
+    /// <sandbox>/<device>.sock` (its control socket is `<device>.ctl` beside it), as
+    /// `sim-<device>`, and waits until it says it serves; returns the `sim:` transport that
+    /// reaches it.
+    pub fn start_socket_sim(&mut self, device: &str) -> String {
+        let socket = self.path(&format!("{device}.sock")).display().to_string();
+        self.start_sim(
+            &format!("sim-{device}"),
+            crate::bin(&format!("teleop-sim-{device}")),
+            &["--socket", &socket],
+            &format!("{device}: socket"),
+        );
+        format!("sim:{socket}")
+    }
+
     /// The process started as `name`.
     pub fn process(&mut self, name: &str) -> &mut Process {
         self.processes

@@ -3,20 +3,13 @@
 #![allow(clippy::unwrap_used)]
 
 use teleop_e2e::rig::Rig;
-use teleop_e2e::{bin, Sandbox};
+use teleop_e2e::Sandbox;
 
 /// The emulated Revo2 as its own process on a socket in a fresh rig, and the transport that
 /// reaches it.
 fn start() -> (Rig, String) {
     let mut rig = Rig::new();
-    let socket = rig.path("revo2.sock").display().to_string();
-    rig.start_sim(
-        "sim-revo2",
-        bin("teleop-sim-revo2"),
-        &["--socket", &socket],
-        "revo2: socket",
-    );
-    let transport = format!("sim:{socket}");
+    let transport = rig.start_socket_sim("revo2");
     (rig, transport)
 }
 

@@ -5,7 +5,6 @@
 //! crafted CAN message and its reply, and the ADC channel check.
 #![allow(clippy::unwrap_used)]
 
-use teleop_e2e::bin;
 use teleop_e2e::rig::Rig;
 use teleop_shadow_protocol::can::APP_START;
 use teleop_shadow_protocol::hex;
@@ -14,14 +13,8 @@ use teleop_shadow_protocol::hex;
 /// that reaches it.
 fn start() -> (Rig, String) {
     let mut rig = Rig::new();
-    let socket = rig.path("shadow.sock").display().to_string();
-    rig.start_sim(
-        "sim-shadow",
-        bin("teleop-sim-shadow"),
-        &["--socket", &socket],
-        "shadow: socket",
-    );
-    (rig, format!("sim:{socket}"))
+    let transport = rig.start_socket_sim("shadow");
+    (rig, transport)
 }
 
 fn shadow(rig: &Rig, transport: &str, args: &[&str]) -> (bool, String) {
