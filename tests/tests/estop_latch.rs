@@ -78,6 +78,18 @@ impl Hand {
         forces
     }
 
+    /// Pumps for `duration`: force commands come back from `whose` node, every one stopped
+    /// (else the test fails saying `failure`).
+    fn stays_stopped(&mut self, duration: Duration, whose: &str, failure: &str) {
+        let forces = self.pump(duration);
+        assert!(!forces.is_empty(), "force commands from {whose}");
+        assert!(
+            forces.iter().all(stopped),
+            "{failure}: {:?}",
+            forces.iter().find(|f| !stopped(f))
+        );
+    }
+
     /// Pumps until the newest force command satisfies `ok` (panics after `timeout`).
     fn until(&mut self, timeout: Duration, what: &str, ok: impl Fn(&GloveForceCommand) -> bool) {
         wait_for(timeout, what, || {
@@ -143,12 +155,10 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
     kill_9(first);
     let second = restarted(&sandbox, "feedback", first);
     hand.forces.drain(|_| {}); // the killed node's last ones
-    let forces = hand.pump(Duration::from_millis(700));
-    assert!(!forces.is_empty(), "force commands from the restarted node");
-    assert!(
-        forces.iter().all(stopped),
-        "restarted node released the e-stop: {:?}",
-        forces.iter().find(|f| !stopped(f))
+    hand.stays_stopped(
+        Duration::from_millis(700),
+        "the restarted node",
+        "restarted node released the e-stop",
     );
 
     // Released: forces return.
@@ -177,12 +187,10 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
     let third = restarted(&sandbox, "feedback", second);
     assert_ne!(third, first);
     hand.forces.drain(|_| {}); // the killed node's last ones
-    let forces = hand.pump(Duration::from_millis(700));
-    assert!(!forces.is_empty(), "force commands from the restarted node");
-    assert!(
-        forces.iter().all(stopped),
-        "the e-stop sent while the node was down was lost: {:?}",
-        forces.iter().find(|f| !stopped(f))
+    hand.stays_stopped(
+        Duration::from_millis(700),
+        "the restarted node",
+        "the e-stop sent while the node was down was lost",
     );
 
     // Only --release releases.
@@ -577,12 +585,10 @@ fn an_estop_engaged_while_nothing_runs_stops_both_sides_of_a_session_started_lat
     left.until(Duration::from_secs(20), "the left side's forces", |_| true);
     right.until(Duration::from_secs(20), "the right side's forces", |_| true);
     for (name, hand) in [("left", &mut left), ("right", &mut right)] {
-        let forces = hand.pump(Duration::from_millis(500));
-        assert!(!forces.is_empty(), "{name}: force commands");
-        assert!(
-            forces.iter().all(stopped),
-            "{name} side pushes under the e-stop engaged before it started: {:?}",
-            forces.iter().find(|f| !stopped(f))
+        hand.stays_stopped(
+            Duration::from_millis(500),
+            &format!("the {name} side"),
+            &format!("{name} side pushes under the e-stop engaged before it started"),
         );
     }
     assert!(said.contains("in any namespace, will obey it"), "{said}");
