@@ -2,6 +2,11 @@
 //! starts) as separate processes, each session in its own temporary folder and iceoryx2
 //! root/prefix so that tests can run in parallel without seeing each other.
 //!
+//! One rig and one watcher serve every test: [`rig`] starts processes (a simulator, a node, the
+//! CLI) in a [`Sandbox`] and keeps their logs, [`watch`] waits on a session's topics and says
+//! what it saw, [`hand`] is a hand node under test on a rig, [`ecat`] an emulated EtherCAT bus
+//! served from the test's own process.
+//!
 //! The executables must be built first (`cargo build --workspace --bins`, which the README's
 //! test command does); [`bin`] says so when one is missing.
 //!
