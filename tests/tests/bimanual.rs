@@ -15,6 +15,16 @@ use teleop_msgs::{
 use teleop_runtime::{Namespace, NodeRuntime, Subscriber};
 
 const SIDES: [&str; 2] = ["left", "right"];
+
+/// The topics that flow on each side of a running session.
+const FLOWING: [&str; 5] = [
+    "glove/state",
+    "hand/command",
+    "hand/state",
+    "hand/tactile",
+    "glove/force_command",
+];
+
 /// How long the session runs.
 const SESSION: Duration = Duration::from_secs(20);
 
@@ -185,13 +195,7 @@ fn both_sides_close_their_loops_and_are_recorded() {
     );
     let rows = stats_rows(&String::from_utf8(out.stdout).unwrap());
     for side in SIDES {
-        for topic in [
-            "glove/state",
-            "hand/command",
-            "hand/state",
-            "hand/tactile",
-            "glove/force_command",
-        ] {
+        for topic in FLOWING {
             let name = format!("{side}/{topic}");
             let samples = rows.iter().find(|(t, _)| *t == name).map(|r| r.1);
             assert!(
@@ -267,14 +271,7 @@ fn both_sides_close_their_loops_and_are_recorded() {
     let info = teleop_recording::info(&path).unwrap();
     assert!(info.complete);
     for side in SIDES {
-        for topic in [
-            "glove/state",
-            "hand/command",
-            "hand/state",
-            "hand/tactile",
-            "glove/force_command",
-            "health",
-        ] {
+        for topic in FLOWING.iter().chain(&["health"]) {
             let name = format!("{side}/{topic}");
             let t = info.topics.iter().find(|t| t.topic == name);
             assert!(
