@@ -10,11 +10,16 @@
 //!   (counted once per loss), refusals and clamps counted once per command sample and logged
 //!   rate-limited, the ramp back after any hold, `hand/state` and `hand/tactile` out, health and
 //!   device info periodically, also while the link is down;
-//! - [`Resume`] ([`resume`]): the ramp from a held target back to the operator's pose (pure).
+//! - [`Resume`] ([`resume`]): the ramp from a held target back to the operator's pose (pure);
+//! - [`session`]: the one session loop a device runs under, through its [`Transport`]: connect
+//!   with typed errors (a lost link retried with back-off, a wrong device or setting looked at
+//!   again slowly), one turn of the device's clock at a time, the device's hold on stop once per
+//!   session on every way out, reconnect, and link-down reports while the hand is away.
 //!
-//! A device plugs in below this: its transport (the EtherCAT master's cycle with a driver, the
-//! Allegro's loop on its CAN stream) asks [`HandPorts::command`] once per cycle for the command
-//! to follow (`None`: hold) and hands every cycle's state to [`HandPorts::publish`].
+//! A device plugs in below this as a [`Transport`] (the Allegro's CAN stream; the EtherCAT
+//! master's cycle with a driver still runs its own loop, see ARCHITECTURE.md): each turn asks
+//! [`HandPorts::command`] for the command to follow (`None`: hold) and hands the turn's state
+//! to [`HandPorts::publish`]; its link-down reports go to [`HandPorts::publish_down`].
 //!
 //! # What it must not depend on
 //!
@@ -23,7 +28,9 @@
 pub mod admission;
 pub mod ports;
 pub mod resume;
+pub mod session;
 
 pub use admission::{Admission, Modes, Refusal};
 pub use ports::{HandPorts, Timing, REFUSAL_LOG_PERIOD};
 pub use resume::Resume;
+pub use session::{Backoff, Cause, ConnectError, Down, Ending, Fault, Transport};
