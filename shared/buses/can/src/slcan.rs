@@ -660,7 +660,7 @@ mod tests {
     }
 
     #[test]
-    fn notes_examples() {
+    fn the_slcan_protocol_examples_encode_as_documented() {
         let on = CanFrame::standard(0x100, &[]).expect("valid");
         assert_eq!(line(&on), "t1000\r");
         let period = CanFrame::standard(0x204, &[3, 0, 0, 0, 0, 0]).expect("valid");

@@ -196,7 +196,7 @@ mod tests {
     }
 
     #[test]
-    fn notes_numbers() {
+    fn frame_lengths_match_the_documented_bit_counts() {
         // docs/devices/allegro.md: 8 bytes 111..135 bits; DLC 0 or RTR 47..55.
         assert_eq!(frame_bits(&std8()), (111, 135));
         let empty = CanFrame::standard(0x04A, &[]).expect("valid");

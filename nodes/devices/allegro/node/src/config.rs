@@ -383,7 +383,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn defaults_are_valid_and_follow_the_notes() {
+    fn defaults_are_valid_and_follow_the_device_page() {
         let s = AllegroConfig::default().validate().unwrap();
         assert_eq!(s.period, Duration::from_millis(3));
         assert_eq!(&s.pwm_limit[..4], &[375, 675, 450, 285]);
