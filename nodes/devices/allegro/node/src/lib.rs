@@ -10,8 +10,9 @@
 //!   frames mean), over `teleop-allegro-protocol`;
 //! - [`bringup`]: bringing the hand up on a link, detecting its generation, naming a hand of the
 //!   other generation or a silent bus;
-//! - [`driver`]: the loop clocked by the hand's stream, its safety (hold, missing frames, bus
-//!   errors, reconnect, stop) behind a [`driver::Host`];
+//! - [`driver`]: the loop clocked by the hand's stream (hold, missing frames, bus errors, zero
+//!   torque and SYSTEM_OFF at the end of each session) as a transport under the hand-node core's
+//!   session loop (reconnect, back-off, stop), behind a [`driver::Host`];
 //! - [`node`]: the node's ports as that host (`hand/command` in; `hand/state`, health,
 //!   `device/info` out).
 //!

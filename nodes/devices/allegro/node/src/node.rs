@@ -152,7 +152,9 @@ impl Host for Ports {
             Generation::V3 => 3.0,
             Generation::V4 => 4.0,
         };
-        self.hand.health().set_detail("protocol_generation", generation);
+        self.hand
+            .health()
+            .set_detail("protocol_generation", generation);
         tracing::info!(
             generation = %hand.generation,
             firmware = %firmware_text(hand.identity),
