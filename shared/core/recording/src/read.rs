@@ -1,6 +1,7 @@
 //! Reading recordings: [`info`] and [`read_messages`].
 
 use std::{
+    borrow::Cow,
     collections::{BTreeMap, HashMap, HashSet},
     fs::File,
     io::{Read, Seek, SeekFrom},
@@ -10,7 +11,7 @@ use std::{
 };
 
 use mcap::{
-    records::{ChunkIndex, Record},
+    records::{ChunkIndex, Record, SchemaHeader},
     sans_io::{indexed_reader::ReadOrder, IndexedReadEvent, IndexedReader, IndexedReaderOptions},
     Summary,
 };
@@ -299,11 +300,7 @@ fn info_from_summary(
                         &c.topic,
                         c.schema
                             .as_ref()
-                            .map(|s| RecordedSchema {
-                                name: &s.name,
-                                encoding: &s.encoding,
-                                data: &s.data,
-                            })
+                            .map(|s| RecordedSchema::from(&**s))
                             .as_ref(),
                         &c.message_encoding,
                     ),
@@ -416,14 +413,7 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
         };
         match record {
             Record::Schema { header, data } => {
-                schemas.insert(
-                    header.id,
-                    StreamSchema {
-                        name: header.name,
-                        encoding: header.encoding,
-                        data: data.into_owned(),
-                    },
-                );
+                schemas.insert(header.id, StreamSchema::new(header, data));
             }
             Record::Channel(c) => {
                 let schema = schemas.get(&c.schema_id);
@@ -431,13 +421,7 @@ fn info_by_streaming(file: OpenFile) -> Result<RecordingInfo, RecordingError> {
                 entry.converted_from = converted_from(
                     &path,
                     &c.topic,
-                    schema
-                        .map(|s| RecordedSchema {
-                            name: &s.name,
-                            encoding: &s.encoding,
-                            data: &s.data,
-                        })
-                        .as_ref(),
+                    schema.map(RecordedSchema::from).as_ref(),
                     &c.message_encoding,
                 );
                 entry.topic = c.topic;
@@ -547,11 +531,7 @@ fn indexed_messages(
         if !wanted(filter, &channel.topic) {
             continue;
         }
-        let schema = channel.schema.as_ref().map(|s| RecordedSchema {
-            name: &s.name,
-            encoding: &s.encoding,
-            data: &s.data,
-        });
+        let schema = channel.schema.as_ref().map(|s| RecordedSchema::from(&**s));
         let kind = check_channel(
             &file.path,
             &channel.topic,
@@ -682,6 +662,37 @@ struct StreamSchema {
     data: Vec<u8>,
 }
 
+impl StreamSchema {
+    /// The schema of a `Schema` record met while streaming.
+    fn new(header: SchemaHeader, data: Cow<'_, [u8]>) -> Self {
+        Self {
+            name: header.name,
+            encoding: header.encoding,
+            data: data.into_owned(),
+        }
+    }
+}
+
+impl<'a> From<&'a StreamSchema> for RecordedSchema<'a> {
+    fn from(s: &'a StreamSchema) -> Self {
+        Self {
+            name: &s.name,
+            encoding: &s.encoding,
+            data: &s.data,
+        }
+    }
+}
+
+impl<'a> From<&'a mcap::Schema<'_>> for RecordedSchema<'a> {
+    fn from(s: &'a mcap::Schema<'_>) -> Self {
+        Self {
+            name: &s.name,
+            encoding: &s.encoding,
+            data: &s.data,
+        }
+    }
+}
+
 struct StreamState {
     stream: RecordStream,
     /// Errors from the MCAP layer are reported (finished file) or end the iteration quietly
@@ -791,14 +802,8 @@ impl StreamState {
             };
             match record {
                 Record::Schema { header, data } => {
-                    self.schemas.insert(
-                        header.id,
-                        StreamSchema {
-                            name: header.name,
-                            encoding: header.encoding,
-                            data: data.into_owned(),
-                        },
-                    );
+                    self.schemas
+                        .insert(header.id, StreamSchema::new(header, data));
                 }
                 Record::Channel(c) => {
                     let wanted = self.topics.as_ref().is_none_or(|t| t.contains(&c.topic));
@@ -816,11 +821,7 @@ impl StreamState {
                             ),
                         }));
                     }
-                    let recorded = schema.map(|s| RecordedSchema {
-                        name: &s.name,
-                        encoding: &s.encoding,
-                        data: &s.data,
-                    });
+                    let recorded = schema.map(RecordedSchema::from);
                     let kind =
                         match check_channel(path, &c.topic, recorded.as_ref(), &c.message_encoding)
                         {

@@ -3,57 +3,12 @@
 
 mod common;
 
-use std::{
-    collections::BTreeMap,
-    io::BufWriter,
-    path::{Path, PathBuf},
-    sync::OnceLock,
-};
+use std::{collections::BTreeMap, path::Path, sync::OnceLock};
 
+use common::{raw_file, write_bytes};
 use proptest::prelude::*;
 use teleop_msgs::{GloveState, Message, NodeHealth, CDR_LE_HEADER};
 use teleop_recording::*;
-
-fn write_bytes(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, bytes).unwrap();
-    path
-}
-
-/// A file of one channel written with the MCAP library directly, bypassing the recorder's
-/// checks.
-fn raw_file(
-    dir: &Path,
-    topic: &str,
-    schema_name: &str,
-    schema_text: &str,
-    message_encoding: &str,
-    data: &[u8],
-) -> PathBuf {
-    let path = dir.join("raw.mcap");
-    let file = std::fs::File::create(&path).unwrap();
-    let mut w = mcap::WriteOptions::new()
-        .create(BufWriter::new(file))
-        .unwrap();
-    let schema = w
-        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
-        .unwrap();
-    let channel = w
-        .add_channel(schema, topic, message_encoding, &BTreeMap::new())
-        .unwrap();
-    w.write_to_known_channel(
-        &mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: 1,
-            log_time: 10,
-            publish_time: 9,
-        },
-        data,
-    )
-    .unwrap();
-    w.finish().unwrap();
-    path
-}
 
 fn glove_data() -> Vec<u8> {
     let s: GloveState = common::sample(1, 1, 1);

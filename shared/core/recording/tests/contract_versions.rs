@@ -8,11 +8,10 @@ mod common;
 
 use std::{
     collections::{BTreeMap, HashMap, HashSet},
-    io::BufWriter,
     path::{Path, PathBuf},
 };
 
-use common::{fill, leaves, sample, value, Leaf, Value};
+use common::{fill, leaves, raw_file, sample, value, write_bytes, Leaf, Value};
 use teleop_msgs::{
     bus_state, device_model, fingertip_sensor, link_kind, text_of, DeviceInfo, HandState, Message,
     NodeHealth, Tactile, CDR_LE_HEADER, CONTRACT_VERSION,
@@ -20,6 +19,7 @@ use teleop_msgs::{
 use teleop_recording::{
     legacy::{
         DEVICE_INFO_V2_SCHEMA, HAND_STATE_V1_SCHEMA, NODE_HEALTH_V2_SCHEMA, TACTILE_V1_SCHEMA,
+        V2_DETAIL_NAMES,
     },
     *,
 };
@@ -283,19 +283,16 @@ fn check_health(v2: &[u8], v3: &NodeHealth) {
             ("rtt_ms".into(), u16_ms(1)),
             ("latency_p99_ms".into(), u16_ms(3)),
         ],
-        "allegro" => [
-            "protocol_generation",
-            "bus_state",
-            "unknown_frames",
-            "bad_frames",
-            "reconnects",
-            "max_temperature_c",
-            "late_periods",
-        ]
-        .iter()
-        .enumerate()
-        .map(|(i, n)| (n.to_string(), byte(i)))
-        .collect(),
+        // The Allegro's seven byte counters, in version 2's order (named once, in `legacy`).
+        "allegro" => V2_DETAIL_NAMES
+            .iter()
+            .find(|(n, _)| *n == "allegro")
+            .unwrap()
+            .1
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.to_string(), byte(i)))
+            .collect(),
         _ => (0..7)
             .filter(|&i| detail[i] != 0)
             .map(|i| (format!("detail_{i}"), byte(i)))
@@ -470,27 +467,50 @@ fn read_v2_sample(path: &Path) -> Vec<OwnedMessage> {
     messages
 }
 
+/// Reads a version 2 sample of one hand (as [`read_v2_sample`]): its converted `DeviceInfo`
+/// has `fields` by name, and its `hand/state` (version 2's, unchanged) shows the hand with the
+/// link up on `link` with `joint_count` joints. Returns the messages.
+fn read_v2_hand_sample(
+    path: &str,
+    model: u8,
+    fields: &[(&str, &str)],
+    link: u8,
+    joint_count: u8,
+) -> Vec<OwnedMessage> {
+    let messages = read_v2_sample(Path::new(path));
+    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
+    let device = devices.iter().find(|d| d.device_model == model).unwrap();
+    let want: Vec<(&str, String)> = fields.iter().map(|&(n, v)| (n, v.to_string())).collect();
+    assert_eq!(device.named_fields(), want, "{path}");
+    let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
+    assert!(
+        states.iter().any(|s| s.link_up == 1
+            && s.link_kind == link
+            && s.hand_model == model
+            && s.joint_count == joint_count),
+        "{path}"
+    );
+    messages
+}
+
 #[test]
 fn the_version_2_allegro_sample_reads_converted() {
-    let messages = read_v2_sample(Path::new(ALLEGRO_V2));
-    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
-    let allegro = devices
-        .iter()
-        .find(|d| d.device_model == device_model::ALLEGRO)
-        .unwrap();
     // Version 2 kept the link in `serial_b` (32 bytes: the path is cut there).
-    assert_eq!(
-        allegro.named_fields(),
-        [
-            ("device_model", "allegro".to_string()),
-            ("link_kind", "can".to_string()),
-            ("bus_address", "0".to_string()),
-            ("model_name", "Wonik Allegro Hand v4".to_string()),
-            ("serial_number", "SAH04000AR0042".to_string()),
-            ("firmware_version", "hw 0x0401 fw 0x0102".to_string()),
-            ("protocol", "v4".to_string()),
-            ("link", "slcan:/tmp/v2fix/run/teleop-alle".to_string()),
-        ]
+    let messages = read_v2_hand_sample(
+        ALLEGRO_V2,
+        device_model::ALLEGRO,
+        &[
+            ("device_model", "allegro"),
+            ("link_kind", "can"),
+            ("bus_address", "0"),
+            ("model_name", "Wonik Allegro Hand v4"),
+            ("serial_number", "SAH04000AR0042"),
+            ("firmware_version", "hw 0x0401 fw 0x0102"),
+            ("protocol", "v4"),
+            ("link", "slcan:/tmp/v2fix/run/teleop-alle"),
+        ],
+        link_kind::CAN,
+        16,
     );
     let health: Vec<NodeHealth> = messages.iter().filter_map(|m| m.decode()).collect();
     let node = health.iter().rev().find(|h| h.name() == "allegro").unwrap();
@@ -500,63 +520,61 @@ fn the_version_2_allegro_sample_reads_converted() {
         Some(f64::from(bus_state::CAN_ERROR_ACTIVE))
     );
     assert!(node.detail("max_temperature_c") > Some(0.0));
-    // The hand state is version 2's, unchanged: CAN, 16 joints.
-    let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
-    assert!(states.iter().any(|s| s.link_up == 1
-        && s.link_kind == link_kind::CAN
-        && s.hand_model == device_model::ALLEGRO
-        && s.joint_count == 16));
 }
 
 #[test]
 fn the_version_2_shadow_sample_reads_converted() {
-    let messages = read_v2_sample(Path::new(SHADOW_V2));
-    let devices: Vec<DeviceInfo> = messages.iter().filter_map(|m| m.decode()).collect();
-    let shadow = devices
-        .iter()
-        .find(|d| d.device_model == device_model::SHADOW)
-        .unwrap();
-    assert_eq!(
-        shadow.named_fields(),
-        [
-            ("device_model", "shadow".to_string()),
-            ("link_kind", "ethercat".to_string()),
-            ("identity_serial", "1178".to_string()),
-            ("model_name", "Shadow Hand E (SR06 palm, 0220)".to_string()),
-            ("serial_number", "1178".to_string()),
-            ("hardware_revision", "0".to_string()),
-        ]
+    read_v2_hand_sample(
+        SHADOW_V2,
+        device_model::SHADOW,
+        &[
+            ("device_model", "shadow"),
+            ("link_kind", "ethercat"),
+            ("identity_serial", "1178"),
+            ("model_name", "Shadow Hand E (SR06 palm, 0220)"),
+            ("serial_number", "1178"),
+            ("hardware_revision", "0"),
+        ],
+        link_kind::ETHERCAT,
+        24,
     );
-    let states: Vec<HandState> = messages.iter().filter_map(|m| m.decode()).collect();
-    assert!(states
-        .iter()
-        .any(|s| s.link_up == 1 && s.hand_model == device_model::SHADOW && s.joint_count == 24));
+}
+
+/// The byte offset of the primitive field `path` (`kind`, `serial_a[0]`) in a payload of
+/// `schema`.
+fn offset_of(schema: &str, path: &str) -> usize {
+    leaves(schema)
+        .into_iter()
+        .find(|l| l.path == path)
+        .unwrap_or_else(|| panic!("no field {path}"))
+        .offset
+}
+
+/// The one message of a file holding a version 2 `DeviceInfo` `payload`, read converted.
+fn read_v2_device_info(dir: &Path, payload: &[u8]) -> DeviceInfo {
+    let path = cdr_file(
+        dir,
+        "device/info",
+        DeviceInfo::SCHEMA_NAME,
+        DEVICE_INFO_V2_SCHEMA,
+        payload,
+    );
+    let messages = all_messages(&path);
+    assert_eq!(messages.len(), 1);
+    messages[0].decode().unwrap()
 }
 
 #[test]
 fn every_version_2_slot_lands_in_its_named_field() {
     let dir = tempfile::tempdir().unwrap();
     let size = 200;
-    let kind_at = leaves(DEVICE_INFO_V2_SCHEMA)
-        .into_iter()
-        .find(|l| l.path == "kind")
-        .unwrap()
-        .offset;
+    let kind_at = offset_of(DEVICE_INFO_V2_SCHEMA, "kind");
     // Each device kind of version 2 and one it did not number; text slots full of distinctive
     // bytes (no zero: all 32 bytes are text).
     for kind in [1u8, 2, 3, 4, 9] {
         let mut payload = v1_payload(DEVICE_INFO_V2_SCHEMA, size, u64::from(kind));
         payload[kind_at] = kind;
-        let path = raw_file(
-            dir.path(),
-            "device/info",
-            DeviceInfo::SCHEMA_NAME,
-            DEVICE_INFO_V2_SCHEMA,
-            &payload,
-        );
-        let messages = all_messages(&path);
-        assert_eq!(messages.len(), 1);
-        let got: DeviceInfo = messages[0].decode().unwrap();
+        let got = read_v2_device_info(dir.path(), &payload);
         assert_eq!(got, device_info_expected(&payload), "kind {kind}");
         let expected_model = [
             device_model::GLOVE,
@@ -576,20 +594,9 @@ fn every_version_2_slot_lands_in_its_named_field() {
     ] {
         let mut payload = vec![0u8; size];
         payload[kind_at] = kind;
-        let at = leaves(DEVICE_INFO_V2_SCHEMA)
-            .into_iter()
-            .find(|l| l.path == format!("{slot}[0]"))
-            .unwrap()
-            .offset;
+        let at = offset_of(DEVICE_INFO_V2_SCHEMA, &format!("{slot}[0]"));
         payload[at..at + text.len()].copy_from_slice(text.as_bytes());
-        let path = raw_file(
-            dir.path(),
-            "device/info",
-            DeviceInfo::SCHEMA_NAME,
-            DEVICE_INFO_V2_SCHEMA,
-            &payload,
-        );
-        let got: DeviceInfo = all_messages(&path)[0].decode().unwrap();
+        let got = read_v2_device_info(dir.path(), &payload);
         let value = got
             .named_fields()
             .into_iter()
@@ -602,8 +609,7 @@ fn every_version_2_slot_lands_in_its_named_field() {
 #[test]
 fn every_version_2_health_detail_is_named() {
     let dir = tempfile::tempdir().unwrap();
-    let leaves_v2 = leaves(NODE_HEALTH_V2_SCHEMA);
-    let at = |path: &str| leaves_v2.iter().find(|l| l.path == path).unwrap().offset;
+    let at = |path: &str| offset_of(NODE_HEALTH_V2_SCHEMA, path);
     for node in ["feedback", "left/bridge", "right/allegro", "retarget"] {
         let mut payload = v1_payload(NODE_HEALTH_V2_SCHEMA, 128, 5);
         let name_at = at("node_name[0]");
@@ -611,7 +617,7 @@ fn every_version_2_health_detail_is_named() {
         payload[name_at..name_at + node.len()].copy_from_slice(node.as_bytes());
         // One zero detail byte: a node without names of its own keeps only the others.
         payload[at("detail[2]")] = 0;
-        let path = raw_file(
+        let path = cdr_file(
             dir.path(),
             "health",
             NodeHealth::SCHEMA_NAME,
@@ -630,7 +636,7 @@ fn every_version_2_health_detail_is_named() {
         assert_eq!(named, want, "{node}");
     }
     // A version 2 message of the wrong size is a bad message naming the version.
-    let path = raw_file(
+    let path = cdr_file(
         dir.path(),
         "health",
         NodeHealth::SCHEMA_NAME,
@@ -649,7 +655,7 @@ fn a_killed_version_1_recording_reads_converted_too() {
     // Cut before the summary: the streaming reader (file order, no indexes) converts as well.
     let dir = tempfile::tempdir().unwrap();
     let bytes = std::fs::read(SAMPLE).unwrap();
-    let cut = write(dir.path(), "cut.mcap", &bytes[..bytes.len() / 2]);
+    let cut = write_bytes(dir.path(), "cut.mcap", &bytes[..bytes.len() / 2]);
     let cut_info = info(&cut).unwrap();
     assert!(!cut_info.complete);
     let topics: Vec<&str> = converted_topics(&cut_info)
@@ -672,43 +678,16 @@ fn a_killed_version_1_recording_reads_converted_too() {
     }
 }
 
-fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
-    let path = dir.join(name);
-    std::fs::write(&path, bytes).unwrap();
-    path
-}
-
-/// A file with one channel and one message, written with the MCAP library directly.
-fn raw_file(
+/// A file of one CDR channel and one message: `payload` after the CDR header.
+fn cdr_file(
     dir: &Path,
     topic: &str,
     schema_name: &str,
     schema_text: &str,
     payload: &[u8],
 ) -> PathBuf {
-    let path = dir.join(format!("{}.mcap", topic.replace('/', "_")));
-    let file = std::fs::File::create(&path).unwrap();
-    let mut w = mcap::WriteOptions::new()
-        .create(BufWriter::new(file))
-        .unwrap();
-    let schema = w
-        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
-        .unwrap();
-    let channel = w
-        .add_channel(schema, topic, "cdr", &BTreeMap::new())
-        .unwrap();
-    w.write_to_known_channel(
-        &mcap::records::MessageHeader {
-            channel_id: channel,
-            sequence: 7,
-            log_time: 10,
-            publish_time: 9,
-        },
-        &[&CDR_LE_HEADER[..], payload].concat(),
-    )
-    .unwrap();
-    w.finish().unwrap();
-    path
+    let data = [&CDR_LE_HEADER[..], payload].concat();
+    raw_file(dir, topic, schema_name, schema_text, "cdr", &data)
 }
 
 /// A version 1 payload of `size` bytes with a distinctive value in every field.
@@ -734,13 +713,9 @@ fn every_version_1_field_is_carried_over() {
         };
         if topic == "hand/tactile" {
             // Three fingertips used, two not: their sensor kind differs.
-            let count = leaves(v1_schema)
-                .into_iter()
-                .find(|l| l.path == "fingertip_count")
-                .unwrap();
-            payload[count.offset] = 3;
+            payload[offset_of(v1_schema, "fingertip_count")] = 3;
         }
-        let path = raw_file(dir.path(), topic, schema_name, v1_schema, &payload);
+        let path = cdr_file(dir.path(), topic, schema_name, v1_schema, &payload);
         let messages: Vec<OwnedMessage> = read_messages(&path, &Filter::all())
             .unwrap()
             .collect::<Result<_, _>>()
@@ -750,7 +725,7 @@ fn every_version_1_field_is_carried_over() {
         check_converted(v1_schema, &payload, &v2_schema, &messages[0].payload);
 
         // A version 1 message of the wrong size is a bad message naming the version.
-        let short = raw_file(dir.path(), topic, schema_name, v1_schema, &payload[1..]);
+        let short = cdr_file(dir.path(), topic, schema_name, v1_schema, &payload[1..]);
         let err = read_messages(&short, &Filter::all())
             .unwrap()
             .find_map(Result::err)
@@ -764,7 +739,7 @@ fn every_version_1_field_is_carried_over() {
 fn an_unknown_version_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let unknown = HAND_STATE_V1_SCHEMA.replace("uint32 wkc_errors", "uint64 wkc_errors");
-    let path = raw_file(
+    let path = cdr_file(
         dir.path(),
         "hand/state",
         HandState::SCHEMA_NAME,
@@ -795,7 +770,7 @@ fn an_unknown_version_is_refused_by_name() {
         assert!(text.contains(part), "{part} missing: {text}");
     }
     // A version 1 schema text on another topic is not version 1 of that topic.
-    let path = raw_file(
+    let path = cdr_file(
         dir.path(),
         "hand/tactile",
         Tactile::SCHEMA_NAME,

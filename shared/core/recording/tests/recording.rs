@@ -74,6 +74,21 @@ fn write_glove(rec: &mut Recorder, count: u64) -> Vec<GloveState> {
 
 /// Simulates SIGKILL: the recorder vanishes without finishing; the file holds what it had
 /// handed to the operating system. Returns a copy of that file.
+/// Writes tick `i` of a 1 kHz stream of `M` on `stream` and, every 100th tick, a `NodeHealth`
+/// on `health` (a node's 10 Hz health); returns the tick's time, `T0 + i` ms.
+fn write_tick<M: Message>(rec: &mut Recorder, stream: TopicId, health: TopicId, i: u64) -> u64 {
+    let t = T0 + i * MS;
+    let s: M = sample(i, i + 1, t);
+    rec.write(stream, &RecordedMessage::from_sample(&s, t))
+        .unwrap();
+    if i.is_multiple_of(100) {
+        let h: NodeHealth = sample(i, i / 100 + 1, t);
+        rec.write(health, &RecordedMessage::from_sample(&h, t))
+            .unwrap();
+    }
+    t
+}
+
 fn kill(rec: Recorder, dir: &Path) -> PathBuf {
     let path = rec.path().to_path_buf();
     std::mem::forget(rec);
@@ -255,15 +270,7 @@ fn rotation_by_size_gives_readable_files_with_schemas_channels_and_metadata() {
     let health = rec.add_message_type::<NodeHealth>().unwrap();
     let n = 1500u64;
     for i in 0..n {
-        let t = T0 + i * MS;
-        let s: HandState = sample(i, i + 1, t);
-        rec.write(hand, &RecordedMessage::from_sample(&s, t))
-            .unwrap();
-        if i % 100 == 0 {
-            let h: NodeHealth = sample(i, i / 100 + 1, t);
-            rec.write(health, &RecordedMessage::from_sample(&h, t))
-                .unwrap();
-        }
+        write_tick::<HandState>(&mut rec, hand, health, i);
     }
     rec.note_drops("hand/state", 2);
     let summary = rec.finish().unwrap();
@@ -351,15 +358,7 @@ fn info_on_finished_and_killed_files() {
         .unwrap();
     // 2 s: glove at 1 kHz, health at 10 Hz, one marker.
     for i in 0..2000u64 {
-        let t = T0 + i * MS;
-        let s: GloveState = sample(i, i + 1, t);
-        rec.write(glove, &RecordedMessage::from_sample(&s, t))
-            .unwrap();
-        if i % 100 == 0 {
-            let h: NodeHealth = sample(i, i / 100 + 1, t);
-            rec.write(health, &RecordedMessage::from_sample(&h, t))
-                .unwrap();
-        }
+        let t = write_tick::<GloveState>(&mut rec, glove, health, i);
         if i == 1000 {
             let marker = RecordedMessage {
                 topic: "lab/marker",

@@ -2,7 +2,11 @@
 //! schema text, and the primitive leaves of a payload.
 #![allow(dead_code, clippy::unwrap_used)]
 
-use std::collections::HashMap;
+use std::{
+    collections::{BTreeMap, HashMap},
+    io::BufWriter,
+    path::{Path, PathBuf},
+};
 
 use teleop_msgs::{Message, TopicVisitor};
 
@@ -181,4 +185,46 @@ pub fn for_each_type<F: ForEachType>(f: &mut F) {
 /// Calls `M`'s handler for the contract type of `topic`.
 pub fn with_type<F: ForEachType>(topic: &str, f: &mut F) {
     teleop_msgs::visit_topic(topic, Adapter(f)).unwrap_or_else(|| panic!("unknown topic {topic}"));
+}
+
+/// Writes `bytes` to `dir/name`.
+pub fn write_bytes(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// A file of one channel and one message (named after its topic), written with the MCAP library
+/// directly, bypassing the recorder's checks.
+pub fn raw_file(
+    dir: &Path,
+    topic: &str,
+    schema_name: &str,
+    schema_text: &str,
+    message_encoding: &str,
+    data: &[u8],
+) -> PathBuf {
+    let path = dir.join(format!("{}.mcap", topic.replace('/', "_")));
+    let file = std::fs::File::create(&path).unwrap();
+    let mut w = mcap::WriteOptions::new()
+        .create(BufWriter::new(file))
+        .unwrap();
+    let schema = w
+        .add_schema(schema_name, "ros2msg", schema_text.as_bytes())
+        .unwrap();
+    let channel = w
+        .add_channel(schema, topic, message_encoding, &BTreeMap::new())
+        .unwrap();
+    w.write_to_known_channel(
+        &mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: 1,
+            log_time: 10,
+            publish_time: 9,
+        },
+        data,
+    )
+    .unwrap();
+    w.finish().unwrap();
+    path
 }
