@@ -127,7 +127,8 @@ pub trait Host {
     /// One cycle was run.
     fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()>;
     /// The hand is down (no link, no answer, or a fault): called after each failed attempt and
-    /// each fault.
+    /// each fault, and every `teleop_hand_node::session::LINK_DOWN_REPORT` while the session
+    /// loop waits to bring the hand up again. An error ends the loop.
     fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()>;
 }
 
