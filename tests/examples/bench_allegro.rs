@@ -34,7 +34,9 @@ use std::time::Duration;
 
 use teleop_allegro_protocol::{v4, Generation};
 use teleop_can_link::{timing, CanLink};
-use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
+use teleop_e2e::bench::{
+    drive_glove, interrupt_all, late_periods, loadavg, percentiles, spawn_quiet, step_reactions,
+};
 use teleop_e2e::Sandbox;
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
@@ -198,14 +200,7 @@ fn report(seen: &[Seen], steps: &[(u64, bool)], state: Vec<u64>, force: Vec<u64>
         "  torque set period (nominal 3000 us)                   {}",
         percentiles(periods.clone())
     );
-    let late = |limit: u64| periods.iter().filter(|p| **p > limit).count();
-    println!(
-        "  torque periods > 4.5 ms / > 6 ms / > 10 ms: {} / {} / {} of {}",
-        late(4_500_000),
-        late(6_000_000),
-        late(10_000_000),
-        periods.len()
-    );
+    println!("  torque {}", late_periods(&periods, [4.5, 6.0, 10.0]));
     // 2. Bus load.
     let bits: u64 = seen.iter().map(|f| u64::from(f.bits)).sum();
     println!(
@@ -215,25 +210,12 @@ fn report(seen: &[Seen], steps: &[(u64, bool)], state: Vec<u64>, force: Vec<u64>
         bits as f64 / span_s
     );
     // 3. Glove -> torque.
-    let middle: Vec<&Seen> = seen.iter().filter(|f| f.id == 0x184).collect();
-    let mut glove = Vec::new();
-    for &(t, closing) in steps {
-        let i = middle.partition_point(|f| f.t_ns < t);
-        let Some(before) = i.checked_sub(1).map(|k| middle[k].pwm1) else {
-            continue;
-        };
-        let moved = middle[i..].iter().find(|f| {
-            let d = i32::from(f.pwm1) - i32::from(before);
-            if closing {
-                d > 150
-            } else {
-                d < -150
-            }
-        });
-        if let Some(f) = moved {
-            glove.push(f.t_ns - t);
-        }
-    }
+    let middle: Vec<(u64, i32)> = seen
+        .iter()
+        .filter(|f| f.id == 0x184)
+        .map(|f| (f.t_ns, i32::from(f.pwm1)))
+        .collect();
+    let glove = step_reactions(&middle, steps, 150);
     println!(
         "  glove/state published -> middle torque frame carrying the step ({} of {} steps)  {}",
         glove.len(),

@@ -34,7 +34,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::bench::{drive_glove, interrupt_all, loadavg, percentiles, spawn_quiet};
+use teleop_e2e::bench::{
+    drive_glove, interrupt_all, late_periods, loadavg, percentiles, spawn_quiet, step_reactions,
+};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{serve_socket, StreamServer};
 use teleop_msgs::{GloveForceCommand, GloveState, HandState};
@@ -213,32 +215,9 @@ fn report(seen: &[Seen], steps: &[(u64, bool)], state: Vec<u64>, force: Vec<u64>
         "  |period - 1000 us|                                    {}",
         percentiles(deviation)
     );
-    let late = |limit: u64| periods.iter().filter(|p| **p > limit).count();
-    println!(
-        "  periods > 1.5 ms / > 2 ms / > 5 ms: {} / {} / {} of {}",
-        late(1_500_000),
-        late(2_000_000),
-        late(5_000_000),
-        periods.len()
-    );
-    let mut glove = Vec::new();
-    for &(t, closing) in steps {
-        let i = seen.partition_point(|f| f.t_ns < t);
-        let Some(before) = i.checked_sub(1).map(|k| seen[k].demand) else {
-            continue;
-        };
-        let moved = seen[i..].iter().find(|f| {
-            let d = i32::from(f.demand) - i32::from(before);
-            if closing {
-                d > 100
-            } else {
-                d < -100
-            }
-        });
-        if let Some(f) = moved {
-            glove.push(f.t_ns - t);
-        }
-    }
+    println!("  {}", late_periods(&periods, [1.5, 2.0, 5.0]));
+    let demand: Vec<(u64, i32)> = seen.iter().map(|f| (f.t_ns, i32::from(f.demand))).collect();
+    let glove = step_reactions(&demand, steps, 100);
     println!(
         "  glove/state published -> MFJ3 demand applied by the palm ({} of {} steps)  {}",
         glove.len(),

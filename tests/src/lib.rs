@@ -325,10 +325,33 @@ pub fn control(path: &Path, command: &str) -> String {
     reply
 }
 
+/// The repository's Revo2 hand profile (the tests' hand where the hand does not matter).
+pub fn revo2_profile() -> String {
+    Sandbox::repo()
+        .join("config/hands/revo2.toml")
+        .display()
+        .to_string()
+}
+
 /// A node configuration for a test's sandbox: `text` naming the repository's Revo2 profile.
 pub fn with_profile(text: &str) -> String {
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    format!("hand_profile = {:?}\n{text}", profile.display().to_string())
+    format!("hand_profile = {:?}\n{text}", revo2_profile())
+}
+
+/// A launch file's `[[process]]` `name`: the node `teleop-<name>` with `--config <name>.toml`,
+/// then `settings` (TOML lines of its restart policy).
+pub fn node_process(name: &str, settings: &str) -> String {
+    format!(
+        "\n[[process]]\nname = \"{name}\"\nprogram = \"teleop-{name}\"\nargs = [\"--config\", \"{name}.toml\"]\n{settings}"
+    )
+}
+
+/// A launch file of one process, `retarget`: `teleop-retarget` on the Revo2 profile.
+pub fn retarget_launch() -> String {
+    format!(
+        "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--profile\", {:?}]\n",
+        revo2_profile()
+    )
 }
 
 /// A force-feedback configuration the tests that run `teleop-feedback` share.
@@ -483,6 +506,44 @@ pub mod bench {
         }
         measuring(false);
         out
+    }
+
+    /// For each glove step `(stamp_ns, closing)` of [`drive_glove`]: the time from the step to
+    /// the first of the device's samples `seen` (`(t_ns, value)`, in time order) whose value
+    /// moved more than `threshold` from the one before the step (up when closing, down when
+    /// opening). Steps with no sample before them or no such move are left out.
+    pub fn step_reactions(seen: &[(u64, i32)], steps: &[(u64, bool)], threshold: i32) -> Vec<u64> {
+        let mut out = Vec::new();
+        for &(t, closing) in steps {
+            let i = seen.partition_point(|&(at, _)| at < t);
+            let Some(before) = i.checked_sub(1).map(|k| seen[k].1) else {
+                continue;
+            };
+            let moved = seen[i..].iter().find(|&&(_, v)| {
+                if closing {
+                    v - before > threshold
+                } else {
+                    v - before < -threshold
+                }
+            });
+            if let Some(&(at, _)) = moved {
+                out.push(at - t);
+            }
+        }
+        out
+    }
+
+    /// `periods > A ms / > B ms / > C ms: a / b / c of n` for the limits `limits_ms`.
+    pub fn late_periods(periods: &[u64], limits_ms: [f64; 3]) -> String {
+        let late = |ms: f64| periods.iter().filter(|&&p| p as f64 > ms * 1e6).count();
+        let [a, b, c] = limits_ms;
+        format!(
+            "periods > {a} ms / > {b} ms / > {c} ms: {} / {} / {} of {}",
+            late(a),
+            late(b),
+            late(c),
+            periods.len()
+        )
     }
 
     /// `p50 .. p99 .. max ..` of samples in nanoseconds, printed in microseconds (`-` for none).

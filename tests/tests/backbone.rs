@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
+use teleop_e2e::{node_process, wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{
     command_flags, contact_source, device_model, force_flags, units, GloveForceCommand, GloveState,
     HandCommand, HandState, Tactile,
@@ -21,25 +21,11 @@ max = 0.6
 "#;
 
 fn launch_toml(restart: &str) -> String {
+    let policy = format!("restart = \"{restart}\"\nrestart_delay_ms = 100\n");
     format!(
-        r#"
-[session]
-stop_timeout_ms = 2000
-
-[[process]]
-name = "feedback"
-program = "teleop-feedback"
-args = ["--config", "feedback.toml"]
-restart = "{restart}"
-restart_delay_ms = 100
-
-[[process]]
-name = "retarget"
-program = "teleop-retarget"
-args = ["--config", "retarget.toml"]
-restart = "{restart}"
-restart_delay_ms = 100
-"#
+        "[session]\nstop_timeout_ms = 2000\n{}{}",
+        node_process("feedback", &policy),
+        node_process("retarget", &policy)
     )
 }
 

@@ -8,38 +8,31 @@
 use std::process::Output;
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{wait_for, with_profile, Sandbox, FEEDBACK_TOML};
+use teleop_e2e::{node_process, wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{device_model, force_flags, units, GloveForceCommand, GloveState, HandCommand};
 use teleop_msgs::{HandState, NodeHealth, Tactile};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 
-/// One process `name` running `program`, restarted 1.5 s after it dies (long enough to send an
+/// One node `name` ([`node_process`]), restarted 1.5 s after it dies (long enough to send an
 /// e-stop while it is down).
-fn launch_one(name: &str, program: &str, config: &str) -> String {
+fn launch_one(name: &str) -> String {
+    let policy = "restart = \"always\"\nrestart_delay_ms = 1500\nrestart_backoff_max_ms = 1500\n";
     format!(
-        r#"
-[session]
-stop_timeout_ms = 2000
-
-[[process]]
-name = "{name}"
-program = "{program}"
-args = ["--config", "{config}"]
-restart = "always"
-restart_delay_ms = 1500
-restart_backoff_max_ms = 1500
-"#
+        "[session]\nstop_timeout_ms = 2000\n{}",
+        node_process(name, policy)
     )
 }
 
-/// The feedback node alone in the sandbox (`launch_one`): writes its files, returns the launch
-/// file.
+/// The node `name` (`teleop-<name>`, configured by `config` and the Revo2 profile) alone in the
+/// sandbox (`launch_one`): writes its files, returns the launch file.
+fn alone(sandbox: &Sandbox, name: &str, config: &str) -> std::path::PathBuf {
+    sandbox.write(&format!("{name}.toml"), &with_profile(config));
+    sandbox.write("launch.toml", &launch_one(name))
+}
+
+/// The feedback node alone in the sandbox ([`alone`]).
 fn feedback_launch(sandbox: &Sandbox) -> std::path::PathBuf {
-    sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
-    sandbox.write(
-        "launch.toml",
-        &launch_one("feedback", "teleop-feedback", "feedback.toml"),
-    )
+    alone(sandbox, "feedback", FEEDBACK_TOML)
 }
 
 /// The test plays the hand: state and tactile with the thumb pressing (10 N: the glove's thumb
@@ -90,6 +83,13 @@ impl Hand {
         );
     }
 
+    /// After the feedback node restarted: drops the killed node's last force commands, then the
+    /// restarted node's stay stopped for 700 ms (else the test fails saying `failure`).
+    fn restarted_stays_stopped(&mut self, failure: &str) {
+        self.forces.drain(|_| {});
+        self.stays_stopped(Duration::from_millis(700), "the restarted node", failure);
+    }
+
     /// Pumps until the newest force command satisfies `ok` (panics after `timeout`).
     fn until(&mut self, timeout: Duration, what: &str, ok: impl Fn(&GloveForceCommand) -> bool) {
         wait_for(timeout, what, || {
@@ -117,6 +117,24 @@ fn text(out: &Output) -> String {
     )
 }
 
+/// Runs `teleop estop` with `args`: asserts that it succeeds (or, `succeeds` false, fails) and
+/// says each of `says`; returns what it printed.
+fn estop(sandbox: &Sandbox, args: &[&str], succeeds: bool, says: &[&str]) -> String {
+    let out = sandbox.run_teleop(&[&["estop"], args].concat());
+    let said = text(&out);
+    assert_eq!(out.status.success(), succeeds, "{said}");
+    for words in says {
+        assert!(said.contains(words), "{words:?} not said: {said}");
+    }
+    said
+}
+
+/// `teleop estop --release` succeeds saying each of `says`, and `hand`'s forces return.
+fn release(sandbox: &Sandbox, hand: &mut Hand, says: &[&str]) {
+    estop(sandbox, &["--release"], true, says);
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+}
+
 /// Kills `pid` with SIGKILL (no chance to clean up).
 fn kill_9(pid: u32) {
     // SAFETY: kill(2) on a pid the test read from the pipeline's node list.
@@ -141,12 +159,11 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
     hand.until(Duration::from_secs(20), "glove force from contact", pushing);
 
     // Engaged: the CLI names the node that acknowledged; forces zero.
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("ENGAGED") && text(&out).contains("acknowledged by feedback"),
-        "{}",
-        text(&out)
+    estop(
+        &sandbox,
+        &[],
+        true,
+        &["ENGAGED", "acknowledged by feedback"],
     );
     hand.until(Duration::from_secs(2), "e-stop", stopped);
 
@@ -154,22 +171,10 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
     let first = sandbox.pid_of("feedback").unwrap();
     kill_9(first);
     let second = restarted(&sandbox, "feedback", first);
-    hand.forces.drain(|_| {}); // the killed node's last ones
-    hand.stays_stopped(
-        Duration::from_millis(700),
-        "the restarted node",
-        "restarted node released the e-stop",
-    );
+    hand.restarted_stays_stopped("restarted node released the e-stop");
 
     // Released: forces return.
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("acknowledged by feedback"),
-        "{}",
-        text(&out)
-    );
-    hand.until(Duration::from_secs(3), "forces after release", pushing);
+    release(&sandbox, &mut hand, &["acknowledged by feedback"]);
 
     // Engaged while the node is down: nobody acknowledges (exit 1, said so), and the node comes
     // back engaged.
@@ -177,26 +182,13 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
     wait_for(Duration::from_secs(5), "the node to be gone", || {
         (sandbox.pid_of("feedback") != Some(second)).then_some(())
     });
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(!out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("no node acknowledged"),
-        "{}",
-        text(&out)
-    );
+    estop(&sandbox, &[], false, &["no node acknowledged"]);
     let third = restarted(&sandbox, "feedback", second);
     assert_ne!(third, first);
-    hand.forces.drain(|_| {}); // the killed node's last ones
-    hand.stays_stopped(
-        Duration::from_millis(700),
-        "the restarted node",
-        "the e-stop sent while the node was down was lost",
-    );
+    hand.restarted_stays_stopped("the e-stop sent while the node was down was lost");
 
     // Only --release releases.
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
-    hand.until(Duration::from_secs(3), "forces after release", pushing);
+    release(&sandbox, &mut hand, &[]);
 }
 
 const RETARGET_TOML: &str = r#"
@@ -206,11 +198,7 @@ glove_timeout_ms = 100
 #[test]
 fn a_glove_sample_older_than_the_timeout_does_not_drive_the_hand_after_a_restart() {
     let sandbox = Sandbox::new();
-    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("retarget", "teleop-retarget", "retarget.toml"),
-    );
+    let launch = alone(&sandbox, "retarget", RETARGET_TOML);
     let _session = sandbox.launch(&launch);
     let node = NodeRuntime::new("e2e-glove", &sandbox.ipc).unwrap();
     let mut glove: Publisher<GloveState> = node.publisher().unwrap();
@@ -298,12 +286,11 @@ fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release
     };
     until("the hand following the glove", &following);
 
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("acknowledged by feedback, glove, revo2"),
-        "{}",
-        text(&out)
+    estop(
+        &sandbox,
+        &[],
+        true,
+        &["acknowledged by feedback, glove, revo2"],
     );
     // The glove still drives fresh commands, but the hand holds and the glove force is zero.
     until("the hand holding under the e-stop", &|| {
@@ -316,8 +303,7 @@ fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release
                 .is_some_and(|s| s.link_up == 1 && s.holding == 1)
             && forces.latest().is_some_and(|f| stopped(&f))
     });
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
+    estop(&sandbox, &["--release"], true, &[]);
     until("the hand following again", &following);
     forces.drain(|_| {});
     assert_eq!(
@@ -330,11 +316,7 @@ fn in_the_simulated_session_the_hand_holds_and_the_glove_goes_limp_until_release
 #[test]
 fn a_replayed_glove_drives_the_hand_its_stamps_moved_to_the_replay() {
     let sandbox = Sandbox::new();
-    sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
-    let launch = sandbox.write(
-        "launch.toml",
-        &launch_one("retarget", "teleop-retarget", "retarget.toml"),
-    );
+    let launch = alone(&sandbox, "retarget", RETARGET_TOML);
     let _session = sandbox.launch(&launch);
     let node = NodeRuntime::new("e2e-glove", &sandbox.ipc).unwrap();
     let commands: Subscriber<HandCommand> = node.subscriber().unwrap();
@@ -403,12 +385,11 @@ fn release_without_namespace_releases_a_side_latched_while_its_nodes_are_down() 
         Some(&teleop_runtime::Namespace::new("left").unwrap()),
     );
     // Nothing runs: engaged all the same, said so, exit 1.
-    let out = sandbox.run_teleop(&["estop", "--namespace", "left"]);
-    assert!(!out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("no node acknowledged"),
-        "{}",
-        text(&out)
+    estop(
+        &sandbox,
+        &["--namespace", "left"],
+        false,
+        &["no node acknowledged"],
     );
     assert!(latch.exists(), "{}", latch.display());
     // No namespace is in use, but the left side is latched: released with the others.
@@ -496,12 +477,11 @@ fn estop_with_a_full_ipc_root_still_stops_the_running_nodes() {
     // The disk of the IPC root fills up: `teleop estop` cannot make its iceoryx2 node.
     let fill = mount.0.join("fill");
     let _ = std::fs::write(&fill, vec![0u8; 32 << 20]);
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(!out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("cannot ring any doorbell") && text(&out).contains("ENGAGED"),
-        "{}",
-        text(&out)
+    estop(
+        &sandbox,
+        &[],
+        false,
+        &["cannot ring any doorbell", "ENGAGED"],
     );
     // The latch alone stops the running node.
     hand.until(
@@ -510,9 +490,7 @@ fn estop_with_a_full_ipc_root_still_stops_the_running_nodes() {
         stopped,
     );
     std::fs::remove_file(&fill).unwrap();
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
-    hand.until(Duration::from_secs(3), "forces after release", pushing);
+    release(&sandbox, &mut hand, &[]);
     drop(session);
 }
 
@@ -540,22 +518,14 @@ fn estop_with_an_unwritable_latch_still_rings_every_doorbell() {
         }
     }
     let mutable = Mutable(root);
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(!out.status.success(), "{}", text(&out));
-    assert!(
-        text(&out).contains("cannot write the e-stop latch"),
-        "{}",
-        text(&out)
-    );
+    estop(&sandbox, &[], false, &["cannot write the e-stop latch"]);
     hand.until(
         Duration::from_secs(2),
         "e-stop through the doorbell alone",
         stopped,
     );
     drop(mutable);
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
-    hand.until(Duration::from_secs(3), "forces after release", pushing);
+    release(&sandbox, &mut hand, &[]);
 }
 
 #[test]
@@ -563,9 +533,7 @@ fn an_estop_engaged_while_nothing_runs_stops_both_sides_of_a_session_started_lat
     let sandbox = Sandbox::new();
     sandbox.write("feedback.toml", &with_profile(FEEDBACK_TOML));
     // Nothing runs: engaged all the same (exit 1: nobody acknowledged).
-    let out = sandbox.run_teleop(&["estop"]);
-    assert!(!out.status.success(), "{}", text(&out));
-    let said = text(&out);
+    let said = estop(&sandbox, &[], false, &[]);
     let side = |ns: &str| {
         format!(
             "\n[[process]]\nname = \"feedback-{ns}\"\nnode = \"feedback\"\nprogram = \"teleop-feedback\"\nnamespace = \"{ns}\"\nargs = [\"--config\", \"feedback.toml\"]\n"
@@ -592,8 +560,7 @@ fn an_estop_engaged_while_nothing_runs_stops_both_sides_of_a_session_started_lat
         );
     }
     assert!(said.contains("in any namespace, will obey it"), "{said}");
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
+    estop(&sandbox, &["--release"], true, &[]);
     left.until(Duration::from_secs(3), "left forces after release", pushing);
     right.until(
         Duration::from_secs(3),
@@ -668,8 +635,7 @@ fn the_glove_node_obeys_the_estop_itself() {
         push(&mut forces);
     }
     assert_eq!(force_set(&sandbox).as_deref(), Some("0, 0, 0, 0, 0"));
-    let out = sandbox.run_teleop(&["estop", "--release"]);
-    assert!(out.status.success(), "{}", text(&out));
+    estop(&sandbox, &["--release"], true, &[]);
     push_until(
         &mut forces,
         "600, 600, 600, 600, 600",

@@ -6,7 +6,7 @@
 
 use std::time::Duration;
 
-use teleop_e2e::{bin, wait_for, Sandbox};
+use teleop_e2e::{bin, retarget_launch, wait_for, Sandbox};
 
 /// (thread name, policy, real-time priority) of every thread of `pid`, from
 /// /proc/<pid>/task/<tid>/stat (fields 2, 41 and 40).
@@ -271,14 +271,7 @@ fn scheduling_settings_in_the_launchers_environment_do_not_reach_its_processes()
         return;
     }
     let sandbox = Sandbox::new();
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    let launch = sandbox.write(
-        "launch.toml",
-        &format!(
-            "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--profile\", {:?}]\n",
-            profile.display().to_string()
-        ),
-    );
+    let launch = sandbox.write("launch.toml", &retarget_launch());
     // `teleop launch` itself started with settings meant for no process of this file.
     let mut launcher = sandbox
         .teleop()

@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use teleop_e2e::{wait_for, Sandbox};
+use teleop_e2e::{retarget_launch, revo2_profile, wait_for, with_profile, Sandbox};
 
 fn alive(pid: u32) -> bool {
     // A zombie still has a /proc entry; its state is `Z`.
@@ -19,14 +19,7 @@ fn alive(pid: u32) -> bool {
 #[test]
 fn a_hung_process_is_killed_and_restarted() {
     let sandbox = Sandbox::new();
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    sandbox.write(
-        "retarget.toml",
-        &format!(
-            "hand_profile = {:?}\nhealth_period_ms = 100\n",
-            profile.display().to_string()
-        ),
-    );
+    sandbox.write("retarget.toml", &with_profile("health_period_ms = 100\n"));
     let launch = sandbox.write(
         "launch.toml",
         r#"
@@ -179,7 +172,6 @@ fn a_node_whose_parent_death_signal_was_cleared_still_dies_with_the_launcher() {
         return;
     }
     let sandbox = Sandbox::new();
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
     let retarget = teleop_e2e::bin("teleop-retarget");
     let launch = sandbox.write(
         "launch.toml",
@@ -192,7 +184,7 @@ args = ["--pdeathsig", "clear", "--", {:?}, "--profile", {:?}, "--name", "orphan
 node = "orphan-check"
 "#,
             retarget.display().to_string(),
-            profile.display().to_string()
+            revo2_profile()
         ),
     );
     let mut session = sandbox.launch(&launch);
@@ -211,14 +203,7 @@ fn a_node_stopped_and_continued_goes_on() {
     // SIGSTOP then SIGCONT (a debugger, Ctrl-Z and `fg`) interrupts the node's wait; it is not
     // a request to stop.
     let sandbox = Sandbox::new();
-    let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    let launch = sandbox.write(
-        "launch.toml",
-        &format!(
-            "[[process]]\nname = \"retarget\"\nprogram = \"teleop-retarget\"\nargs = [\"--profile\", {:?}]\n",
-            profile.display().to_string()
-        ),
-    );
+    let launch = sandbox.write("launch.toml", &retarget_launch());
     let mut session = sandbox.launch(&launch);
     let pid = wait_for(Duration::from_secs(20), "retarget node", || {
         sandbox.pid_of("retarget")
