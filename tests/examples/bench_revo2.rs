@@ -31,10 +31,10 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use teleop_e2e::bench::{loadavg, percentiles};
-use teleop_e2e::{bin, Sandbox};
+use teleop_e2e::{bin, revo2_position_command, Sandbox};
 use teleop_ecat_link::{FrameLink, StreamServer, MAX_FRAME};
 use teleop_ecat_sim::SubDevice;
-use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState};
+use teleop_msgs::{HandCommand, HandState};
 use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 use teleop_sim_revo2::hand::Drive;
 use teleop_sim_revo2::{revo2_subdevice, Revo2};
@@ -158,15 +158,11 @@ fn run(stress: bool) {
         }
         let k = 100 + (2 * i % 800) as i32;
         i += 1;
-        let mut c = HandCommand {
-            hand_model: device_model::REVO2,
-            joint_count: 6,
-            control_mode: control_mode::POSITION,
-            units: units::NORMALISED,
-            ..Default::default()
-        };
-        c.joints[0].target = k as f32 / 1000.0;
-        let header = commands.publish(&c).unwrap();
+        let mut targets = [0.0; 6];
+        targets[0] = k as f32 / 1000.0;
+        let header = commands
+            .publish(&revo2_position_command(targets, 0.0))
+            .unwrap();
         if armed {
             published.push((header.stamp_ns, k));
         }

@@ -333,6 +333,24 @@ pub fn revo2_profile() -> String {
         .to_string()
 }
 
+/// A normalised position command for the Revo2's six joints, each with `speed_limit` (per
+/// second; 0 sets none).
+pub fn revo2_position_command(targets: [f32; 6], speed_limit: f32) -> teleop_msgs::HandCommand {
+    use teleop_msgs::{control_mode, device_model, units, HandCommand};
+    let mut c = HandCommand {
+        hand_model: device_model::REVO2,
+        joint_count: 6,
+        control_mode: control_mode::POSITION,
+        units: units::NORMALISED,
+        ..Default::default()
+    };
+    for (j, t) in c.joints.iter_mut().zip(targets) {
+        j.target = t;
+        j.speed_limit = speed_limit;
+    }
+    c
+}
+
 /// A node configuration for a test's sandbox: `text` naming the repository's Revo2 profile.
 pub fn with_profile(text: &str) -> String {
     format!("hand_profile = {:?}\n{text}", revo2_profile())
