@@ -765,17 +765,7 @@ struct Loader {
 }
 
 impl Application for Loader {
-    fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, SdoAbort> {
-        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-    }
-    fn sdo_write(&mut self, _: u16, _: u8, _: &[u8], _: AlState) -> Result<(), SdoAbort> {
-        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-    }
-    fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
-        Ok((0, 0))
-    }
-    fn write_outputs(&mut self, _: &[u8], _: Duration) {}
-    fn read_inputs(&mut self, _: &mut [u8], _: Duration) {}
+    crate::no_objects!();
     fn mailbox_request(&mut self, kind: u8, payload: &[u8], cx: &MailboxContext) -> MailboxReply {
         self.requests.push((kind, payload.to_vec(), *cx));
         if payload.first() == Some(&5) {

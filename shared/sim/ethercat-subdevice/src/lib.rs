@@ -251,6 +251,33 @@ impl SdoAbort {
     pub const NO_DICTIONARY: Self = Self(0x0800_0023);
 }
 
+/// The [`Application`] methods of a SubDevice without an object dictionary or process data
+/// (a bridge, a bootloader, a test's bare device): every SDO is refused with
+/// [`SdoAbort::OBJECT_DOES_NOT_EXIST`], both process images are empty. Write it inside the
+/// `impl Application` block.
+#[macro_export]
+macro_rules! no_objects {
+    () => {
+        fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, $crate::SdoAbort> {
+            Err($crate::SdoAbort::OBJECT_DOES_NOT_EXIST)
+        }
+        fn sdo_write(
+            &mut self,
+            _: u16,
+            _: u8,
+            _: &[u8],
+            _: $crate::AlState,
+        ) -> Result<(), $crate::SdoAbort> {
+            Err($crate::SdoAbort::OBJECT_DOES_NOT_EXIST)
+        }
+        fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
+            Ok((0, 0))
+        }
+        fn write_outputs(&mut self, _: &[u8], _: ::core::time::Duration) {}
+        fn read_inputs(&mut self, _: &mut [u8], _: ::core::time::Duration) {}
+    };
+}
+
 /// The device behind the ESC: its object dictionary and its reaction to process data.
 ///
 /// All methods are called synchronously from [`SubDevice::process_frame`]; keep them short.

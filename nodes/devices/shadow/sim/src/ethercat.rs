@@ -20,7 +20,7 @@
 use std::time::Duration;
 
 use teleop_ecat_sim::{
-    AlState, Application, EscConfig, Identity, Pdi, SdoAbort, SmSetting, SubDevice, SyncManagers,
+    AlState, Application, EscConfig, Identity, Pdi, SmSetting, SubDevice, SyncManagers,
 };
 use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
 use teleop_shadow_protocol::layout::{CanBridge, Command, Protocol, PRODUCT_BRIDGE, PRODUCT_SR06};
@@ -72,29 +72,12 @@ pub fn palm_sync_managers(protocol: Protocol) -> Vec<SmSetting> {
     ]
 }
 
-/// Neither SubDevice has an object dictionary or PDOs.
-macro_rules! no_coe {
-    () => {
-        fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, SdoAbort> {
-            Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-        }
-        fn sdo_write(&mut self, _: u16, _: u8, _: &[u8], _: AlState) -> Result<(), SdoAbort> {
-            Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-        }
-        fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
-            Ok((0, 0))
-        }
-        fn write_outputs(&mut self, _: &[u8], _: Duration) {}
-        fn read_inputs(&mut self, _: &mut [u8], _: Duration) {}
-    };
-}
-
 /// The bridge SubDevice: nothing behind its ESC.
 #[derive(Debug, Default)]
 pub struct Bridge;
 
 impl Application for Bridge {
-    no_coe!();
+    teleop_ecat_sim::no_objects!();
 }
 
 /// What the palm's firmware counted.
@@ -177,7 +160,7 @@ impl PalmFirmware {
 }
 
 impl Application for PalmFirmware {
-    no_coe!();
+    teleop_ecat_sim::no_objects!();
 
     fn pdi(&mut self, now: Duration, _: AlState, pdi: &mut Pdi<'_>) {
         loop {

@@ -4,32 +4,18 @@
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use futures_lite::future::block_on;
 use teleop_ecat_link::{FrameLink, InProcessLink};
 use teleop_ecat_master::{scan, Bus};
-use teleop_ecat_sim::{AlState, Application, EscConfig, SdoAbort, SubDevice};
+use teleop_ecat_sim::{Application, EscConfig, SubDevice};
 
 /// A SubDevice without objects or process data.
 struct Bare;
 
 impl Application for Bare {
-    fn sdo_read(&mut self, _: u16, _: u8) -> Result<Vec<u8>, SdoAbort> {
-        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-    }
-
-    fn sdo_write(&mut self, _: u16, _: u8, _: &[u8], _: AlState) -> Result<(), SdoAbort> {
-        Err(SdoAbort::OBJECT_DOES_NOT_EXIST)
-    }
-
-    fn process_image_sizes(&self) -> Result<(usize, usize), u16> {
-        Ok((0, 0))
-    }
-
-    fn write_outputs(&mut self, _: &[u8], _: Duration) {}
-
-    fn read_inputs(&mut self, _: &mut [u8], _: Duration) {}
+    teleop_ecat_sim::no_objects!();
 }
 
 #[test]
