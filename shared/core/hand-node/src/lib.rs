@@ -16,14 +16,15 @@
 //!   again slowly), one turn of the device's clock at a time, the device's hold on stop once per
 //!   session on every way out, reconnect, and link-down reports while the hand is away.
 //!
-//! A device plugs in below this as a [`Transport`] (the Allegro's CAN stream; the EtherCAT
-//! master's cycle with a driver still runs its own loop, see ARCHITECTURE.md): each turn asks
+//! A device plugs in below this as a [`Transport`] (the EtherCAT master's cycle with a driver,
+//! the Allegro's CAN stream): each turn asks
 //! [`HandPorts::command`] for the command to follow (`None`: hold) and hands the turn's state
 //! to [`HandPorts::publish`]; its link-down reports go to [`HandPorts::publish_down`].
 //!
 //! # What it must not depend on
 //!
-//! Any device protocol, bus or transport; the retargeting and force-feedback logic.
+//! Any device protocol, bus or transport (they depend on it: the EtherCAT master uses
+//! [`session`], which itself uses no message types); the retargeting and force-feedback logic.
 
 pub mod admission;
 pub mod ports;

@@ -281,6 +281,7 @@ impl Bus {
 }
 
 /// The bus [`Bus::current`] picked; dereferences to it (`&current` is a `&Bus`).
+#[derive(Clone)]
 pub enum CurrentBus<'a> {
     /// The bus first opened.
     First(&'a Bus),

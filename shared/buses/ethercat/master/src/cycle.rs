@@ -2,25 +2,26 @@
 //! packs the host's command (or, when it has none, the driver's hold, once), exchanges process
 //! data, checks the AL state of every SubDevice and the working counter computed from the bus,
 //! and hands the decoded inputs to the [`Host`]. Lost frames are counted and ridden out; an AL
-//! error is acknowledged and OP requested again; a lost link brings the bus up again without a
-//! process restart. On stop the device gets its hold outputs for a few cycles, then leaves OP.
+//! error is acknowledged and OP requested again. [`run`] is the master as a transport under the
+//! hand-node core's session loop (`teleop_hand_node::session`: the only place of reconnect,
+//! back-off and the link-down reports): connecting is bring-up (a [`WrongDevice`] is its own
+//! error), a turn is one cycle, and on stop the device gets its hold outputs for a few cycles,
+//! then leaves OP. No message types or ports are used here.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use ethercrab::MainDevice;
 use futures_lite::future::block_on;
+use teleop_hand_node::session::{self, Backoff, ConnectError, Down, Ending, Fault, Transport};
 use teleop_runtime::now_ns;
 
-use crate::bus::{expected_wkc, recover_op, scan, Bus, Found, OpGroup, PreOpGroup};
+use crate::bus::{expected_wkc, recover_op, scan, Bus, CurrentBus, Found, OpGroup, PreOpGroup};
 use crate::driver::{Driver, Image, OwnExchange, OwnLayout};
 
 /// Cycles the device gets its hold outputs for before the master leaves OP on stop.
 const STOP_HOLD_CYCLES: u32 = 10;
-
-/// How often [`Host::link_down`] is called while the master waits to bring the bus up again.
-pub const LINK_DOWN_REPORT: Duration = Duration::from_millis(100);
 
 /// How the master cycles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -91,9 +92,9 @@ pub trait Host<D: Driver> {
     fn event(&mut self, event: Event);
 
     /// The link is down (bring-up failed, or the device was lost); `counters` so far. Called
-    /// after each failed bring-up and each loss, and every [`LINK_DOWN_REPORT`] while waiting to
-    /// try again, so the host can keep reporting (its health above all) while the device is
-    /// away.
+    /// after each failed bring-up and each loss, and every
+    /// `teleop_hand_node::session::LINK_DOWN_REPORT` while waiting to try again, so the host can
+    /// keep reporting (its health above all) while the device is away.
     fn link_down(&mut self, counters: &Counters) -> anyhow::Result<()>;
 }
 
@@ -104,9 +105,9 @@ pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 pub const MAX_BACKOFF: Duration = Duration::from_secs(2);
 
 /// The bus holds another device than the driver's: its identity check refused what it found
-/// (the refusal names both). Not a link that comes back by retrying fast: [`run`] logs it as an
-/// error, once per distinct refusal, and looks again every [`MAX_BACKOFF`] (a device swapped
-/// for the right one is still found).
+/// (the refusal names both). Not a link that comes back by retrying fast: [`run`] (the session
+/// loop) logs it as an error, again only when it changes or every 10 s, and looks again every
+/// [`MAX_BACKOFF`] (a device swapped for the right one is still found).
 #[derive(Debug, thiserror::Error)]
 #[error("wrong device: {0:#}")]
 pub struct WrongDevice(pub anyhow::Error);
@@ -136,97 +137,195 @@ pub async fn bring_up<D: Driver>(
         .map_err(|e| anyhow::anyhow!("PRE-OP -> OP failed: {e}"))
 }
 
-/// Brings the device up and cycles until the host asks to stop; brings it up again (backing off
-/// from [`FIRST_BACKOFF`] up to [`MAX_BACKOFF`]) whenever bring-up fails or the device is lost
-/// (a failing host, e.g. a publish error inside the cycle, counts as lost too); a
-/// [`WrongDevice`] is looked at again every [`MAX_BACKOFF`]. Returns an error only when the
-/// host fails to report the link down.
+/// Brings the device up and cycles until the host asks to stop, under the hand-node core's
+/// session loop (`teleop_hand_node::session`): brings it up again (backing off from
+/// [`FIRST_BACKOFF`] up to [`MAX_BACKOFF`]) whenever bring-up fails or the device is lost (a
+/// failing host, e.g. a publish error inside the cycle, counts as lost too); a [`WrongDevice`]
+/// is looked at again every [`MAX_BACKOFF`]. On stop the device gets its hold outputs for a few
+/// cycles, then leaves OP. Returns an error only when the host fails to report the link down.
 pub fn run<D: Driver, H: Host<D>>(
     bus: &Bus,
     driver: &mut D,
     host: &mut H,
     settings: &Settings,
 ) -> anyhow::Result<()> {
-    let mut counters = Counters::default();
-    let mut backoff = FIRST_BACKOFF;
-    // The last wrong device logged (each distinct one is logged once).
-    let mut wrong_logged: Option<String> = None;
-    while !host.stop_requested() {
-        let bus = bus.current(); // a fresh bus once ethercrab's own task has ended (ethercrab:)
-        match block_on(bring_up(bus.md(), driver)) {
-            Ok(group) => {
-                tracing::info!(
-                    period_us = settings.period.as_micros() as u64,
-                    expected_wkc = driver
-                        .own_layout()
-                        .map_or_else(|| expected_wkc(bus.md(), &group), |l| l.expected_wkc),
-                    "{} in OP",
-                    driver.name()
-                );
-                backoff = FIRST_BACKOFF;
-                wrong_logged = None;
-                host.connected(driver);
-                match cycle(&bus, &group, driver, host, settings, &mut counters) {
-                    Ok(()) => {
-                        leave_op(&bus, group, driver.name());
-                        break;
-                    }
-                    Err(e) => {
-                        tracing::warn!(
-                            "lost the {}: {e:#}; bringing the bus up again",
-                            driver.name()
-                        );
-                        host.event(Event::Lost);
-                        host.link_down(&counters)?;
-                    }
-                }
-            }
-            Err(e) if e.is::<WrongDevice>() => {
-                let text = format!("{e:#}");
-                if wrong_logged.as_ref() != Some(&text) {
-                    tracing::error!(
-                        "{} bring-up refused: {text}; looking again every {} ms",
-                        driver.name(),
-                        MAX_BACKOFF.as_millis()
-                    );
-                    wrong_logged = Some(text);
-                }
-                host.link_down(&counters)?;
-                wait_link_down(MAX_BACKOFF, host, &counters)?;
-            }
-            Err(e) => {
-                tracing::warn!(
-                    "{} bring-up failed: {e:#}; retrying in {} ms",
-                    driver.name(),
-                    backoff.as_millis()
-                );
-                host.link_down(&counters)?;
-                wait_link_down(backoff, host, &counters)?;
-                backoff = (backoff * 2).min(MAX_BACKOFF);
-            }
-        }
-    }
+    std::thread::scope(|scope| {
+        let mut master = Master {
+            bus,
+            driver,
+            host,
+            settings,
+            scope,
+            counters: Counters::default(),
+        };
+        let backoff = Backoff {
+            first: FIRST_BACKOFF,
+            most: MAX_BACKOFF,
+        };
+        session::run(&mut master, backoff)
+    })?;
     tracing::info!("stopped");
     Ok(())
 }
 
-/// Waits `d` (less when the host asks to stop), telling the host the link is down every
-/// [`LINK_DOWN_REPORT`].
-fn wait_link_down<D: Driver>(
-    d: Duration,
-    host: &mut impl Host<D>,
-    counters: &Counters,
-) -> anyhow::Result<()> {
-    let start = Instant::now();
-    let mut reported = start;
-    while start.elapsed() < d && !host.stop_requested() {
-        std::thread::sleep(Duration::from_millis(10));
-        if reported.elapsed() >= LINK_DOWN_REPORT {
-            reported = Instant::now();
-            host.link_down(counters)?;
+/// The master with a driver and its host, as the session loop's transport: a turn is one cycle.
+struct Master<'a, 'scope, 'env, D, H> {
+    bus: &'env Bus,
+    driver: &'a mut D,
+    host: &'a mut H,
+    settings: &'a Settings,
+    /// Where the side channel's thread runs (it borrows the bus).
+    scope: &'scope std::thread::Scope<'scope, 'env>,
+    counters: Counters,
+}
+
+/// The driver's side channel: its thread, its latest reading, and its stop.
+struct SideChannel<'scope, P> {
+    polled: Arc<Mutex<Option<P>>>,
+    stop: Arc<AtomicBool>,
+    thread: std::thread::ScopedJoinHandle<'scope, ()>,
+}
+
+/// A device in OP and the state of its cycle.
+struct Cycling<'scope, 'env, D: Driver> {
+    bus: CurrentBus<'env>,
+    group: Arc<OpGroup>,
+    exchanger: Exchanger,
+    expected: u16,
+    subdevices: usize,
+    outputs: Image,
+    inputs: Image,
+    side: Option<SideChannel<'scope, D::Polled>>,
+    deadline: Instant,
+    last_inputs: Option<D::Inputs>,
+    refused: bool,
+    holding: bool,
+    lost_in_a_row: u32,
+    wrong_in_a_row: u32,
+    last_good: Instant,
+}
+
+impl<'scope, 'env, D, H> Transport for Master<'_, 'scope, 'env, D, H>
+where
+    D: Driver + 'scope,
+    H: Host<D>,
+{
+    type Session = Cycling<'scope, 'env, D>;
+    type Error = anyhow::Error;
+
+    fn name(&self) -> &str {
+        self.driver.name()
+    }
+
+    fn stop_requested(&self) -> bool {
+        self.host.stop_requested()
+    }
+
+    fn connect(&mut self) -> Result<Self::Session, ConnectError> {
+        let bus = self.bus.current(); // a fresh bus once ethercrab's own task has ended (ethercrab:)
+        let group = match block_on(bring_up(bus.md(), self.driver)) {
+            Ok(group) => group,
+            Err(e) => {
+                return Err(match e.downcast::<WrongDevice>() {
+                    Ok(wrong) => ConnectError::WrongDevice(format!("{:#}", wrong.0)),
+                    Err(e) => ConnectError::Lost(format!("bring-up failed: {e:#}")),
+                })
+            }
+        };
+        let md = bus.md();
+        let exchanger = Exchanger::new(self.driver.own_layout());
+        let expected = exchanger.expected_wkc(md, &group);
+        tracing::info!(
+            period_us = self.settings.period.as_micros() as u64,
+            expected_wkc = expected,
+            "{} in OP",
+            self.driver.name()
+        );
+        let subdevices = group.len();
+        let (outputs, inputs) = exchanger.images(md, &group);
+        let group = Arc::new(group);
+        let side = match self.driver.poll_period() {
+            Some(period) => {
+                let polled = Arc::new(Mutex::new(None));
+                let stop = Arc::new(AtomicBool::new(false));
+                let (bus, group, out, halt) =
+                    (bus.clone(), group.clone(), polled.clone(), stop.clone());
+                let thread = std::thread::Builder::new()
+                    .name("ecat-side-poll".into())
+                    .spawn_scoped(self.scope, move || {
+                        side_channel::<D>(bus.md(), &group, period, &out, &halt)
+                    })
+                    .map_err(|e| ConnectError::Lost(format!("side-channel thread: {e}")))?;
+                Some(SideChannel {
+                    polled,
+                    stop,
+                    thread,
+                })
+            }
+            None => None,
+        };
+        self.host.connected(self.driver);
+        // This thread cycles at the real-time priority launch.toml names (its side thread,
+        // started above, stays normal).
+        teleop_runtime::realtime::enter_realtime();
+        Ok(Cycling {
+            bus,
+            group,
+            exchanger,
+            expected,
+            subdevices,
+            outputs,
+            inputs,
+            side,
+            deadline: Instant::now(),
+            last_inputs: None,
+            refused: false,
+            holding: false,
+            lost_in_a_row: 0,
+            wrong_in_a_row: 0,
+            last_good: Instant::now(),
+        })
+    }
+
+    fn serve(&mut self, c: &mut Self::Session) -> Result<(), Fault<anyhow::Error>> {
+        cycle(self.driver, self.host, self.settings, &mut self.counters, c)
+            .map_err(|e| Fault::Lost(format!("{e:#}")))
+    }
+
+    fn stop(&mut self, mut c: Self::Session, ending: Ending<'_>) {
+        let md = c.bus.md();
+        if ending == Ending::Stop {
+            // Stopping: the driver's hold for a few cycles before leaving OP.
+            if let Some(last) = &c.last_inputs {
+                self.driver.hold(Some(last), &mut c.outputs);
+                c.exchanger.write(md, &c.group, &c.outputs);
+                for _ in 0..STOP_HOLD_CYCLES {
+                    let _ = c.exchanger.exchange(md, &c.group, &mut c.inputs);
+                    std::thread::sleep(self.settings.period);
+                }
+                tracing::info!("sent hold before leaving OP");
+            }
+        }
+        teleop_runtime::realtime::leave_realtime();
+        if let Some(side) = c.side.take() {
+            side.stop.store(true, Ordering::SeqCst);
+            if side.thread.join().is_err() {
+                tracing::warn!("the side channel's thread panicked");
+            }
+        }
+        if ending == Ending::Stop {
+            match Arc::try_unwrap(c.group) {
+                Ok(group) => leave_op(&c.bus, group, self.driver.name()),
+                Err(_) => tracing::warn!("the group is still in use: not leaving OP"),
+            }
+        } else {
+            self.host.event(Event::Lost);
         }
     }
-    Ok(())
+
+    fn link_down(&mut self, _: &Down<'_>) -> anyhow::Result<()> {
+        self.host.link_down(&self.counters)
+    }
 }
 
 /// Copies `outputs` into ethercrab's process image, SubDevice by SubDevice.
@@ -318,197 +417,160 @@ impl Exchanger {
     }
 }
 
-/// Cycles until stop (`Ok`) or until the device is lost (`Err`).
+/// One cycle: waits for its absolute deadline, packs the host's command (or the driver's hold),
+/// exchanges, checks the AL states and the working counter, and hands the decoded inputs to the
+/// host. `Err`: the device is lost. No allocation while it goes well.
 fn cycle<D: Driver, H: Host<D>>(
-    bus: &Bus,
-    group: &OpGroup,
     driver: &mut D,
     host: &mut H,
     settings: &Settings,
     counters: &mut Counters,
+    c: &mut Cycling<'_, '_, D>,
 ) -> anyhow::Result<()> {
-    let md = bus.md();
+    let md = c.bus.md();
+    let group = &*c.group;
     let period = settings.period;
-    let mut exchanger = Exchanger::new(driver.own_layout());
-    let expected = exchanger.expected_wkc(md, group);
-    let subdevices = group.len();
-    let (mut outputs, mut inputs) = exchanger.images(md, group);
-    let polled: Mutex<Option<D::Polled>> = Mutex::new(None);
-    let poll_period = driver.poll_period();
-    let stop_poll = AtomicBool::new(false);
-
-    std::thread::scope(|scope| -> anyhow::Result<()> {
-        if let Some(poll_period) = poll_period {
-            let (polled, stop_poll) = (&polled, &stop_poll);
-            std::thread::Builder::new()
-                .name("ecat-side-poll".into())
-                .spawn_scoped(scope, move || {
-                    side_channel::<D>(md, group, poll_period, polled, stop_poll)
-                })?;
+    // Absolute deadlines: a late cycle does not shift the ones after it.
+    c.deadline += period;
+    let now = Instant::now();
+    if c.deadline > now {
+        teleop_runtime::sleep_until(c.deadline);
+    } else if now - c.deadline > period * 10 {
+        c.deadline = now; // far behind (e.g. after a stall): re-anchor instead of bursting
+    }
+    // What to send: the host's command, or the driver's hold when it has none (the host's
+    // policy: stale, e-stop, refused) or the driver cannot take it.
+    let command = host.command();
+    let fresh = command.is_some();
+    let packed = command.is_some_and(|cmd| driver.pack(&cmd, &mut c.outputs));
+    let write = if packed {
+        c.refused = false;
+        c.holding = false;
+        true
+    } else {
+        if fresh {
+            if !c.refused {
+                tracing::warn!(
+                    "the {} cannot take the hand command: the device holds",
+                    driver.name()
+                );
+                c.refused = true;
+            }
+            host.event(Event::Refused);
+        } else {
+            c.refused = false;
         }
-        // This thread cycles at the real-time priority launch.toml names (its side thread,
-        // started above, stays normal).
-        teleop_runtime::realtime::enter_realtime();
-        let result = (|| -> anyhow::Result<()> {
-            let mut deadline = Instant::now();
-            let mut last_inputs: Option<D::Inputs> = None;
-            let mut refused = false;
-            let mut holding = false;
-            let mut lost_in_a_row = 0u32;
-            let mut wrong_in_a_row = 0u32;
-            let mut last_good = Instant::now();
-            while !host.stop_requested() {
-                // Absolute deadlines: a late cycle does not shift the ones after it.
-                deadline += period;
-                let now = Instant::now();
-                if deadline > now {
-                    teleop_runtime::sleep_until(deadline);
-                } else if now - deadline > period * 10 {
-                    deadline = now; // far behind (e.g. after a stall): re-anchor instead of bursting
-                }
-                // What to send: the host's command, or the driver's hold when it has none (the
-                // host's policy: stale, e-stop, refused) or the driver cannot take it.
-                let command = host.command();
-                let fresh = command.is_some();
-                let packed = command.is_some_and(|c| driver.pack(&c, &mut outputs));
-                let write = if packed {
-                    refused = false;
-                    holding = false;
-                    true
-                } else {
-                    if fresh {
-                        if !refused {
-                            tracing::warn!(
-                                "the {} cannot take the hand command: the device holds",
-                                driver.name()
-                            );
-                            refused = true;
-                        }
-                        host.event(Event::Refused);
-                    } else {
-                        refused = false;
-                    }
-                    if holding && !driver.hold_every_cycle() {
-                        false // keep sending the hold already in the outputs
-                    } else if last_inputs.is_some() || driver.hold_every_cycle() {
-                        driver.hold(last_inputs.as_ref(), &mut outputs);
-                        holding = true;
-                        true
-                    } else {
-                        false
-                    }
-                };
-                if write {
-                    exchanger.write(md, group, &outputs);
-                }
-                let response = exchanger.exchange(md, group, &mut inputs);
-                let origin_ns = now_ns();
-                let (response, working_counter) = match response {
-                    Ok(r) => {
-                        lost_in_a_row = 0;
-                        r
-                    }
-                    Err(e) => {
-                        counters.lost_frames += 1;
-                        lost_in_a_row += 1;
-                        tracing::debug!("cycle lost: {e}");
-                        if last_good.elapsed() > settings.link_timeout {
-                            anyhow::bail!(
-                                "no answer for {} ms ({lost_in_a_row} cycles; {e})",
-                                last_good.elapsed().as_millis()
-                            );
-                        }
-                        continue;
-                    }
-                };
-                // The AL states come in the same frame; check them first: a SubDevice that lost
-                // OP (watchdog, power cycle, emulator restart) also answers with a wrong working
-                // counter, which must not hide it.
-                if response.subdevice_states.len() != subdevices {
-                    anyhow::bail!(
-                        "the {} left OP: {} of {subdevices} SubDevices answered the state check",
-                        driver.name(),
-                        response.subdevice_states.len()
-                    );
-                }
-                let mut recovered = false;
-                for (index, state) in response.subdevice_states.iter().enumerate() {
-                    match state {
-                        ethercrab::SubDeviceState::Op => {}
-                        ethercrab::SubDeviceState::SafeOp => {
-                            let code = block_on(recover_op(md, group, index))?;
-                            counters.recoveries += 1;
-                            tracing::warn!(
-                                subdevice = index,
-                                al_status_code = format!("{code:#06x}"),
-                                "{} dropped to SAFE-OP: acknowledged, OP requested",
-                                driver.name()
-                            );
-                            host.event(Event::Recovered);
-                            recovered = true;
-                        }
-                        other => {
-                            anyhow::bail!(
-                                "the {} left OP (SubDevice {index}: {other:?})",
-                                driver.name()
-                            )
-                        }
-                    }
-                }
-                if recovered {
-                    holding = false; // re-send the hold/command after recovery
-                    continue;
-                }
-                if working_counter != expected {
-                    counters.wkc_errors += 1;
-                    wrong_in_a_row += 1;
-                    if counters.wkc_errors % 100 == 1 {
-                        tracing::warn!(
-                            wkc = working_counter,
-                            expected,
-                            total = counters.wkc_errors,
-                            "wrong working counter: inputs of this cycle ignored"
-                        );
-                    }
-                    if last_good.elapsed() > settings.link_timeout {
-                        anyhow::bail!(
-                            "{wrong_in_a_row} cycles in a row with a wrong working counter"
-                        );
-                    }
-                    continue;
-                }
-                wrong_in_a_row = 0;
-                last_good = Instant::now();
-                let side =
-                    poll_period.and_then(|_| *polled.lock().unwrap_or_else(|e| e.into_inner()));
-                let Some(decoded) = driver.unpack(&inputs, side.as_ref()) else {
-                    counters.wkc_errors += 1;
-                    continue;
-                };
-                let exchange = Exchange {
-                    origin_ns,
-                    holding: !packed,
-                    counters: *counters,
-                };
-                host.exchanged(driver, &decoded, &exchange)?;
-                last_inputs = Some(decoded);
+        if c.holding && !driver.hold_every_cycle() {
+            false // keep sending the hold already in the outputs
+        } else if c.last_inputs.is_some() || driver.hold_every_cycle() {
+            driver.hold(c.last_inputs.as_ref(), &mut c.outputs);
+            c.holding = true;
+            true
+        } else {
+            false
+        }
+    };
+    if write {
+        c.exchanger.write(md, group, &c.outputs);
+    }
+    let response = c.exchanger.exchange(md, group, &mut c.inputs);
+    let origin_ns = now_ns();
+    let (response, working_counter) = match response {
+        Ok(r) => {
+            c.lost_in_a_row = 0;
+            r
+        }
+        Err(e) => {
+            counters.lost_frames += 1;
+            c.lost_in_a_row += 1;
+            tracing::debug!("cycle lost: {e}");
+            if c.last_good.elapsed() > settings.link_timeout {
+                anyhow::bail!(
+                    "no answer for {} ms ({} cycles; {e})",
+                    c.last_good.elapsed().as_millis(),
+                    c.lost_in_a_row
+                );
             }
-            // Stopping: the driver's hold for a few cycles before leaving OP.
-            if let Some(last) = &last_inputs {
-                driver.hold(Some(last), &mut outputs);
-                exchanger.write(md, group, &outputs);
-                for _ in 0..STOP_HOLD_CYCLES {
-                    let _ = exchanger.exchange(md, group, &mut inputs);
-                    std::thread::sleep(period);
-                }
-                tracing::info!("sent hold before leaving OP");
+            return Ok(());
+        }
+    };
+    // The AL states come in the same frame; check them first: a SubDevice that lost OP
+    // (watchdog, power cycle, emulator restart) also answers with a wrong working counter,
+    // which must not hide it.
+    if response.subdevice_states.len() != c.subdevices {
+        anyhow::bail!(
+            "the {} left OP: {} of {} SubDevices answered the state check",
+            driver.name(),
+            response.subdevice_states.len(),
+            c.subdevices
+        );
+    }
+    let mut recovered = false;
+    for (index, state) in response.subdevice_states.iter().enumerate() {
+        match state {
+            ethercrab::SubDeviceState::Op => {}
+            ethercrab::SubDeviceState::SafeOp => {
+                let code = block_on(recover_op(md, group, index))?;
+                counters.recoveries += 1;
+                tracing::warn!(
+                    subdevice = index,
+                    al_status_code = format!("{code:#06x}"),
+                    "{} dropped to SAFE-OP: acknowledged, OP requested",
+                    driver.name()
+                );
+                host.event(Event::Recovered);
+                recovered = true;
             }
-            Ok(())
-        })();
-        stop_poll.store(true, Ordering::SeqCst);
-        teleop_runtime::realtime::leave_realtime();
-        result
-    })
+            other => {
+                anyhow::bail!(
+                    "the {} left OP (SubDevice {index}: {other:?})",
+                    driver.name()
+                )
+            }
+        }
+    }
+    if recovered {
+        c.holding = false; // re-send the hold/command after recovery
+        return Ok(());
+    }
+    if working_counter != c.expected {
+        counters.wkc_errors += 1;
+        c.wrong_in_a_row += 1;
+        if counters.wkc_errors % 100 == 1 {
+            tracing::warn!(
+                wkc = working_counter,
+                expected = c.expected,
+                total = counters.wkc_errors,
+                "wrong working counter: inputs of this cycle ignored"
+            );
+        }
+        if c.last_good.elapsed() > settings.link_timeout {
+            anyhow::bail!(
+                "{} cycles in a row with a wrong working counter",
+                c.wrong_in_a_row
+            );
+        }
+        return Ok(());
+    }
+    c.wrong_in_a_row = 0;
+    c.last_good = Instant::now();
+    let side = c
+        .side
+        .as_ref()
+        .and_then(|s| *s.polled.lock().unwrap_or_else(|e| e.into_inner()));
+    let Some(decoded) = driver.unpack(&c.inputs, side.as_ref()) else {
+        counters.wkc_errors += 1;
+        return Ok(());
+    };
+    let exchange = Exchange {
+        origin_ns,
+        holding: !packed,
+        counters: *counters,
+    };
+    host.exchanged(driver, &decoded, &exchange)
+        .map_err(|e| e.context("the host failed"))?;
+    c.last_inputs = Some(decoded);
+    Ok(())
 }
 
 /// Runs the driver's side channel every `period` until `stop`. A failure is logged once per run

@@ -13,8 +13,9 @@
 //!   layout, exchanged with one LRW of the master's);
 //! - [`cycle`]: bring-up with a driver and the cycle (absolute deadlines, the driver's hold
 //!   whenever the host gives no command (its policy: `teleop-hand-node`), working-counter and
-//!   AL-state checks of every SubDevice, recovery, reconnect, counters), reporting to a
-//!   [`Host`] (the node's ports);
+//!   AL-state checks of every SubDevice, recovery, counters), reporting to a [`Host`] (the
+//!   node's ports), run as a transport under `teleop-hand-node`'s session loop (reconnect,
+//!   back-off, link-down reports, the hold on stop once per session);
 //! - [`mailbox`]: raw mailbox access on ethercrab's `Command` API (any device): the FoE mailbox
 //!   port of `teleop-foe` and the normal SDO download ethercrab lacks;
 //! - [`transport`]: where the bus is (`sim:`, `interface:`, `ethercrab:`).
@@ -23,7 +24,7 @@
 //!
 //! Any device (its protocol crate, its conversions: those are the driver's), the message
 //! contract and iceoryx2 ports (those are the host's; `teleop-runtime` is used for its clock
-//! only), and the emulators (only in tests).
+//! only, `teleop-hand-node` for its session loop only), and the emulators (only in tests).
 
 pub mod bus;
 pub mod cycle;
@@ -38,7 +39,7 @@ pub use bus::{
 };
 pub use cycle::{
     bring_up, discover, leave_op, run, Counters, Event, Exchange, Host, Settings, WrongDevice,
-    FIRST_BACKOFF, LINK_DOWN_REPORT, MAX_BACKOFF,
+    FIRST_BACKOFF, MAX_BACKOFF,
 };
 pub use driver::{Driver, Image, OwnExchange, OwnLayout};
 pub use pump::{Connect, Pump, PumpStatus};
