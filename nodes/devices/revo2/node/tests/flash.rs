@@ -21,7 +21,7 @@ use teleop_revo2::flash::{
 use teleop_revo2::mailbox::EcatMailbox;
 use teleop_revo2::Revo2Config;
 use teleop_revo2_protocol::{Board, FirmwareHeader, Version};
-use teleop_sim_revo2::{revo2_subdevice, Revo2};
+use teleop_sim_revo2::{revo2_behind, revo2_subdevice, Revo2};
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
 
@@ -509,21 +509,13 @@ fn a_device_without_foe_or_bootstrap_mailbox_is_refused() {
             "no bootstrap mailbox",
         ),
     ] {
-        let mut device = revo2_subdevice(None, 1);
         let config = teleop_ecat_sim::EscConfig {
             mailbox_protocols: protocols,
             bootstrap_rx_mailbox: bootstrap,
             bootstrap_tx_mailbox: (bootstrap.0 + 0x200, bootstrap.1),
-            ..device.config().clone()
+            ..revo2_subdevice(None, 1).config().clone()
         };
-        let app = std::mem::replace(
-            device.app_mut(),
-            Revo2::new(
-                teleop_sim_revo2::hand::Hand::new(Default::default(), None),
-                &Default::default(),
-            ),
-        );
-        let sim: Sim = Arc::new(Mutex::new(SubDevice::new(config, app)));
+        let sim: Sim = Arc::new(Mutex::new(revo2_behind(config, None)));
         let bus = bus(&sim);
         let firmware = Firmware::new(
             &name(Board::Wrist, (1, 0, 0)),

@@ -18,7 +18,7 @@ use teleop_revo2::bus::{bring_up, Bus};
 use teleop_revo2::config::{DeviceSettings, TactileSource};
 use teleop_revo2::Revo2Config;
 use teleop_revo2_protocol::{multi_command, ControlMode, Inputs, Outputs, UnitMode};
-use teleop_sim_revo2::{revo2_subdevice, Revo2};
+use teleop_sim_revo2::{revo2_behind, revo2_subdevice, Revo2};
 
 type Sim = Arc<Mutex<SubDevice<Revo2>>>;
 
@@ -177,7 +177,6 @@ fn every_control_mode_moves_the_fingers_in_physical_units() {
 
 #[test]
 fn a_wrong_identity_is_refused_with_a_clear_error() {
-    let mut device = revo2_subdevice(None, 1);
     // Same ESC, another product: build it from the generic emulator with a foreign identity.
     let config = teleop_ecat_sim::EscConfig {
         identity: teleop_ecat_sim::Identity {
@@ -189,14 +188,7 @@ fn a_wrong_identity_is_refused_with_a_clear_error() {
         name: "EK1100".into(),
         ..teleop_ecat_sim::EscConfig::default()
     };
-    let app = std::mem::replace(
-        device.app_mut(),
-        Revo2::new(
-            teleop_sim_revo2::hand::Hand::new(Default::default(), None),
-            &Default::default(),
-        ),
-    );
-    let sim: Sim = Arc::new(Mutex::new(SubDevice::new(config, app)));
+    let sim: Sim = Arc::new(Mutex::new(revo2_behind(config, None)));
     let clock = Clock::default();
     let bus = bus(&sim, &clock);
     let err = block_on(bring_up(bus.md(), &Revo2Config::default()))

@@ -55,6 +55,13 @@ pub fn revo2_subdevice_with_loop(
         firmware_loop,
         ..EscConfig::default()
     };
+    revo2_behind(config, object)
+}
+
+/// The emulated Revo2's firmware (with an optional virtual object in its hand) behind an ESC
+/// configured as `config`: the Revo2's own, or a test's variant of it (another identity, other
+/// mailboxes).
+pub fn revo2_behind(config: EscConfig, object: Option<hand::VirtualObject>) -> SubDevice<Revo2> {
     let hand = hand::Hand::new(hand::HandParams::default(), object);
     SubDevice::new(config, Revo2::new(hand, &Versions::default()))
 }
