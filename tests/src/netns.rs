@@ -149,6 +149,62 @@ impl Netns {
         cmd.args(["netns", "exec", &self.name]).arg(program);
         cmd
     }
+
+    /// The emulator `program` (a workspace binary) serving on `ecs0` in the namespace
+    /// (`--interface ecs0`, `args`, `--control dir/sim.ctl`), its output in `dir/sim.log`;
+    /// returns once the log says `ready` (fails, with the log, if it exits or takes 10 s).
+    pub fn start_emulator(&self, program: &str, args: &[&str], dir: &Path, ready: &str) -> Child {
+        let log = std::fs::File::create(dir.join("sim.log")).expect("sim.log");
+        let mut cmd = self.command(crate::bin(program));
+        cmd.args(["--interface", "ecs0"])
+            .args(args)
+            .arg("--control")
+            .arg(dir.join("sim.ctl"))
+            .env("TELEOP_LOG", "info")
+            .stdout(log.try_clone().expect("sim.log"))
+            .stderr(log);
+        let mut sim = die_with_parent(&mut cmd)
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {program}: {e}"));
+        let start = Instant::now();
+        loop {
+            let text = std::fs::read_to_string(dir.join("sim.log")).unwrap_or_default();
+            if text.contains(ready) {
+                return sim;
+            }
+            if let Ok(Some(status)) = sim.try_wait() {
+                panic!("the emulator exited ({status}):\n{text}");
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(10),
+                "the emulator did not start:\n{text}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Runs the SOEM check `script` (python3 with pysoem) on `ecm0` for `cycles` cycles, for
+    /// at most 60 s, then stops the emulator `sim` (its log in `dir/sim.log`). Asserts that the
+    /// script succeeded and ended with `OK`; returns its output and a report for further
+    /// checks (status, output, the emulator's log).
+    pub fn run_soem(
+        &self,
+        script: &str,
+        cycles: u32,
+        sim: &mut Child,
+        dir: &Path,
+    ) -> (String, String) {
+        let mut cmd = self.command("python3");
+        cmd.args([script, "ecm0", &cycles.to_string()]);
+        let (status, out, err) = run_for(die_with_parent(&mut cmd), Duration::from_secs(60));
+        stop(sim);
+        let sim_log = std::fs::read_to_string(dir.join("sim.log")).unwrap_or_default();
+        let report =
+            format!("soem_op.py: {status:?}\n{out}{err}\n---- emulator log ----\n{sim_log}");
+        assert!(status.is_some_and(|s| s.success()), "{report}");
+        assert_eq!(out.lines().last(), Some("OK"), "{report}");
+        (out, report)
+    }
 }
 
 impl Drop for Netns {

@@ -15,14 +15,12 @@
 
 mod common;
 
-use teleop_e2e::netns::{die_with_parent, pysoem_missing, run_for, skip, stop, Netns};
+use teleop_e2e::netns::{die_with_parent, pysoem_missing, skip, stop, Netns};
 use teleop_e2e::skip_unless_privileged;
 
 use common::{position_command, positions};
-use std::io::{BufRead, BufReader, Write};
-use std::os::unix::net::UnixStream;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::{Child, Command};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -38,49 +36,14 @@ fn serial() -> MutexGuard<'static, ()> {
     LOCK.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// `teleop-sim-revo2`, next to this test's target directory.
-fn sim_binary() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    // target/<profile>/deps/veth-HASH -> target/<profile>/teleop-sim-revo2
-    let path = exe
-        .parent()
-        .and_then(Path::parent)
-        .map(|dir| dir.join("teleop-sim-revo2"))
-        .unwrap();
-    assert!(
-        path.exists(),
-        "{} is missing: run `cargo build --workspace --bins` first (the emulator is a binary of \
-         the sim-revo2 crate; a dev-dependency builds only its library)",
-        path.display()
-    );
-    path
-}
-
-/// The emulator serving on `ecs0` in `ns`, its output in `dir/sim.log`.
+/// The emulator serving on `ecs0` in `ns`, no object in its hand, its output in `dir/sim.log`.
 fn start_sim(ns: &Netns, dir: &Path) -> Child {
-    let log = std::fs::File::create(dir.join("sim.log")).unwrap();
-    let mut cmd = ns.command(sim_binary());
-    cmd.args(["--interface", "ecs0", "--object", "none", "--control"])
-        .arg(dir.join("sim.ctl"))
-        .env("TELEOP_LOG", "info")
-        .stdout(log.try_clone().unwrap())
-        .stderr(log);
-    let mut sim = die_with_parent(&mut cmd).spawn().unwrap();
-    let start = Instant::now();
-    loop {
-        let text = std::fs::read_to_string(dir.join("sim.log")).unwrap_or_default();
-        if text.contains("revo2: interface ecs0") {
-            return sim;
-        }
-        if let Ok(Some(status)) = sim.try_wait() {
-            panic!("the emulator exited ({status}):\n{text}");
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(10),
-            "the emulator did not start:\n{text}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    ns.start_emulator(
+        "teleop-sim-revo2",
+        &["--object", "none"],
+        dir,
+        "revo2: interface ecs0",
+    )
 }
 
 /// The node on `ecm0` with `transport`, the emulator on `ecs0`, and the test's ports.
@@ -204,11 +167,7 @@ impl Rig {
 
     /// A command on the emulator's control socket; returns its answer.
     fn sim_control(&self, line: &str) -> String {
-        let mut conn = UnixStream::connect(self.dir.path().join("sim.ctl")).unwrap();
-        writeln!(conn, "{line}").unwrap();
-        let mut answer = String::new();
-        BufReader::new(conn).read_line(&mut answer).unwrap();
-        answer
+        teleop_e2e::control(&self.dir.path().join("sim.ctl"), line)
     }
 
     /// `ip link set ecm0 down`, wait for the node to report the link down, then `up`.
@@ -243,6 +202,29 @@ impl Rig {
         assert!(self.sim_running(), "the emulator is still serving");
         self.log()
     }
+
+    /// Follows a pose, resets the master's interface
+    /// ([`Self::reset_master_interface_and_recover`]) and follows another; the node's log after
+    /// the reset says each of `says` and none of `never`.
+    fn follow_across_an_interface_reset(&mut self, says: &[&str], never: &[&str]) {
+        self.follow(
+            [0.2, 0.3, 0.1, 0.4, 0.5, 0.6],
+            0.02,
+            Duration::from_secs(10),
+        );
+        let log = self.reset_master_interface_and_recover();
+        for words in says {
+            assert!(log.contains(words), "{words:?} not logged:\n{log}");
+        }
+        for words in never {
+            assert!(!log.contains(words), "{words:?} logged:\n{log}");
+        }
+        self.follow(
+            [0.6, 0.5, 0.7, 0.2, 0.3, 0.1],
+            0.02,
+            Duration::from_secs(10),
+        );
+    }
 }
 
 impl Drop for Rig {
@@ -275,25 +257,10 @@ fn ethercrab_task_reaches_op_follows_commands_and_recovers_with_a_fresh_bus() {
         "ethercrab's own task carries the frames, not the pump:\n{log}"
     );
     assert!(log.contains("Revo2 found") && log.contains("control_fw=1.4.2"));
-    rig.follow(
-        [0.2, 0.3, 0.1, 0.4, 0.5, 0.6],
-        0.02,
-        Duration::from_secs(10),
-    );
-
     // Admin-down makes the task's next send fail (ENETDOWN): ethercrab's task ends for good and
     // takes its PDU handles with it. The node reports the link down, and once the interface is
     // up again opens a fresh bus (new storage, MainDevice and task) in the same process.
-    let log = rig.reset_master_interface_and_recover();
-    assert!(
-        log.contains("ethercrab's task ended") && log.contains("opened a fresh bus"),
-        "{log}"
-    );
-    rig.follow(
-        [0.6, 0.5, 0.7, 0.2, 0.3, 0.1],
-        0.02,
-        Duration::from_secs(10),
-    );
+    rig.follow_across_an_interface_reset(&["ethercrab's task ended", "opened a fresh bus"], &[]);
 }
 
 #[test]
@@ -306,23 +273,8 @@ fn pump_on_interface_reaches_op_follows_commands_and_survives_an_interface_reset
         log.contains("EtherCAT link open") && !log.contains("ethercrab's raw-socket task"),
         "{log}"
     );
-    rig.follow(
-        [0.2, 0.3, 0.1, 0.4, 0.5, 0.6],
-        0.02,
-        Duration::from_secs(10),
-    );
-
     // The pump reopens its raw socket and the same bus is brought up again.
-    let log = rig.reset_master_interface_and_recover();
-    assert!(
-        log.contains("EtherCAT link lost") && !log.contains("opened a fresh bus"),
-        "{log}"
-    );
-    rig.follow(
-        [0.6, 0.5, 0.7, 0.2, 0.3, 0.1],
-        0.02,
-        Duration::from_secs(10),
-    );
+    rig.follow_across_an_interface_reset(&["EtherCAT link lost"], &["opened a fresh bus"]);
 }
 
 /// Why the SOEM test cannot run, if it cannot.
@@ -338,20 +290,11 @@ fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
     let dir = tempfile::tempdir().unwrap();
     let mut sim = start_sim(&ns, dir.path());
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/soem_op.py");
-    let mut cmd = ns.command("python3");
-    cmd.args([script, "ecm0", "300"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped());
-    let (status, out, err) = run_for(die_with_parent(&mut cmd), Duration::from_secs(60));
-    stop(&mut sim);
-    let sim_log = std::fs::read_to_string(dir.path().join("sim.log")).unwrap_or_default();
-    let report = format!("soem_op.py: {status:?}\n{out}{err}\n---- emulator log ----\n{sim_log}");
-    assert!(status.is_some_and(|s| s.success()), "{report}");
+    let (out, report) = ns.run_soem(script, 300, &mut sim, dir.path());
     assert!(
         out.contains("vendor 0x00bc0000 product 0x00009252") && out.contains("in OP"),
         "{report}"
     );
-    assert_eq!(out.lines().last(), Some("OK"), "{report}");
 }
 
 #[test]

@@ -10,39 +10,8 @@
 //! (`cargo build --workspace --bins`).
 #![allow(clippy::unwrap_used)]
 
-use std::path::Path;
-use std::process::Child;
-use std::time::{Duration, Instant};
-
-use teleop_e2e::netns::{die_with_parent, pysoem_missing, run_for, skip, stop, Netns};
-use teleop_e2e::{bin, skip_unless_privileged};
-
-/// The emulator serving on `ecs0` in `ns`, its output in `dir/sim.log`.
-fn start_sim(ns: &Netns, dir: &Path) -> Child {
-    let log = std::fs::File::create(dir.join("sim.log")).unwrap();
-    let mut cmd = ns.command(bin("teleop-sim-shadow"));
-    cmd.args(["--interface", "ecs0", "--control"])
-        .arg(dir.join("sim.ctl"))
-        .env("TELEOP_LOG", "info")
-        .stdout(log.try_clone().unwrap())
-        .stderr(log);
-    let mut sim = die_with_parent(&mut cmd).spawn().unwrap();
-    let start = Instant::now();
-    loop {
-        let text = std::fs::read_to_string(dir.join("sim.log")).unwrap_or_default();
-        if text.contains("shadow: interface ecs0") {
-            return sim;
-        }
-        if let Ok(Some(status)) = sim.try_wait() {
-            panic!("the emulator exited ({status}):\n{text}");
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(10),
-            "the emulator did not start:\n{text}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
+use teleop_e2e::netns::{pysoem_missing, skip, Netns};
+use teleop_e2e::skip_unless_privileged;
 
 #[test]
 fn soem_brings_both_emulated_subdevices_to_op_over_a_veth_pair() {
@@ -53,15 +22,14 @@ fn soem_brings_both_emulated_subdevices_to_op_over_a_veth_pair() {
     }
     let ns = Netns::new("teleop-shadow-veth-");
     let dir = tempfile::tempdir().unwrap();
-    let mut sim = start_sim(&ns, dir.path());
+    let mut sim = ns.start_emulator(
+        "teleop-sim-shadow",
+        &[],
+        dir.path(),
+        "shadow: interface ecs0",
+    );
     let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/soem_op.py");
-    let mut cmd = ns.command("python3");
-    cmd.args([script, "ecm0", "200"]);
-    let (status, out, err) = run_for(die_with_parent(&mut cmd), Duration::from_secs(60));
-    stop(&mut sim);
-    let sim_log = std::fs::read_to_string(dir.path().join("sim.log")).unwrap_or_default();
-    let report = format!("soem_op.py: {status:?}\n{out}{err}\n---- emulator log ----\n{sim_log}");
-    assert!(status.is_some_and(|s| s.success()), "{report}");
+    let (out, report) = ns.run_soem(script, 200, &mut sim, dir.path());
     assert!(
         out.contains("product 0x0") && out.contains("product 0x6"),
         "{report}"
@@ -71,5 +39,4 @@ fn soem_brings_both_emulated_subdevices_to_op_over_a_veth_pair() {
         "SAFE-OP refused first: {report}"
     );
     assert!(out.contains("both in OP"), "{report}");
-    assert_eq!(out.lines().last(), Some("OK"), "{report}");
 }
