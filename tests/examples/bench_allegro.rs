@@ -34,12 +34,9 @@ use std::time::Duration;
 
 use teleop_allegro_protocol::{v4, Generation};
 use teleop_can_link::{timing, CanLink};
-use teleop_e2e::bench::{
-    drive_glove, interrupt_all, late_periods, loadavg, percentiles, spawn_quiet, step_reactions,
-};
+use teleop_e2e::bench::{drive_hand_pipeline, late_periods, loadavg, percentiles, step_reactions};
 use teleop_e2e::Sandbox;
-use teleop_msgs::{GloveForceCommand, GloveState, HandState};
-use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::now_ns;
 use teleop_sim_allegro::adapter::AckStyle;
 use teleop_sim_allegro::firmware::{Firmware, FirmwareOptions};
 use teleop_sim_allegro::hand::{Hand, HandParams, VirtualObject};
@@ -68,12 +65,6 @@ fn main() {
     let sandbox = Sandbox::new();
     sandbox.session("launch/allegro.toml");
     let dir = sandbox.dir.path();
-    let retarget = std::fs::read_to_string(dir.join("config/allegro/retarget.toml"))
-        .unwrap()
-        .replace("max_speed = 2.0", "max_speed = 100.0")
-        .replace("min_cutoff_hz = 1.5", "min_cutoff_hz = 1000.0")
-        .replace("beta = 0.5", "beta = 0.0");
-    sandbox.write("config/allegro/retarget-bench.toml", &retarget);
 
     let hand = Hand::allegro(HandParams::default(), Some(VirtualObject::ball())).unwrap();
     let sim = Sim::start(
@@ -116,37 +107,10 @@ fn main() {
         })
     };
 
-    let node = NodeRuntime::new("bench-allegro", &sandbox.ipc).unwrap();
-    let mut glove: Publisher<GloveState> = node.publisher().unwrap();
-    let states: Subscriber<HandState> = node.subscriber().unwrap();
-    let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
-    let mut children = [
-        spawn_quiet(&sandbox, "teleop-allegro", "config/allegro.toml", &[]),
-        spawn_quiet(
-            &sandbox,
-            "teleop-retarget",
-            "config/allegro/retarget-bench.toml",
-            &[],
-        ),
-        spawn_quiet(
-            &sandbox,
-            "teleop-feedback",
-            "config/allegro/feedback.toml",
-            &[],
-        ),
-    ];
-
     // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
-    let drive = drive_glove(
-        WARM_UP,
-        SECONDS,
-        MIDDLE,
-        &mut glove,
-        &states,
-        &forces,
-        |m| recording.store(m, Ordering::SeqCst),
-    );
-    interrupt_all(&mut children);
+    let drive = drive_hand_pipeline(&sandbox, "allegro", &[], WARM_UP, SECONDS, MIDDLE, |m| {
+        recording.store(m, Ordering::SeqCst)
+    });
     stop.store(true, Ordering::SeqCst);
     sniffer.join().unwrap();
     let seen = seen.lock().unwrap().clone();

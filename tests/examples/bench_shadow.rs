@@ -34,13 +34,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::bench::{
-    drive_glove, interrupt_all, late_periods, loadavg, percentiles, spawn_quiet, step_reactions,
-};
+use teleop_e2e::bench::{drive_hand_pipeline, late_periods, loadavg, percentiles, step_reactions};
 use teleop_e2e::{bin, Sandbox};
 use teleop_ecat_link::{serve_socket, StreamServer};
-use teleop_msgs::{GloveForceCommand, GloveState, HandState};
-use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::now_ns;
 use teleop_shadow_protocol::can::APP_START;
 use teleop_shadow_protocol::hex;
 use teleop_shadow_protocol::mapping::Mapping;
@@ -72,12 +69,6 @@ fn main() {
     let sandbox = Sandbox::new();
     sandbox.session("launch/shadow.toml");
     let dir = sandbox.dir.path();
-    let retarget = std::fs::read_to_string(dir.join("config/shadow/retarget.toml"))
-        .unwrap()
-        .replace("max_speed = 2.0", "max_speed = 100.0")
-        .replace("min_cutoff_hz = 1.5", "min_cutoff_hz = 1000.0")
-        .replace("beta = 0.5", "beta = 0.0");
-    sandbox.write("config/shadow/retarget-bench.toml", &retarget);
     let socket = dir.join("teleop-shadow.sock");
 
     let mfj3 = usize::from(Mapping::EV3.motor_of_joint("MFJ3").unwrap());
@@ -114,43 +105,17 @@ fn main() {
         })
     };
 
-    let node = NodeRuntime::new("bench-shadow", &sandbox.ipc).unwrap();
-    let mut glove: Publisher<GloveState> = node.publisher().unwrap();
-    let states: Subscriber<HandState> = node.subscriber().unwrap();
-    let forces: Subscriber<GloveForceCommand> = node.subscriber().unwrap();
     let transport = format!("sim:{}", socket.display());
-    let mut children = [
-        spawn_quiet(
-            &sandbox,
-            "teleop-shadow",
-            "config/shadow.toml",
-            &["--transport", &transport],
-        ),
-        spawn_quiet(
-            &sandbox,
-            "teleop-retarget",
-            "config/shadow/retarget-bench.toml",
-            &[],
-        ),
-        spawn_quiet(
-            &sandbox,
-            "teleop-feedback",
-            "config/shadow/feedback.toml",
-            &[],
-        ),
-    ];
-
     // Glove samples at 300 Hz, the middle channel stepping every 200-300 ms.
-    let drive = drive_glove(
+    let drive = drive_hand_pipeline(
+        &sandbox,
+        "shadow",
+        &["--transport", &transport],
         WARM_UP,
         SECONDS,
         MIDDLE,
-        &mut glove,
-        &states,
-        &forces,
         |m| recording.store(m, Ordering::SeqCst),
     );
-    interrupt_all(&mut children);
     let seen = seen.lock().unwrap().clone();
     report(
         &seen,

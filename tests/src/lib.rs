@@ -413,7 +413,7 @@ pub mod bench {
     use std::time::{Duration, Instant};
 
     use teleop_msgs::{GloveForceCommand, GloveState, HandState};
-    use teleop_runtime::{now_ns, Publisher, Subscriber};
+    use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
 
     /// Starts `program --config CONFIG [extra...]` from this workspace with the sandbox's IPC
     /// settings, in the sandbox, its output discarded (a benchmark prints only its results).
@@ -524,6 +524,57 @@ pub mod bench {
         }
         measuring(false);
         out
+    }
+
+    /// Runs a hand's pipeline in `sandbox`: the node `teleop-<hand>` (`config/<hand>.toml` and
+    /// `node_args`), retargeting without filter or speed limit (`config/<hand>/retarget.toml`
+    /// changed so) and force feedback; drives it with [`drive_glove`] (the arguments as there)
+    /// from the IPC node `bench-<hand>`, then interrupts the processes. Returns the drive.
+    pub fn drive_hand_pipeline(
+        sandbox: &crate::Sandbox,
+        hand: &str,
+        node_args: &[&str],
+        warm_up: Duration,
+        seconds: u64,
+        middle: usize,
+        measuring: impl FnMut(bool),
+    ) -> GloveDrive {
+        let retarget = std::fs::read_to_string(
+            sandbox
+                .dir
+                .path()
+                .join(format!("config/{hand}/retarget.toml")),
+        )
+        .expect("the hand's retarget.toml")
+        .replace("max_speed = 2.0", "max_speed = 100.0")
+        .replace("min_cutoff_hz = 1.5", "min_cutoff_hz = 1000.0")
+        .replace("beta = 0.5", "beta = 0.0");
+        let retarget_bench = format!("config/{hand}/retarget-bench.toml");
+        sandbox.write(&retarget_bench, &retarget);
+        let node = NodeRuntime::new(&format!("bench-{hand}"), &sandbox.ipc).expect("IPC node");
+        let mut glove: Publisher<GloveState> = node.publisher().expect("glove/state");
+        let states: Subscriber<HandState> = node.subscriber().expect("hand/state");
+        let forces: Subscriber<GloveForceCommand> = node.subscriber().expect("glove/force_command");
+        let mut children = [
+            spawn_quiet(
+                sandbox,
+                &format!("teleop-{hand}"),
+                &format!("config/{hand}.toml"),
+                node_args,
+            ),
+            spawn_quiet(sandbox, "teleop-retarget", &retarget_bench, &[]),
+            spawn_quiet(
+                sandbox,
+                "teleop-feedback",
+                &format!("config/{hand}/feedback.toml"),
+                &[],
+            ),
+        ];
+        let drive = drive_glove(
+            warm_up, seconds, middle, &mut glove, &states, &forces, measuring,
+        );
+        interrupt_all(&mut children);
+        drive
     }
 
     /// For each glove step `(stamp_ns, closing)` of [`drive_glove`]: the time from the step to
