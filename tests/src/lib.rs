@@ -333,6 +333,18 @@ pub fn revo2_profile() -> String {
         .to_string()
 }
 
+/// A scripted device's clock: whether its period ending at `next` is over (then `next` moves one
+/// `period` on); else sleeps until it is and says no, so that the caller serves its bus first.
+pub fn period_due(next: &mut Instant, period: Duration) -> bool {
+    let now = Instant::now();
+    if now < *next {
+        std::thread::sleep(*next - now);
+        return false;
+    }
+    *next += period;
+    true
+}
+
 /// A normalised position command for the Revo2's six joints, each with `speed_limit` (per
 /// second; 0 sets none).
 pub fn revo2_position_command(targets: [f32; 6], speed_limit: f32) -> teleop_msgs::HandCommand {

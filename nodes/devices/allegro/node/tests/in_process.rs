@@ -106,12 +106,9 @@ impl ScriptedHand {
                         }
                     }
                 }
-                let now = Instant::now();
-                if now < next {
-                    std::thread::sleep(next - now);
+                if !teleop_e2e::period_due(&mut next, Duration::from_millis(3)) {
                     continue;
                 }
-                next += Duration::from_millis(3);
                 let (streaming, torque, looping) = {
                     let log = l.lock().unwrap();
                     (log.streaming, log.torque, log.torque_frames > 0)

@@ -61,12 +61,9 @@ fn scripted_hand(bus: &LocalBus, payload: Payload, stop: Arc<AtomicBool>, q0: [f
                     _ => {}
                 }
             }
-            let now = Instant::now();
-            if now < next {
-                std::thread::sleep(next - now);
+            if !teleop_e2e::period_due(&mut next, Duration::from_millis(3)) {
                 continue;
             }
-            next += Duration::from_millis(3);
             if !streaming {
                 continue;
             }
