@@ -162,6 +162,17 @@ impl Command {
     /// Bytes on the wire.
     pub const SIZE: usize = 58;
 
+    /// The command that puts the palm in CAN direct mode (the motors' CAN buses bridged), in
+    /// `numbering`; every other field zero.
+    pub fn can_direct_mode(numbering: crate::data::EdcNumbering) -> Self {
+        Self {
+            edc_command: crate::data::EdcCommand::CanDirectMode
+                .value(numbering)
+                .expect("CAN direct mode has a value in every numbering"),
+            ..Self::default()
+        }
+    }
+
     /// The 58 bytes.
     pub fn pack(&self) -> [u8; 58] {
         let mut b = [0u8; 58];

@@ -449,12 +449,7 @@ mod tests {
     #[test]
     fn can_direct_mode_bridges_to_the_bootloader_and_writes_only_the_bridge_status() {
         let mut palm = Palm::new();
-        let direct = Command {
-            edc_command: EdcCommand::CanDirectMode
-                .value(EdcNumbering::Shipped)
-                .unwrap(),
-            ..Command::default()
-        };
+        let direct = Command::can_direct_mode(EdcNumbering::Shipped);
         // MAGIC to motor 13 (bus 2, id 3): its application restarts into the bootloader, which
         // announces itself.
         let magic = BootMessage::magic(3);

@@ -162,19 +162,14 @@ fn a_read_back_that_differs_is_a_mismatch_naming_the_address() {
 #[test]
 fn flashing_motor_13_through_the_palm_in_can_direct_mode() {
     use teleop_shadow_protocol::can::BootMessage;
-    use teleop_shadow_protocol::data::{EdcCommand, EdcNumbering};
+    use teleop_shadow_protocol::data::EdcNumbering;
     use teleop_shadow_protocol::layout::{CanBridge, Command};
     use teleop_sim_shadow::palm::Palm;
 
     let app = generated_application(700, 11);
     let img = image(&app);
     let mut palm = Palm::new();
-    let direct = Command {
-        edc_command: EdcCommand::CanDirectMode
-            .value(EdcNumbering::Shipped)
-            .unwrap(),
-        ..Command::default()
-    };
+    let direct = Command::can_direct_mode(EdcNumbering::Shipped);
     // Motor 13 is board 3 on bus 2.
     let mut flasher = Flasher::new(3, img, Settings::default());
     let mut now = Palm::BOOT_MS;
