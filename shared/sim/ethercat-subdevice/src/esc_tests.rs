@@ -272,6 +272,14 @@ impl Bus {
     }
 }
 
+/// The datagrams that put SM0/SM1 on the standard mailbox (0x1000 and 0x1080, 128 bytes each).
+fn standard_mailbox() -> [Dg; 2] {
+    [
+        dg(BWR, 0, reg::sm(0, 0), &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0]),
+        dg(BWR, 0, reg::sm(1, 0), &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0]),
+    ]
+}
+
 fn sdo_upload(counter: u8, index: u16, sub: u8) -> Vec<u8> {
     let i = index.to_le_bytes();
     vec![
@@ -737,14 +745,9 @@ fn other_mailbox_protocols_reach_the_application() {
         now += Duration::from_millis(1);
         parse_reply(&sd.process_frame(&build_frame(&[d]), now).expect("reply")).remove(0)
     };
-    run(
-        &mut sd,
-        dg(BWR, 0, reg::sm(0, 0), &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0]),
-    );
-    run(
-        &mut sd,
-        dg(BWR, 0, reg::sm(1, 0), &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0]),
-    );
+    for d in standard_mailbox() {
+        run(&mut sd, d);
+    }
     run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x03, 0]));
     assert_eq!(sd.al_state(), (AlState::Boot, false, 0));
     let mut m = vec![3, 0, 0, 0, 0, 0x14, 1, 2, 3];
@@ -806,14 +809,9 @@ fn boot_uses_the_bootstrap_mailbox_and_offers_foe_only() {
     let image = sd.sii_image();
     assert_eq!(&image[0x28..0x30], &[0x00, 0x18, 0, 1, 0x00, 0x1A, 0, 1]);
     // SM0/SM1 on the standard mailbox: BOOT refused with 0x0015.
-    run(
-        &mut sd,
-        dg(BWR, 0, reg::sm(0, 0), &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0]),
-    );
-    run(
-        &mut sd,
-        dg(BWR, 0, reg::sm(1, 0), &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0]),
-    );
+    for d in standard_mailbox() {
+        run(&mut sd, d);
+    }
     run(&mut sd, dg(BWR, 0, reg::AL_CONTROL, &[0x03, 0]));
     assert_eq!(sd.al_state(), (AlState::Init, true, 0x0015));
     // Moved to the bootstrap mailbox (disable, configure, enable): BOOT.
@@ -875,24 +873,9 @@ fn a_restart_takes_the_device_off_the_bus_then_back_as_at_power_on() {
         at(1),
     )
     .expect("reply");
-    sd.process_frame(
-        &frame(dg(
-            BWR,
-            0,
-            reg::sm(0, 0),
-            &[0x00, 0x10, 128, 0, 0x26, 0, 1, 0],
-        )),
-        at(2),
-    );
-    sd.process_frame(
-        &frame(dg(
-            BWR,
-            0,
-            reg::sm(1, 0),
-            &[0x80, 0x10, 128, 0, 0x22, 0, 1, 0],
-        )),
-        at(3),
-    );
+    for (ms, d) in [2, 3].into_iter().zip(standard_mailbox()) {
+        sd.process_frame(&frame(d), at(ms));
+    }
     sd.process_frame(&frame(dg(BWR, 0, reg::AL_CONTROL, &[0x02, 0])), at(4));
     assert_eq!(sd.al_state(), (AlState::PreOp, false, 0));
     assert!(sd.app().polls >= 4, "polled on every frame");
