@@ -84,10 +84,7 @@ fn glove_commands_configure_the_simulated_device() {
 fn control_socket_injects_faults_and_unplugs_at_run_time() {
     let (rig, link) = start(&["--script", "hold"]);
     assert!(glove(&rig, &link, &["info"]).0);
-    assert!(rig
-        .sandbox
-        .control("glove.ctl", "drop 1")
-        .starts_with("ok"));
+    assert!(rig.sandbox.control("glove.ctl", "drop 1").starts_with("ok"));
     let (ok, out) = glove(&rig, &link, &["info"]);
     assert!(!ok && out.contains("no answer within"), "{out}");
     assert!(rig.sandbox.control("glove.ctl", "clear").starts_with("ok"));
