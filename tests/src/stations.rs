@@ -62,11 +62,11 @@ pub fn start(
     prefix: &str,
     patch: impl Fn(bool, String) -> String,
 ) -> (Netns, Netns, Station, Station) {
-    start_hand(prefix, "", patch)
+    start_hand(prefix, "revo2", patch)
 }
 
 /// As [`start`], with the stations of `hand` (`launch/<hand>-operator.toml` and
-/// `launch/<hand>-robot.toml`; `""`: the Revo2's).
+/// `launch/<hand>-robot.toml`).
 pub fn start_hand(
     prefix: &str,
     hand: &str,
@@ -76,13 +76,7 @@ pub fn start_hand(
         prefix,
         (&format!("{OPERATOR_IP}/24"), &format!("{ROBOT_IP}/24")),
     );
-    let launch = |side: &str| {
-        if hand.is_empty() {
-            format!("launch/{side}.toml")
-        } else {
-            format!("launch/{hand}-{side}.toml")
-        }
-    };
+    let launch = |side: &str| format!("launch/{hand}-{side}.toml");
     let op = prepare(&launch("operator"), "config/bridge/operator.toml", |t| {
         patch(true, t)
     });
