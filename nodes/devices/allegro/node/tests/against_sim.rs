@@ -177,8 +177,17 @@ const POSE: [f32; 16] = [
     0.1, 0.3, 0.3, 0.2, 0.0, 0.2, 0.2, 0.2, -0.1, 0.3, 0.3, 0.2, 0.6, 0.2, 0.2, 0.2,
 ];
 
+/// One hand session at a time: each test runs a simulated hand and a node at the hand's 333 Hz
+/// and checks timing the hand shows (states per second, the torque watchdog, the stop); two at
+/// once on a two-core machine measure each other.
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// Everything the issue asks of one generation, in one simulator session.
 fn generation(generation: &str) {
+    let _one = one_at_a_time();
     let mut rig = Rig::new(generation, generation, "ball");
     let up = rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
     assert_eq!(up.joint_count, 16);
@@ -327,6 +336,7 @@ fn v4_against_the_simulator() {
 /// bring-up sends SYSTEM_ON either way.
 #[test]
 fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
+    let _one = one_at_a_time();
     let mut rig = Rig::with_sim_options(
         "v4",
         "v4",
@@ -362,6 +372,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
 
 #[test]
 fn the_other_generation_is_named_and_the_node_waits_for_the_right_one() {
+    let _one = one_at_a_time();
     let rig = Rig::new("v4", "v3", "none");
     rig.wait_log(Duration::from_secs(10), "saw v4 IDs; set protocol = v4");
     let mut rig = rig;
@@ -468,6 +479,7 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
 /// finger frames nor unknown ones.
 #[test]
 fn v3_tells_state_answers_from_the_stream_with_either_payload() {
+    let _one = one_at_a_time();
     for (payload, inject) in [("positions", "0000000000000000"), ("empty", "")] {
         let rig = Rig::with_sim_options("v3", "v3", "none", &["--state-answer", payload]);
         rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
@@ -506,6 +518,7 @@ fn v3_tells_state_answers_from_the_stream_with_either_payload() {
 /// run and never brings the hand up again. (Before stamps were used: 1-7 restarts in 12 s.)
 #[test]
 fn v4_rides_out_a_loaded_host() {
+    let _one = one_at_a_time();
     use std::sync::atomic::{AtomicBool, Ordering};
     let rig = Rig::new("v4", "v4", "none");
     rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
