@@ -71,7 +71,7 @@ pub trait Message: ZeroCopySend + Copy + Default + Debug + Send + Sync + 'static
     /// ROS 2 schema name, e.g. `teleop_msgs/msg/GloveState`.
     const SCHEMA_NAME: &'static str;
     /// The iceoryx2 payload type name: `<SCHEMA_NAME>@v<CONTRACT_VERSION>`, e.g.
-    /// `teleop_msgs/msg/GloveState@v2`.
+    /// `teleop_msgs/msg/GloveState@v3`.
     const TYPE_NAME: &'static str;
     /// The fields in declaration order.
     const FIELDS: &'static [Field];

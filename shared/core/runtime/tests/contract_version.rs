@@ -19,8 +19,8 @@ struct HandStateV1 {
 /// `EStop` with the current layout but another contract version in its name.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
 #[repr(C)]
-#[type_name("teleop_msgs/msg/EStop@v3")]
-struct EStopV3 {
+#[type_name("teleop_msgs/msg/EStop@v4")]
+struct EStopV4 {
     bytes: [u64; 5],
 }
 
@@ -60,18 +60,18 @@ fn another_contract_version_is_refused_by_name() {
     let text = err.to_string();
     for part in [
         "contract version mismatch on service teleop/hand/state",
-        "`teleop_msgs/msg/HandState@v2 (536 bytes)`",
+        "`teleop_msgs/msg/HandState@v3 (536 bytes)`",
         "`teleop_msgs/msg/HandState (432 bytes)`",
     ] {
         assert!(text.contains(part), "{part:?} missing from: {text}");
     }
 
     // Same size, another version: refused all the same.
-    let err = refusal::<EStopV3, EStop>(&settings);
+    let err = refusal::<EStopV4, EStop>(&settings);
     let text = err.to_string();
     assert!(
         text.contains("contract version mismatch on service teleop/estop")
-            && text.contains("`teleop_msgs/msg/EStop@v3 (40 bytes)`"),
+            && text.contains("`teleop_msgs/msg/EStop@v4 (40 bytes)`"),
         "{text}"
     );
     settings.remove_shared_memory();
