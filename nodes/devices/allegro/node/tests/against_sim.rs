@@ -351,11 +351,22 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
     assert!(worst < 0.05, "PD settle error {worst} rad");
-    // Stale: the hold keeps sending torque, so the watchdog never trips and the pose stays.
+    // Stale: the hold keeps sending torque, so the watchdog never trips during it and the pose
+    // stays. (Counted from here: a scheduling stall of this loaded test machine longer than the
+    // 20 ms watchdog while the hand is followed is not what this checks; it is printed.)
+    let before = rig.sim.control("stats");
+    eprintln!(
+        "torque timeouts before the hold: {}",
+        field(&before, "torque_timeouts")
+    );
     rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
     std::thread::sleep(Duration::from_millis(500));
     let status = rig.sim.control("stats");
-    assert_eq!(field(&status, "torque_timeouts"), "0", "{status}");
+    assert_eq!(
+        field(&status, "torque_timeouts"),
+        field(&before, "torque_timeouts"),
+        "the watchdog tripped while the hand held: {status}"
+    );
     let held = rig.states.poll_latest().unwrap();
     let worst = positions(&held)
         .iter()
