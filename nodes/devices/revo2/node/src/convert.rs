@@ -196,18 +196,7 @@ mod tests {
     use teleop_revo2_protocol::TactileData;
 
     fn cmd(targets: [f32; 6], speed: f32) -> HandCommand {
-        let mut c = HandCommand {
-            hand_model: device_model::REVO2,
-            joint_count: 6,
-            control_mode: control_mode::POSITION,
-            units: units::NORMALISED,
-            ..Default::default()
-        };
-        for (j, t) in c.joints.iter_mut().zip(targets) {
-            j.target = t;
-            j.speed_limit = speed;
-        }
-        c
+        teleop_e2e::revo2_position_command(targets, speed)
     }
 
     #[test]
