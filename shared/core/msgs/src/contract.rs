@@ -35,16 +35,19 @@ pub mod device_model {
     pub const SHADOW: u8 = 3;
     /// The EH55BF1 exoskeleton glove (serial line).
     pub const GLOVE: u8 = 4;
+    /// LEAP Hand (16 Dynamixel XC330 servos on one serial bus, Protocol 2.0).
+    pub const LEAP: u8 = 5;
 
     /// Every known model with its short name.
-    const NAMES: [(u8, &str); 4] = [
+    const NAMES: [(u8, &str); 5] = [
         (REVO2, "revo2"),
         (ALLEGRO, "allegro"),
         (SHADOW, "shadow"),
         (GLOVE, "glove"),
+        (LEAP, "leap"),
     ];
 
-    /// The model's short name (`revo2`, `allegro`, `shadow`, `glove`; `unknown` for
+    /// The model's short name (`revo2`, `allegro`, `shadow`, `glove`, `leap`; `unknown` for
     /// [`UNKNOWN`] and any value not listed here): a hand profile's `name`, recording metadata
     /// keys (`device.allegro`) and the viewer's paths use it.
     pub fn name(model: u8) -> &'static str {

@@ -1,0 +1,3 @@
+//! `teleop-leap`: the LEAP Hand node.
+
+fn main() {}

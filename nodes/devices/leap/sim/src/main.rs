@@ -1,0 +1,3 @@
+//! `teleop-sim-leap`: the simulated LEAP Hand.
+
+fn main() {}
