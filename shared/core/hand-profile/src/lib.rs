@@ -13,7 +13,7 @@
 //!
 //! Loading checks everything once; an error names the file, the line and the field
 //! (`config/hands/allegro.toml:31: joint[4].limits: lower (1.2) must be below upper (0.3)`).
-//! The three shipped profiles are also compiled in ([`HandProfile::builtin`]) for recordings
+//! The four shipped profiles are also compiled in ([`HandProfile::builtin`]) for recordings
 //! made before profiles existed.
 //!
 //! # What it must not depend on
@@ -235,7 +235,7 @@ impl FeedbackSource {
 /// A checked hand profile.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HandProfile {
-    /// Short name (`revo2`, `allegro`, `shadow`).
+    /// Short name (`revo2`, `allegro`, `shadow`, `leap`).
     pub name: String,
     /// Human-readable model.
     pub model: String,
@@ -256,7 +256,7 @@ pub struct HandProfile {
 pub const RECORDING_METADATA: &str = "hand_profile";
 
 /// The profiles shipped in `config/hands/`, compiled in: `(name, file name, text)`.
-const BUILTIN: [(&str, &str, &str); 3] = [
+const BUILTIN: [(&str, &str, &str); 4] = [
     (
         "revo2",
         "config/hands/revo2.toml",
@@ -271,6 +271,11 @@ const BUILTIN: [(&str, &str, &str); 3] = [
         "shadow",
         "config/hands/shadow.toml",
         include_str!("../../../../config/hands/shadow.toml"),
+    ),
+    (
+        "leap",
+        "config/hands/leap.toml",
+        include_str!("../../../../config/hands/leap.toml"),
     ),
 ];
 
@@ -290,7 +295,8 @@ impl HandProfile {
         raw::parse(text, origin)
     }
 
-    /// A shipped profile by name (`revo2`, `allegro`, `shadow`), as compiled into this binary.
+    /// A shipped profile by name (`revo2`, `allegro`, `shadow`, `leap`), as compiled into this
+    /// binary.
     pub fn builtin(name: &str) -> Option<Self> {
         let (_, file, text) = BUILTIN.iter().find(|(n, _, _)| *n == name)?;
         // The shipped files are checked by this crate's tests; a broken one is reported by
