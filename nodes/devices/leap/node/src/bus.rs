@@ -1,0 +1,457 @@
+//! The Dynamixel bus: request and reply over a serial line, every byte through
+//! `teleop-leap-protocol`. A [`Line`] moves bytes (the serial port, [`SerialLine`], or a test's
+//! script); the [`Bus`] sends a request and waits for its reply until the reply's timeout
+//! ([`crate::timing`]), and counts what else it finds on the line: bytes that are no packet,
+//! replies with a bad CRC, packets nobody asked for, bytes that came after their request gave up.
+//! Nothing is dropped uncounted.
+//!
+//! Allocation-free: requests are encoded into, and replies scanned and unstuffed in, buffers the
+//! bus owns.
+
+use std::io::{Read, Write};
+use std::os::fd::AsRawFd;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use serialport::{SerialPort, TTYPort};
+use teleop_leap_protocol::packet::{self, ErrorByte, FastSyncReply, Scan, Status};
+use teleop_leap_protocol::{wire, DecodeError, EncodeError};
+
+use crate::timing::Timing;
+
+/// Bytes the receive buffer holds (more than the longest packet a servo sends).
+const RX_CAP: usize = 1024;
+/// Bytes the transmit buffer holds (a Sync Write of 16 goals is 94 before stuffing).
+const TX_CAP: usize = 512;
+/// Most parameter bytes a single servo's reply carries here (the service's reads).
+pub const MAX_REPLY: usize = 64;
+/// Most servos a Fast Sync Read asks.
+pub const MAX_SERVOS: usize = 16;
+/// Most data bytes a Fast Sync Read asks of each servo.
+pub const MAX_BLOCK: usize = 16;
+
+/// Moves bytes to and from the servos.
+pub trait Line {
+    /// Writes all of `bytes`.
+    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()>;
+    /// Reads what arrives within `timeout` into `buf` (at least one byte, or 0 when nothing
+    /// came in time).
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize>;
+}
+
+/// Why a request got no usable reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum BusError {
+    /// No (complete) reply within its timeout.
+    #[error("no reply in time")]
+    Timeout,
+    /// A reply with a bad CRC, or one that does not decode (counted).
+    #[error("a corrupt reply ({0})")]
+    Corrupt(DecodeError),
+    /// The line failed (the adapter is gone): reopen it.
+    #[error("serial line: {0}")]
+    Io(std::io::ErrorKind),
+    /// The request could not be encoded.
+    #[error("request not encoded: {0}")]
+    Encode(EncodeError),
+}
+
+/// What the bus found on the line, since it was opened.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BusCounters {
+    /// Requests sent.
+    pub requests: u64,
+    /// Replies with a bad CRC (a packet's, or a Fast Sync Read block's).
+    pub crc_errors: u64,
+    /// Replies with a good CRC that do not decode as the reply asked for.
+    pub malformed: u64,
+    /// Bytes that were not part of any packet.
+    pub garbage_bytes: u64,
+    /// Runs of such bytes (each run one error).
+    pub garbage_runs: u64,
+    /// Bytes that came after their request had given up, dropped before the next request.
+    pub late_bytes: u64,
+    /// Whole packets nobody waited for (another ID, or not a status packet).
+    pub unexpected: u64,
+    /// Replies not there (complete) in time.
+    pub timeouts: u64,
+}
+
+/// One servo's status reply: its error byte and parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reply {
+    /// The error byte.
+    pub error: ErrorByte,
+    len: usize,
+    data: [u8; MAX_REPLY],
+}
+
+impl Reply {
+    /// The parameters (at most [`MAX_REPLY`] bytes of them).
+    pub fn data(&self) -> &[u8] {
+        &self.data[..self.len]
+    }
+}
+
+/// One servo's block of a Fast Sync Read reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Block {
+    /// The block's error byte.
+    pub error: ErrorByte,
+    /// Its data (the first `len` bytes).
+    pub data: [u8; MAX_BLOCK],
+}
+
+/// The blocks of one Fast Sync Read, in the order of the IDs asked (`None`: no block from it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FastRead {
+    /// Per ID asked, its block.
+    pub blocks: [Option<Block>; MAX_SERVOS],
+    /// Blocks from an ID not asked (counted in `unexpected`).
+    pub foreign_blocks: u32,
+}
+
+impl FastRead {
+    /// Nothing read.
+    pub const EMPTY: Self = Self {
+        blocks: [None; MAX_SERVOS],
+        foreign_blocks: 0,
+    };
+}
+
+/// A request and reply bus over a [`Line`].
+pub struct Bus<L> {
+    line: L,
+    timing: Timing,
+    tx: [u8; TX_CAP],
+    rx: [u8; RX_CAP],
+    rx_len: usize,
+    scratch: [u8; RX_CAP],
+    counters: BusCounters,
+}
+
+impl<L: Line> Bus<L> {
+    /// A bus on `line` with `timing`.
+    pub fn new(line: L, timing: Timing) -> Self {
+        Self {
+            line,
+            timing,
+            tx: [0; TX_CAP],
+            rx: [0; RX_CAP],
+            rx_len: 0,
+            scratch: [0; RX_CAP],
+            counters: BusCounters::default(),
+        }
+    }
+
+    /// What the bus found so far.
+    pub fn counters(&self) -> &BusCounters {
+        &self.counters
+    }
+
+    /// Goes on counting from `counters` (a reopened line's bus counts on from the last one's).
+    pub fn set_counters(&mut self, counters: BusCounters) {
+        self.counters = counters;
+    }
+
+    /// The line's timing.
+    pub fn timing(&self) -> &Timing {
+        &self.timing
+    }
+
+    /// Sets the timing (after the servos' return delay was written).
+    pub fn set_timing(&mut self, timing: Timing) {
+        self.timing = timing;
+    }
+
+    /// The line.
+    pub fn line(&mut self) -> &mut L {
+        &mut self.line
+    }
+
+    /// Pings `id`: its Model Number and firmware version.
+    pub fn ping(&mut self, id: u8) -> Result<(u16, u8), BusError> {
+        let reply = self.transact(id, 3, |out| packet::ping(id, out))?;
+        match reply.data() {
+            [lo, hi, fw, ..] => Ok((u16::from_le_bytes([*lo, *hi]), *fw)),
+            _ => {
+                self.counters.malformed += 1;
+                Err(BusError::Corrupt(DecodeError::DataLength {
+                    what: "ping reply",
+                    expected: 3,
+                    got: reply.data().len(),
+                }))
+            }
+        }
+    }
+
+    /// Reads `len` bytes at `addr` of `id` (the reply's error byte is the caller's to judge;
+    /// with an error the data may be absent).
+    pub fn read(&mut self, id: u8, addr: u16, len: u16) -> Result<Reply, BusError> {
+        self.transact(id, usize::from(len), |out| packet::read(id, addr, len, out))
+    }
+
+    /// Writes `data` at `addr` of `id`; its status.
+    pub fn write(&mut self, id: u8, addr: u16, data: &[u8]) -> Result<Reply, BusError> {
+        self.transact(id, 0, |out| packet::write(id, addr, data, out))
+    }
+
+    /// Reboots `id`; its status (sent before it restarts).
+    pub fn reboot(&mut self, id: u8) -> Result<Reply, BusError> {
+        self.transact(id, 0, |out| packet::reboot(id, out))
+    }
+
+    /// Sync Write of `len` bytes at `addr` to each `(id, data)` (no reply).
+    pub fn sync_write<'a>(
+        &mut self,
+        addr: u16,
+        len: u16,
+        items: impl IntoIterator<Item = (u8, &'a [u8])>,
+    ) -> Result<(), BusError> {
+        let n = packet::sync_write(addr, len, items, &mut self.tx).map_err(BusError::Encode)?;
+        self.send(n)?;
+        // Nothing answers: the bytes take their time on the wire before the next request.
+        Ok(())
+    }
+
+    /// One Fast Sync Read of `len` bytes at `addr` from `ids`: the blocks found, in the order
+    /// of `ids`. The whole reply is one packet; a bad CRC (the packet's or a block's) loses
+    /// all of it (`Corrupt`).
+    pub fn fast_sync_read(
+        &mut self,
+        addr: u16,
+        len: u16,
+        ids: &[u8],
+        out: &mut FastRead,
+    ) -> Result<(), BusError> {
+        *out = FastRead::EMPTY;
+        let n = packet::fast_sync_read(addr, len, ids, &mut self.tx).map_err(BusError::Encode)?;
+        let start = Instant::now();
+        self.send(n)?;
+        let expect = wire::fast_sync_reply_len(ids.len(), usize::from(len));
+        let deadline = start + self.timing.reply(n, expect, ids.len());
+        loop {
+            let raw_len = self.next_packet(deadline)?;
+            let parsed = packet::parse(&self.rx[..raw_len], &mut self.scratch);
+            let reply = match parsed.and_then(|p| FastSyncReply::new(&p, len)) {
+                Ok(reply) => reply,
+                Err(DecodeError::NotFastSync(_)) | Err(DecodeError::NotStatus(_)) => {
+                    // A whole packet, but another one (a late single reply, an echo).
+                    self.counters.unexpected += 1;
+                    self.consume(raw_len);
+                    continue;
+                }
+                Err(e) => {
+                    // A bad CRC (the packet's, or one block's) loses the whole reply.
+                    self.count_decode(e);
+                    self.consume(raw_len);
+                    return Err(BusError::Corrupt(e));
+                }
+            };
+            for block in reply.blocks() {
+                let Some(slot) = ids.iter().position(|id| *id == block.id) else {
+                    out.foreign_blocks += 1;
+                    continue;
+                };
+                let mut data = [0u8; MAX_BLOCK];
+                let k = block.data.len().min(MAX_BLOCK);
+                data[..k].copy_from_slice(&block.data[..k]);
+                out.blocks[slot] = Some(Block {
+                    error: block.error,
+                    data,
+                });
+            }
+            self.counters.unexpected += u64::from(out.foreign_blocks);
+            self.consume(raw_len);
+            return Ok(());
+        }
+    }
+
+    /// Sends the request `encode` writes and waits for `id`'s status with `params` bytes.
+    fn transact(
+        &mut self,
+        id: u8,
+        params: usize,
+        encode: impl FnOnce(&mut [u8]) -> Result<usize, EncodeError>,
+    ) -> Result<Reply, BusError> {
+        let n = encode(&mut self.tx).map_err(BusError::Encode)?;
+        let start = Instant::now();
+        self.send(n)?;
+        let deadline = start + self.timing.reply(n, wire::status_len(params), 1);
+        loop {
+            let raw_len = self.next_packet(deadline)?;
+            let decoded = packet::parse(&self.rx[..raw_len], &mut self.scratch)
+                .and_then(|p| Status::from_packet(&p).map(|s| (s.id, s.error, s.params)));
+            let (from, error, data) = match decoded {
+                Ok(s) => s,
+                Err(DecodeError::NotStatus(_)) => {
+                    // Our own request echoed by a line that echoes, or another master's.
+                    self.counters.unexpected += 1;
+                    self.consume(raw_len);
+                    continue;
+                }
+                Err(e) => {
+                    self.count_decode(e);
+                    self.consume(raw_len);
+                    return Err(BusError::Corrupt(e));
+                }
+            };
+            if from != id {
+                self.counters.unexpected += 1;
+                self.consume(raw_len);
+                continue;
+            }
+            let len = data.len().min(MAX_REPLY);
+            let mut reply = Reply {
+                error,
+                len,
+                data: [0; MAX_REPLY],
+            };
+            reply.data[..len].copy_from_slice(&data[..len]);
+            self.consume(raw_len);
+            return Ok(reply);
+        }
+    }
+
+    /// Counts a reply that did not decode.
+    fn count_decode(&mut self, e: DecodeError) {
+        match e {
+            DecodeError::Crc { .. } | DecodeError::BlockCrc { .. } => self.counters.crc_errors += 1,
+            _ => self.counters.malformed += 1,
+        }
+    }
+
+    /// Drops what is left from earlier requests (counted as late), then sends `tx[..n]`.
+    fn send(&mut self, n: usize) -> Result<(), BusError> {
+        self.counters.late_bytes += self.rx_len as u64;
+        self.rx_len = 0;
+        loop {
+            let got = self
+                .line
+                .recv(&mut self.rx, Duration::ZERO)
+                .map_err(|e| BusError::Io(e.kind()))?;
+            if got == 0 {
+                break;
+            }
+            self.counters.late_bytes += got as u64;
+        }
+        self.counters.requests += 1;
+        self.line
+            .send(&self.tx[..n])
+            .map_err(|e| BusError::Io(e.kind()))
+    }
+
+    /// Receives until a whole packet starts the buffer (bytes before it counted as garbage);
+    /// its length. `Timeout` at `deadline`.
+    fn next_packet(&mut self, deadline: Instant) -> Result<usize, BusError> {
+        loop {
+            match packet::scan(&self.rx[..self.rx_len]) {
+                Scan::Packet(len) => return Ok(len),
+                Scan::Skip(n) if n > 0 => {
+                    self.counters.garbage_bytes += n as u64;
+                    self.counters.garbage_runs += 1;
+                    self.consume(n);
+                    continue;
+                }
+                Scan::Skip(_) | Scan::Need(_) => {}
+            }
+            if self.rx_len == RX_CAP {
+                // Cannot happen with packets shorter than the buffer; never spin on it.
+                self.counters.garbage_bytes += RX_CAP as u64;
+                self.rx_len = 0;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                self.counters.timeouts += 1;
+                return Err(BusError::Timeout);
+            }
+            let got = self
+                .line
+                .recv(&mut self.rx[self.rx_len..], left)
+                .map_err(|e| BusError::Io(e.kind()))?;
+            self.rx_len += got;
+        }
+    }
+
+    /// Drops the first `n` received bytes.
+    fn consume(&mut self, n: usize) {
+        let n = n.min(self.rx_len);
+        self.rx.copy_within(n..self.rx_len, 0);
+        self.rx_len -= n;
+    }
+}
+
+/// The serial port as a [`Line`]: 8N1, no flow control, opened exclusively, in low-latency mode
+/// where the driver has one.
+pub struct SerialLine {
+    port: TTYPort,
+}
+
+/// How long writing a request may block before the line counts as stuck.
+const WRITE_TIMEOUT: Duration = Duration::from_millis(100);
+
+/// Set once the adapter's slow latency timer was warned about (once per process).
+static WARNED: AtomicBool = AtomicBool::new(false);
+
+impl SerialLine {
+    /// Opens `path` at `baud`: asks the driver for `ASYNC_LOW_LATENCY` (a pseudo-terminal
+    /// refuses: a debug note) and warns once, naming the fix, when a USB adapter's latency
+    /// timer is above 1 ms (as the glove's link does: `teleop_glove::latency`).
+    pub fn open(path: &str, baud: u32) -> Result<Self, serialport::Error> {
+        let port = serialport::new(path, baud)
+            .data_bits(serialport::DataBits::Eight)
+            .parity(serialport::Parity::None)
+            .stop_bits(serialport::StopBits::One)
+            .flow_control(serialport::FlowControl::None)
+            .timeout(Duration::from_millis(10))
+            .open_native()?;
+        if let Err(e) = teleop_glove::latency::request_low_latency(port.as_raw_fd()) {
+            tracing::debug!(port = %path, "no low-latency mode: {e}");
+        }
+        if let Some(slow) = teleop_glove::latency::tty_name(Path::new(path))
+            .and_then(|tty| teleop_glove::latency::slow_latency_timer(Path::new("/sys"), &tty))
+        {
+            if !WARNED.swap(true, Ordering::Relaxed) {
+                tracing::warn!(
+                    port = %path,
+                    "the USB-serial adapter's latency timer is {} ms ({}): every reply waits for \
+                     it; for 1 ms run `{}`",
+                    slow.ms,
+                    slow.path.display(),
+                    slow.fix()
+                );
+            }
+        }
+        Ok(Self { port })
+    }
+}
+
+impl Line for SerialLine {
+    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        // The driver takes a request at once unless the line is stuck (a stalled adapter).
+        self.port
+            .set_timeout(WRITE_TIMEOUT)
+            .map_err(std::io::Error::from)?;
+        self.port.write_all(bytes)
+    }
+
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+        self.port
+            .set_timeout(timeout)
+            .map_err(std::io::Error::from)?;
+        match self.port.read(buf) {
+            Ok(n) => Ok(n),
+            // Nothing in time; or a signal (SIGINT: the loop stops after this turn).
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
+                ) =>
+            {
+                Ok(0)
+            }
+            Err(e) => Err(e),
+        }
+    }
+}
