@@ -3,7 +3,7 @@
 //! steer a running pipeline (every side of it, or the namespaces given with `--namespace`);
 //! `calibrate` records an operator calibration profile.
 //!
-//! `glove`, `revo2`, `allegro` and `shadow` are the devices' service commands: their arguments
+//! `glove`, `revo2`, `allegro`, `shadow` and `leap` are the devices' service commands: their arguments
 //! and their I/O live with the device (`service` in each device node's library), and `teleop`
 //! only dispatches to them.
 //!
@@ -132,6 +132,14 @@ enum Command {
         target: teleop_allegro::service::Target,
         #[command(subcommand)]
         command: teleop_allegro::service::AllegroCommand,
+    },
+    /// Talk to the LEAP Hand's servos directly over their serial bus (with the LEAP node
+    /// stopped): info, reboot, home, move.
+    Leap {
+        #[command(flatten)]
+        target: teleop_leap::service::Target,
+        #[command(subcommand)]
+        command: teleop_leap::service::LeapCommand,
     },
     /// Talk to the Shadow Hand's palm directly over EtherCAT (with the Shadow node stopped):
     /// info, motor-board flashing, a crafted CAN message, ADC channel numbers.
@@ -382,6 +390,7 @@ fn main() -> ExitCode {
         Command::Revo2 { target, command } => teleop_revo2::service::run(&target, &command),
         Command::Allegro { target, command } => teleop_allegro::service::run(&target, &command),
         Command::Shadow { target, command } => teleop_shadow::service::run(&target, &command),
+        Command::Leap { target, command } => teleop_leap::service::run(&target, &command),
         Command::Calibrate {
             out,
             yes,
