@@ -116,6 +116,55 @@ proptest! {
     }
 
     #[test]
+    fn packets_are_found_after_garbage(
+        garbage in proptest::collection::vec(0u8..0xFF, 0..100),
+        id in any_id(),
+        params in params(),
+    ) {
+        // No 0xFF in the garbage: nothing in it can start a header.
+        let mut buf = garbage.clone();
+        let mut out = [0u8; MAX_PACKET];
+        let n = encode(id, packet::instruction::WRITE, &params, &mut out).expect("fits");
+        buf.extend_from_slice(&out[..n]);
+        let at = if garbage.is_empty() {
+            0
+        } else {
+            prop_assert_eq!(scan(&buf), Scan::Skip(garbage.len()));
+            garbage.len()
+        };
+        prop_assert_eq!(scan(&buf[at..]), Scan::Packet(n));
+    }
+
+    #[test]
+    fn sync_writes_and_reads_decode_as_sent(
+        addr in any::<u16>(),
+        len in 0u16..8,
+        ids in proptest::collection::vec(0..=MAX_ID, 0..20),
+        fill in any::<u8>(),
+    ) {
+        let data: Vec<Vec<u8>> = ids.iter().map(|&id| vec![fill ^ id; usize::from(len)]).collect();
+        let items: Vec<(u8, &[u8])> = ids.iter().copied().zip(data.iter().map(|d| &d[..])).collect();
+        let mut out = [0u8; MAX_PACKET];
+        let n = packet::sync_write(addr, len, items.iter().copied(), &mut out).expect("fits");
+        let mut scratch = [0u8; MAX_LEN];
+        let p = parse(&out[..n], &mut scratch).expect("parses");
+        prop_assert_eq!(p.id, BROADCAST_ID);
+        match Request::from_packet(&p) {
+            Ok(Request::SyncWrite { addr: a, len: l, items: got }) => {
+                prop_assert_eq!((a, l, got.len()), (addr, len, ids.len()));
+                prop_assert_eq!(got.iter().collect::<Vec<_>>(), items);
+            }
+            other => prop_assert!(false, "{:?}", other),
+        }
+        let n = packet::fast_sync_read(addr, len, &ids, &mut out).expect("fits");
+        let p = parse(&out[..n], &mut scratch).expect("parses");
+        prop_assert_eq!(
+            Request::from_packet(&p),
+            Ok(Request::FastSyncRead { addr, len, ids: &ids[..] })
+        );
+    }
+
+    #[test]
     fn stuffed_packets_hold_no_header_after_it(id in any_id(), params in params()) {
         let mut out = [0u8; MAX_PACKET];
         let n = encode(id, packet::instruction::WRITE, &params, &mut out).expect("fits");
