@@ -198,10 +198,10 @@ fn encode_refusals_are_typed() {
         Err(EncodeError::BufferTooSmall { have: 14, .. })
     ));
     // Room for the unstuffed packet, not for the stuffing byte.
-    assert!(matches!(
+    assert_eq!(
         packet::write(1, 0xFFFF, &[0xFD], &mut out[..13]),
-        Err(EncodeError::BufferTooSmall { have: 13, .. })
-    ));
+        Err(EncodeError::BufferTooSmall { need: 14, have: 13 })
+    );
     assert_eq!(
         packet::sync_write(116, 4, [(1, &[0u8; 4][..]), (2, &[0u8; 2][..])], &mut out),
         Err(EncodeError::ItemLength {

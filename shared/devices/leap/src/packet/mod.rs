@@ -102,13 +102,13 @@ fn pattern_ends_at(bytes: &[u8], end: usize) -> bool {
 }
 
 /// Stuffs `out[start..start + len]` in place (the unstuffed INST..Pn) and returns the stuffed
-/// length, or `None` when `out` has no room for it.
-fn stuff_in_place(out: &mut [u8], start: usize, len: usize) -> Option<usize> {
+/// length, or (as the error) that length when `out` has no room for it.
+fn stuff_in_place(out: &mut [u8], start: usize, len: usize) -> Result<usize, usize> {
     let region = &out[start..start + len];
     let extra = (2..len).filter(|&end| pattern_ends_at(region, end)).count();
     let stuffed = len + extra;
     if start + stuffed > out.len() {
-        return None;
+        return Err(stuffed);
     }
     // Back to front: the write position never falls behind the read position, and the two bytes
     // a pattern check reads before `src` are not yet overwritten (a pattern ending at `src`
@@ -122,16 +122,18 @@ fn stuff_in_place(out: &mut [u8], start: usize, len: usize) -> Option<usize> {
         dst -= 1;
         out[dst] = out[src];
     }
-    Some(stuffed)
+    Ok(stuffed)
 }
 
 /// Finishes a packet whose unstuffed INST..Pn (`body_len` bytes) is already at
 /// `out[PREFIX_LEN..]`: stuffing, then [`frame`] and [`seal`]. Returns the packet's length.
 fn finish(id: u8, out: &mut [u8], body_len: usize) -> Result<usize, EncodeError> {
     let have = out.len();
-    let body = stuff_in_place(out, PREFIX_LEN, body_len).ok_or(EncodeError::BufferTooSmall {
-        need: PREFIX_LEN + body_len + 2 + 1,
-        have,
+    let body = stuff_in_place(out, PREFIX_LEN, body_len).map_err(|stuffed| {
+        EncodeError::BufferTooSmall {
+            need: PREFIX_LEN + stuffed + 2,
+            have,
+        }
     })?;
     let total = frame(id, out, body)?;
     seal(out, total);
