@@ -2,7 +2,8 @@
 //! - its kinematic chains, read as `teleop_hand_profile::Finger` and `Link` document them, give the
 //!   fingertips the URDF gives (the URDF's own joint origins and fixed rotations, transcribed
 //!   below, with dex-urdf's fingertip frames), to 1e-6 m, at zero and at random joint angles;
-//! - its joints are in motor-ID order, and every limit is a servo position inside one turn;
+//! - its joints are in motor-ID order, its counts are the protocol crate's (2048 = 0 rad), and
+//!   every limit is a servo position inside one turn of the control table's position limits;
 //! - the file and the compiled-in copy (`HandProfile::builtin("leap")`) are the same profile.
 //!
 //! Sources: docs/devices/leap.md, "Kinematics" (URDF, tip frames, the hand frame, test vectors)
@@ -17,6 +18,7 @@ use std::path::Path;
 
 use proptest::prelude::*;
 use teleop_hand_profile::{CommandUnits, Finger, HandProfile, Role, GLOVE_FINGERS};
+use teleop_leap_protocol::xc330::{self, Range, State};
 
 type V3 = [f64; 3];
 type M3 = [[f64; 3]; 3];
@@ -403,44 +405,59 @@ fn joints_are_in_motor_id_order() {
     }
 }
 
-/// Servo positions: 4096 counts per turn (0.088 degrees each), 2048 = 180 degrees = 0 rad of the
-/// URDF; one turn is 0..=4095, the range of the position limits (ROBOTIS e-manual, XC330-M288,
-/// Present Position, Min/Max Position Limit).
-const COUNTS_PER_TURN: f64 = 4096.0;
-const ONE_TURN: core::ops::RangeInclusive<f64> = 0.0..=4095.0;
+/// One turn of servo positions: the range of the position limits (Min/Max Position Limit), which
+/// Present Position is brought back into at power-up and reboot.
+fn one_turn() -> core::ops::RangeInclusive<f32> {
+    let limit = |addr| xc330::item_at(addr).unwrap().range;
+    match (
+        limit(xc330::MIN_POSITION_LIMIT),
+        limit(xc330::MAX_POSITION_LIMIT),
+    ) {
+        (Range::Span(lowest, _), Range::Span(_, highest)) => lowest as f32..=highest as f32,
+        other => panic!("position limits {other:?}"),
+    }
+}
 
 #[test]
 fn every_limit_is_a_servo_position_inside_one_turn_and_back() {
     let profile = shipped();
+    let turn = one_turn();
+    assert_eq!(turn, 0.0..=4095.0);
+    // A count is 2 pi / 4096 rad.
+    let count_rad = xc330::RAD_PER_COUNT as f32;
     for joint in &profile.joints {
         assert_eq!(joint.device.unit, "count", "{}", joint.name);
-        // 2048 + rad x 4096 / 2 pi, as the shipped API converts (f32 as the profile holds it).
-        assert_eq!(joint.device.offset, 2048.0, "{}", joint.name);
-        let per_rad = COUNTS_PER_TURN / (2.0 * PI);
-        assert!(
-            (f64::from(joint.device.scale) - per_rad).abs() < 1e-4,
-            "{}: {} counts per rad",
-            joint.name,
-            joint.device.scale
-        );
+        // The profile's counts are the protocol's: 2048 counts (pi, 180 degrees) is the URDF's
+        // 0 rad, so a Present Position reads as the protocol's angle less pi.
+        for count in [0, 1, 2047, 2048, 2049, 4095] {
+            let servo = State {
+                position: count,
+                ..State::default()
+            };
+            let urdf = (servo.position_rad() - PI) as f32;
+            let ours = joint.from_device(count as f32);
+            assert!(
+                (ours - urdf).abs() < 1e-5,
+                "{}: {count} counts are {ours} rad, the servo's {urdf}",
+                joint.name
+            );
+        }
         for limit in [joint.lower, joint.upper, joint.open, joint.closed] {
             let count = joint.to_device(limit).round();
             assert!(
-                ONE_TURN.contains(&f64::from(count)),
+                turn.contains(&count),
                 "{}: {limit} rad is {count} counts",
                 joint.name
             );
             let back = joint.from_device(count);
-            // A count is 2 pi / 4096 rad: the round trip is within half of one.
             assert!(
-                f64::from((back - limit).abs()) <= PI / COUNTS_PER_TURN,
+                (back - limit).abs() <= count_rad / 2.0 + 1e-6,
                 "{}: {limit} rad -> {count} -> {back}",
                 joint.name
             );
         }
     }
-    // 180 degrees is flat: 0 rad is 2048 counts.
-    assert_eq!(profile.joints[1].to_device(0.0), 2048.0);
+    assert_eq!(xc330::COUNTS_PER_REV, 4096);
 }
 
 #[test]
