@@ -10,7 +10,7 @@
 //!   modes, baud rates, hardware error bits, units, the 10-byte state read at 126;
 //! - [`wire`]: packet sizes and byte times, for timeouts and wire-time budgets.
 //!
-//! Sources are public and cited where used: "ROBOTIS e-manual, Protocol 2.0, <section>" and
+//! Sources are public and cited where used: "ROBOTIS e-manual, Protocol 2.0, (section)" and
 //! "e-manual, XC330-M288, control table" (and its shared includes).
 //!
 //! Everything is pure (no I/O, no clocks) and total: every decoder takes any bytes and returns a
