@@ -483,9 +483,9 @@ fn the_file_is_the_compiled_in_profile_and_says_what_the_hand_is() {
             assert_eq!(finger, GLOVE_FINGERS[g], "{}", profile.joints[j].name);
         }
     }
-    // Side joints and the thumb's axial joint rest at 0 rad: no glove channel moves them.
+    // Side joints rest at 0 rad: no glove channel spreads the fingers.
     for joint in &profile.joints {
-        let rests = joint.role == Role::Abduct || joint.name == "thumb_axial";
+        let rests = joint.role == Role::Abduct;
         assert_eq!(joint.glove.channels.is_empty(), rests, "{}", joint.name);
         if rests {
             assert_eq!(joint.radians(joint.glove.offset), 0.0, "{}", joint.name);
