@@ -5,8 +5,9 @@
 use teleop_leap_protocol::crc::crc16;
 use teleop_leap_protocol::packet::{
     self, encode, instruction, parse, scan, ErrorByte, ErrorNumber, FastSyncReply, Packet, Request,
-    Scan, BROADCAST_ID, HEADER, MAX_LEN,
+    Scan, Status, BROADCAST_ID, HEADER, MAX_LEN,
 };
+use teleop_leap_protocol::xc330::State;
 use teleop_leap_protocol::{DecodeError, EncodeError};
 
 /// A packet with the given ID, instruction and raw (already stuffed, or not) INST..Pn body, LEN
@@ -62,6 +63,25 @@ fn stuffing_covers_the_instruction_byte_and_runs() {
     let mut scratch = [0u8; 16];
     let p = parse(&raw, &mut scratch).expect("parses");
     assert_eq!((p.instruction, p.params), (0xFF, &params[..]));
+}
+
+#[test]
+fn a_state_read_that_needs_stuffing() {
+    // Present Current -1 mA (FF FF) then a velocity whose low byte is FD: an ordinary status
+    // carrying the 10 state bytes holds FF FF FD and is stuffed; the state comes back whole.
+    let state = State {
+        current_ma: -1,
+        velocity: 0xFD,
+        position: 2048,
+    };
+    let mut out = [0u8; 32];
+    let n = packet::status(4, 0, &state.encode(), &mut out).expect("encodes");
+    assert_eq!(n, teleop_leap_protocol::wire::status_len(10) + 1);
+    assert_eq!(&out[9..13], [0xFF, 0xFF, 0xFD, 0xFD]);
+    let mut scratch = [0u8; 32];
+    let p = parse(&out[..n], &mut scratch).expect("parses");
+    let s = Status::from_packet(&p).expect("a status");
+    assert_eq!(State::decode(s.params), Ok(state));
 }
 
 #[test]
