@@ -551,10 +551,14 @@ impl Bus {
                     self.hearing(id, baud, end).into_iter().collect()
                 };
                 for k in targets {
+                    // Answered as the servo was set when the request came (a Write of Status
+                    // Return Level or Return Delay Time takes effect after its status).
+                    let (level, delay) = {
+                        let s = &self.servos[k];
+                        (s.status_return_level(), s.return_delay())
+                    };
                     let error = self.execute(k, request, end);
-                    let s = &self.servos[k];
-                    if !broadcast && s.status_return_level() >= 2 {
-                        let delay = s.return_delay();
+                    if !broadcast && level >= 2 {
                         self.line.status(id, error, &[], end, delay, out);
                     }
                 }
