@@ -126,7 +126,8 @@ impl Host {
     /// Drops what was received, then sends the request `encode` writes.
     pub fn send(&mut self, encode: impl FnOnce(&mut [u8]) -> Result<usize, EncodeError>) {
         let n = encode(&mut self.out).unwrap();
-        self.send_raw(&self.out[..n].to_vec());
+        self.port.clear(serialport::ClearBuffer::Input).unwrap();
+        self.port.write_all(&self.out[..n]).unwrap();
     }
 
     /// Drops what was received, then sends `bytes` as they are.
