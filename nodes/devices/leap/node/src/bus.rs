@@ -455,3 +455,116 @@ impl Line for SerialLine {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use std::collections::VecDeque;
+
+    use proptest::prelude::*;
+    use teleop_leap_protocol::xc330::State;
+
+    use super::*;
+
+    /// A line that answers each request with the next scripted bytes (and records requests).
+    #[derive(Default)]
+    struct Script {
+        replies: VecDeque<Vec<u8>>,
+        pending: Vec<u8>,
+        sent: Vec<Vec<u8>>,
+    }
+
+    impl Line for Script {
+        fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+            self.sent.push(bytes.to_vec());
+            if let Some(r) = self.replies.pop_front() {
+                self.pending.extend(r);
+            }
+            Ok(())
+        }
+        fn recv(&mut self, buf: &mut [u8], _: Duration) -> std::io::Result<usize> {
+            let n = self.pending.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.pending[..n]);
+            self.pending.drain(..n);
+            Ok(n)
+        }
+    }
+
+    fn bus(replies: Vec<Vec<u8>>) -> Bus<Script> {
+        let line = Script {
+            replies: replies.into(),
+            ..Default::default()
+        };
+        Bus::new(line, Timing::new(4_000_000, 0, Duration::from_millis(1)))
+    }
+
+    /// The Fast Sync Read reply of `ids`, each at `position`.
+    fn reply(ids: &[u8], position: i32) -> Vec<u8> {
+        let states: Vec<[u8; 10]> = ids
+            .iter()
+            .map(|_| {
+                State {
+                    current_ma: 12,
+                    velocity: -1,
+                    position,
+                }
+                .encode()
+            })
+            .collect();
+        let blocks = ids.iter().zip(&states).map(|(id, s)| (*id, 0u8, &s[..]));
+        let mut out = [0u8; 512];
+        let n = packet::fast_sync_status(blocks, &mut out).unwrap();
+        out[..n].to_vec()
+    }
+
+    #[test]
+    fn a_fast_sync_read_gives_every_block_and_counts_what_else_came() {
+        let ids: Vec<u8> = (0..16).collect();
+        let mut noisy = vec![0x00, 0xFF, 0x13];
+        noisy.extend(reply(&ids, 2048));
+        let mut bus = bus(vec![noisy]);
+        let mut read = FastRead::EMPTY;
+        bus.fast_sync_read(126, 10, &ids, &mut read).unwrap();
+        assert!(read.blocks.iter().all(|b| b.is_some()));
+        let state = State::decode(&read.blocks[7].unwrap().data[..10]).unwrap();
+        assert_eq!((state.current_ma, state.position), (12, 2048));
+        assert_eq!(bus.counters().garbage_bytes, 3);
+        assert_eq!(bus.counters().crc_errors, 0);
+    }
+
+    #[test]
+    fn a_corrupt_reply_is_counted_and_lost_whole_a_missing_block_is_none() {
+        let ids: Vec<u8> = (0..16).collect();
+        for at in [8usize, 20, 100, 229, 230, 231] {
+            let mut bad = reply(&ids, 2048);
+            bad[at] ^= 0x41;
+            let mut bus = bus(vec![bad]);
+            let mut read = FastRead::EMPTY;
+            let e = bus.fast_sync_read(126, 10, &ids, &mut read).unwrap_err();
+            assert!(matches!(e, BusError::Corrupt(_)), "byte {at}: {e:?}");
+            assert_eq!(bus.counters().crc_errors, 1, "byte {at}");
+        }
+        // Servo 11 silent: its block is missing from a good reply.
+        let without: Vec<u8> = ids.iter().copied().filter(|i| *i != 11).collect();
+        let mut bus = bus(vec![reply(&without, 100)]);
+        let mut read = FastRead::EMPTY;
+        bus.fast_sync_read(126, 10, &ids, &mut read).unwrap();
+        assert!(read.blocks[11].is_none());
+        assert_eq!(read.blocks.iter().filter(|b| b.is_some()).count(), 15);
+    }
+
+    proptest! {
+        /// Whatever bytes come back, a request ends with a reply or a typed error, and every
+        /// byte is accounted for.
+        #[test]
+        fn any_bytes_give_a_reply_or_an_error(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+            let ids: Vec<u8> = (0..16).collect();
+            let mut b = bus(vec![bytes.clone(), bytes.clone()]);
+            let mut read = FastRead::EMPTY;
+            let _ = b.fast_sync_read(126, 10, &ids, &mut read);
+            let _ = b.ping(3);
+            let c = *b.counters();
+            prop_assert!(c.garbage_bytes + c.late_bytes <= 2 * bytes.len() as u64);
+        }
+    }
+}
