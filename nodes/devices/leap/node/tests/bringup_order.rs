@@ -1,0 +1,231 @@
+//! The node's loop (`teleop_leap::driver::run_on`) on a recording line: sixteen servos that
+//! answer what the requests ask, keep a control table each, refuse EEPROM writes while their
+//! torque is on (Access Error, as the ROBOTIS e-manual says), and start with the torque on (a
+//! crashed earlier session). What the loop wrote, in order, shows the bring-up as
+//! docs/devices/leap.md gives it: torque off before any EEPROM write, Operating Mode 5 and
+//! Return Delay Time, the gains, Goal Current, the goal at the present position (no jump),
+//! torque on last; then one Sync Write of the goals and one Fast Sync Read per cycle; torque
+//! off on stop.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use teleop_hand_profile::HandProfile;
+use teleop_leap::bus::Line;
+use teleop_leap::driver::{self, Connected, Cycle, Down, Host, Target};
+use teleop_leap::LeapConfig;
+use teleop_leap_protocol::packet::{self, instruction, Request, Scan};
+use teleop_leap_protocol::xc330;
+
+/// What the loop asked of the servos: `(id, instruction, addr, data)`.
+type Record = (u8, u8, u16, Vec<u8>);
+
+/// Sixteen servos behind a line, answering at once; what they were asked goes to `log`.
+struct Servos {
+    tables: Vec<[u8; 256]>,
+    pending: VecDeque<u8>,
+    log: Arc<Mutex<Vec<Record>>>,
+}
+
+impl Servos {
+    fn new(log: Arc<Mutex<Vec<Record>>>) -> Self {
+        let mut table = [0u8; 256];
+        table[0..2].copy_from_slice(&1240u16.to_le_bytes());
+        table[6] = 52;
+        table[9] = 250; // Return Delay Time: the factory's 500 us
+        table[11] = 3; // Operating Mode: position (the factory's)
+        table[64] = 1; // torque on, left so by an earlier session
+        table[132..136].copy_from_slice(&1500i32.to_le_bytes());
+        Self {
+            tables: vec![table; 16],
+            pending: VecDeque::new(),
+            log,
+        }
+    }
+
+    fn status(&mut self, id: u8, error: u8, params: &[u8]) {
+        let mut out = [0u8; 600];
+        let n = packet::status(id, error, params, &mut out).unwrap();
+        self.pending.extend(&out[..n]);
+    }
+
+    fn take(&mut self, raw: &[u8]) {
+        let mut scratch = [0u8; 1100];
+        let p = packet::parse(raw, &mut scratch).unwrap();
+        let id = p.id;
+        match Request::from_packet(&p).unwrap() {
+            Request::Ping => {
+                let t = self.tables[usize::from(id)];
+                self.status(id, 0, &[t[0], t[1], t[6]]);
+            }
+            Request::Read { addr, len } => {
+                let t = self.tables[usize::from(id)];
+                let (a, l) = (usize::from(addr), usize::from(len));
+                self.status(id, 0, &t[a..a + l]);
+            }
+            Request::Write { addr, data } => {
+                self.log
+                    .lock()
+                    .unwrap()
+                    .push((id, instruction::WRITE, addr, data.to_vec()));
+                let t = &mut self.tables[usize::from(id)];
+                if addr < xc330::RAM_START && t[64] == 1 {
+                    self.status(id, 7, &[]);
+                    return;
+                }
+                let a = usize::from(addr);
+                t[a..a + data.len()].copy_from_slice(data);
+                self.status(id, 0, &[]);
+            }
+            Request::SyncWrite { addr, items, .. } => {
+                for (id, data) in items.iter() {
+                    self.log.lock().unwrap().push((
+                        id,
+                        instruction::SYNC_WRITE,
+                        addr,
+                        data.to_vec(),
+                    ));
+                }
+            }
+            Request::FastSyncRead { addr, len, ids } => {
+                self.log.lock().unwrap().push((
+                    0xFE,
+                    instruction::FAST_SYNC_READ,
+                    addr,
+                    ids.to_vec(),
+                ));
+                let (a, l) = (usize::from(addr), usize::from(len));
+                let tables = &self.tables;
+                let blocks = ids
+                    .iter()
+                    .map(|id| (*id, 0u8, &tables[usize::from(*id)][a..a + l]));
+                let mut out = [0u8; 600];
+                let n = packet::fast_sync_status(blocks, &mut out).unwrap();
+                self.pending.extend(&out[..n]);
+            }
+            other => panic!("the loop sent {other:?}"),
+        }
+    }
+}
+
+impl Line for Servos {
+    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        let mut at = 0;
+        while at < bytes.len() {
+            match packet::scan(&bytes[at..]) {
+                Scan::Packet(n) => {
+                    self.take(&bytes[at..at + n]);
+                    at += n;
+                }
+                other => panic!("the loop sent a broken packet: {other:?}"),
+            }
+        }
+        Ok(())
+    }
+
+    fn recv(&mut self, buf: &mut [u8], _: Duration) -> std::io::Result<usize> {
+        let n = self.pending.len().min(buf.len());
+        for (b, v) in buf.iter_mut().zip(self.pending.drain(..n)) {
+            *b = v;
+        }
+        Ok(n)
+    }
+}
+
+/// Holds for a number of cycles, then stops.
+struct Cycles {
+    left: u32,
+    seen: u32,
+}
+
+impl Host for Cycles {
+    fn stop_requested(&self) -> bool {
+        self.left == 0
+    }
+    fn target(&mut self) -> Target {
+        Target::Hold
+    }
+    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn cycle(&mut self, cycle: &Cycle<'_>) -> anyhow::Result<()> {
+        self.left -= 1;
+        self.seen += 1;
+        assert_eq!(cycle.servos.fresh(), 0xFFFF, "every servo read");
+        assert_eq!(cycle.servos.reading(3).position, 1500);
+        Ok(())
+    }
+    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("down: {}", down.why)
+    }
+}
+
+#[test]
+fn bring_up_in_the_documented_order_then_one_write_and_one_read_per_cycle() {
+    let settings = LeapConfig::default().validate().unwrap();
+    let profile = HandProfile::builtin("leap").unwrap();
+    let log = Arc::new(Mutex::new(Vec::new()));
+    let mut line = Some(Servos::new(log.clone()));
+    let mut open = move || line.take().ok_or_else(|| "opened twice".to_string());
+    let mut host = Cycles { left: 5, seen: 0 };
+    driver::run_on(&settings, &profile, &mut host, &mut open).unwrap();
+    assert_eq!(host.seen, 5);
+    let log = log.lock().unwrap().clone();
+
+    for id in 0..16u8 {
+        let writes: Vec<(u16, Vec<u8>)> = log
+            .iter()
+            .filter(|r| r.0 == id && r.1 == instruction::WRITE)
+            .map(|r| (r.2, r.3.clone()))
+            .collect();
+        let (p, i, d) = if [0, 4, 8].contains(&id) {
+            (450u16, 0u16, 150u16)
+        } else {
+            (600, 0, 200)
+        };
+        let mut gains = Vec::new();
+        for g in [d, i, p] {
+            gains.extend(g.to_le_bytes());
+        }
+        assert_eq!(
+            writes,
+            vec![
+                (xc330::TORQUE_ENABLE, vec![0]),
+                (xc330::OPERATING_MODE, vec![5]),
+                (xc330::RETURN_DELAY_TIME, vec![0]),
+                (xc330::POSITION_D_GAIN, gains),
+                (xc330::GOAL_CURRENT, 350u16.to_le_bytes().to_vec()),
+                (xc330::GOAL_POSITION, 1500i32.to_le_bytes().to_vec()),
+                (xc330::TORQUE_ENABLE, vec![1]),
+                (xc330::TORQUE_ENABLE, vec![0]),
+            ],
+            "servo {id}"
+        );
+    }
+    // Every servo's bring-up steps run before any cycle; torque on is the last of them.
+    let last_on = log
+        .iter()
+        .rposition(|r| r.1 == instruction::WRITE && r.3 == [1])
+        .unwrap();
+    let first_cycle = log
+        .iter()
+        .position(|r| r.1 == instruction::SYNC_WRITE)
+        .unwrap();
+    assert!(last_on < first_cycle);
+    // Each cycle: one Sync Write of the 16 goals (held: where the hand was), one Fast Sync
+    // Read of the state of all 16.
+    let cycles: Vec<&Record> = log[first_cycle..]
+        .iter()
+        .filter(|r| r.1 != instruction::WRITE)
+        .collect();
+    assert_eq!(cycles.len(), 5 * 17);
+    for c in cycles.chunks(17) {
+        assert!(c[..16].iter().all(|r| r.1 == instruction::SYNC_WRITE
+            && r.2 == xc330::GOAL_POSITION
+            && r.3 == 1500i32.to_le_bytes()));
+        assert_eq!(c[16].1, instruction::FAST_SYNC_READ);
+        assert_eq!((c[16].2, c[16].3.len()), (xc330::STATE_ADDR, 16));
+    }
+}
