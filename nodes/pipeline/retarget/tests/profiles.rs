@@ -45,7 +45,7 @@ fn radians(profile: &HandProfile, cmd: &HandCommand, j: usize) -> f32 {
 #[test]
 fn every_command_respects_the_profile_limits_and_couplings() {
     let glove = recorded_glove();
-    for name in ["revo2", "allegro", "shadow"] {
+    for name in HandProfile::builtin_names() {
         let profile = HandProfile::builtin(name).unwrap();
         let commands = run(&profile, &glove);
         assert_eq!(commands.len(), glove.len(), "{name}");
@@ -88,7 +88,7 @@ fn every_command_respects_the_profile_limits_and_couplings() {
 #[test]
 fn the_recorded_grasp_closes_and_opens_every_hand() {
     let glove = recorded_glove();
-    for name in ["revo2", "allegro", "shadow"] {
+    for name in HandProfile::builtin_names() {
         let profile = HandProfile::builtin(name).unwrap();
         let commands = run(&profile, &glove);
         // A flexion joint the glove's index finger (channel 3) drives.
@@ -122,7 +122,7 @@ fn more_flexion_never_opens_a_joint() {
             s
         })
         .collect();
-    for name in ["revo2", "allegro", "shadow"] {
+    for name in HandProfile::builtin_names() {
         let profile = HandProfile::builtin(name).unwrap();
         let (a, b) = (run(&profile, &bent), run(&profile, &glove));
         // Joints driven only by finger channels with positive gains, or following one.

@@ -262,6 +262,7 @@ mod tests {
             ("revo2", device_model::REVO2, units::NORMALISED, 6),
             ("allegro", device_model::ALLEGRO, units::PHYSICAL, 16),
             ("shadow", device_model::SHADOW, units::PHYSICAL, 24),
+            ("leap", device_model::LEAP, units::PHYSICAL, 16),
         ] {
             let profile = HandProfile::builtin(name).unwrap();
             let a = Admission::new(&profile, Modes::POSITION);

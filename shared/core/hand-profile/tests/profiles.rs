@@ -297,7 +297,7 @@ proptest! {
 fn builtins_by_model_and_profiles_embedded_in_recordings() {
     use std::collections::BTreeMap;
     use teleop_hand_profile::RECORDING_METADATA;
-    for (id, name) in [(1, "revo2"), (2, "allegro"), (3, "shadow")] {
+    for (id, name) in [(1, "revo2"), (2, "allegro"), (3, "shadow"), (5, "leap")] {
         assert_eq!(HandProfile::builtin_for_model(id).unwrap().name, name);
     }
     assert!(HandProfile::builtin_for_model(0).is_none());

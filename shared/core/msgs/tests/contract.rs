@@ -229,6 +229,7 @@ fn one_numbering_of_devices_with_names() {
         (device_model::ALLEGRO, "allegro"),
         (device_model::SHADOW, "shadow"),
         (device_model::GLOVE, "glove"),
+        (device_model::LEAP, "leap"),
     ];
     for (id, name) in models {
         assert_eq!(device_model::name(id), name);
@@ -238,7 +239,11 @@ fn one_numbering_of_devices_with_names() {
     ids.push(device_model::UNKNOWN);
     ids.sort_unstable();
     ids.dedup();
-    assert_eq!(ids.len(), 5, "every model has its own number");
+    assert_eq!(
+        ids.len(),
+        models.len() + 1,
+        "every model has its own number"
+    );
     assert_eq!(device_model::name(device_model::UNKNOWN), "unknown");
     assert_eq!(device_model::name(200), "unknown");
     assert_eq!(device_model::from_name("unknown"), None);

@@ -790,7 +790,7 @@ fn any_hand() -> BoxedStrategy<Option<HandInput>> {
 }
 
 fn any_profile() -> BoxedStrategy<HandProfile> {
-    prop::sample::select(vec!["revo2", "allegro", "shadow"])
+    prop::sample::select(HandProfile::builtin_names().collect::<Vec<_>>())
         .prop_map(|name| HandProfile::builtin(name).expect("shipped profile"))
         .boxed()
 }

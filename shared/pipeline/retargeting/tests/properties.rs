@@ -9,9 +9,9 @@ use teleop_retargeting::{
     Retargeter, RotationCalibration,
 };
 
-/// One of the shipped profiles (Revo2, Allegro, Shadow).
+/// One of the shipped profiles.
 fn profile() -> impl Strategy<Value = HandProfile> {
-    prop::sample::select(vec!["revo2", "allegro", "shadow"])
+    prop::sample::select(HandProfile::builtin_names().collect::<Vec<_>>())
         .prop_map(|name| HandProfile::builtin(name).unwrap())
 }
 
