@@ -1,7 +1,8 @@
 //! Every simulator speaks the simulator kit's vocabulary on its control socket: the same
 //! common words with the same answers (`ok ...`, `error: ...` naming the word and what it
 //! expected, `stats` as `key=value` words), times in milliseconds, and one refusal for a word
-//! none of them knows. The glove, the Revo2, the Allegro Hand and the Shadow Hand alike.
+//! none of them knows. The glove, the Revo2, the Allegro Hand, the Shadow Hand and the LEAP Hand
+//! alike.
 #![allow(clippy::unwrap_used)]
 
 use std::ffi::OsString;
@@ -51,6 +52,13 @@ fn simulators() -> Vec<(&'static str, SimProcess)> {
             |dir| vec!["--socket".into(), dir.join("shadow.sock").into()],
             "shadow: socket ",
             "shadow.ctl",
+        ),
+        start(
+            "leap",
+            "teleop-sim-leap",
+            |dir| vec!["--link".into(), dir.join("leap").into()],
+            "leap: link ",
+            "leap.ctl",
         ),
     ]
 }
