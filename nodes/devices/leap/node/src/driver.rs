@@ -10,7 +10,7 @@
 //!
 //! - a reply with a bad CRC, or bytes that are no packet: counted; the cycle's state is the last
 //!   one read;
-//! - no reply, or a reply without a servo's block: the servos asked are pinged and the silent
+//! - no reply, or a reply without some servos' blocks: those servos are pinged and the silent
 //!   ones named and left out of the reads (their state marked stale); each is looked for again
 //!   every `silent_retry_ms` and brought up again when it answers;
 //! - a block with the Alert bit: that servo's Hardware Error Status is read and named in words;
@@ -456,10 +456,12 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
                 Ok(()) => {
                     let applied = up.servos.apply(&ask[..n], &up.read);
                     if applied.missing != 0 {
+                        // Which of them is silent: a chain may also end its reply at a silent
+                        // servo, leaving out the ones after it (docs/devices/leap.md, "Fast
+                        // Sync Read": not documented).
                         bad = true;
-                        for j in joints(applied.missing) {
-                            self.silent(up, j);
-                        }
+                        self.find_silent(up, applied.missing)
+                            .map_err(|e| lost(&settings.port, e))?;
                     }
                     for j in joints(applied.new_alerts) {
                         self.report_alert(up, j);

@@ -333,3 +333,34 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     let stats = rig.sim.ok("stats");
     assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
 }
+
+/// What the servos after a silent one in a Fast Sync Read chain do is not documented: the
+/// simulator's `truncate` ends the reply at the silent servo. Only the silent one is named and
+/// left out; the ones after it are read again from the next cycle.
+#[test]
+fn a_silent_servo_that_truncates_the_chain_is_the_only_one_left_out() {
+    let _one = one_at_a_time();
+    let rig = start("none", &["--fast-sync-missing", "truncate"], "");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    rig.sim.ok("silent 9");
+    rig.wait_log(Duration::from_secs(2), "ring_mcp_forward (id 9) silent");
+    rig.wait_state(Duration::from_secs(2), "id 9 marked silent", |s| {
+        s.joints[9].status & status::SILENT != 0
+    });
+    let s = rig.wait_state(Duration::from_secs(2), "all but id 9 read", |s| {
+        (0..16)
+            .filter(|j| *j != 9)
+            .all(|j| s.joints[j].status & (status::STALE | status::SILENT) == 0)
+    });
+    assert!(s.joints[9].status & status::SILENT != 0);
+    std::thread::sleep(Duration::from_millis(300));
+    let log = rig.log();
+    for other in ["ring_pip (id 10) silent", "thumb_ip (id 15) silent"] {
+        assert!(!log.contains(other), "{other}\n{log}");
+    }
+    wait_health(&rig, "one silent servo", |h| {
+        h.detail("silent_servos") == Some(1.0)
+    });
+}
