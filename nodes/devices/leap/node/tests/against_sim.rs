@@ -364,3 +364,79 @@ fn a_silent_servo_that_truncates_the_chain_is_the_only_one_left_out() {
         h.detail("silent_servos") == Some(1.0)
     });
 }
+
+/// `teleop leap info`, `move` and `reboot` against the simulator (the node not running), and
+/// a missing adapter named.
+#[test]
+fn teleop_leap_service_commands_against_the_simulator() {
+    let _one = one_at_a_time();
+    let mut rig = TestRig::new();
+    let sim = Sim::start(&mut rig, "none", &[]);
+    let port = sim.link.display().to_string();
+    // The servos boot when the adapter is first opened: give them their boot time.
+    let info = |rig: &TestRig| rig.sandbox.cli(&["leap", "--port", &port, "info"]);
+    let (ok, text) = info(&rig);
+    assert!(ok, "{text}");
+    let (ok, text) = if text.contains("16 of 16 servos answer") {
+        (ok, text)
+    } else {
+        std::thread::sleep(Duration::from_millis(500));
+        info(&rig)
+    };
+    eprintln!("{text}");
+    assert!(ok, "{text}");
+    for want in [
+        "16 of 16 servos answer",
+        "ring_dip",
+        "XC330-M288-T",
+        " 52 ",
+        "position",
+        " V",
+        " C",
+    ] {
+        assert!(text.contains(want), "{want:?} in\n{text}");
+    }
+
+    // `move`: one joint by name, ramped there, then torque off.
+    let (ok, text) = rig.sandbox.cli(&[
+        "leap",
+        "--port",
+        &port,
+        "move",
+        "index_pip",
+        "40",
+        "--seconds",
+        "2",
+    ]);
+    assert!(ok, "{text}");
+    let stats = sim.ok("stats");
+    let index_pip: f64 = list(&stats, "joint")[2].parse().unwrap();
+    assert!(
+        (index_pip - 40f64.to_radians()).abs() < 0.05,
+        "index_pip at {index_pip} rad after `move index_pip 40`: {stats}\n{text}"
+    );
+    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+
+    // An overloaded servo is cleared by `reboot --id`.
+    sim.ok("overload 3");
+    let (ok, text) = info(&rig);
+    assert!(ok && text.contains("overload"), "{text}");
+    let (ok, text) = rig
+        .sandbox
+        .cli(&["leap", "--port", &port, "reboot", "--id", "3"]);
+    assert!(ok && text.contains("index_dip (id 3): rebooted"), "{text}");
+    std::thread::sleep(Duration::from_millis(500));
+    let stats = sim.ok("stats");
+    assert_eq!(list(&stats, "hardware_error")[3], "0", "{stats}");
+    rig.process("sim-leap").stop();
+
+    let missing = rig.path("ttyUSB9");
+    let (ok, text) = rig
+        .sandbox
+        .cli(&["leap", "--port", &missing.display().to_string(), "info"]);
+    assert!(!ok);
+    assert!(
+        text.contains("cannot open") && text.contains("is the adapter plugged in"),
+        "{text}"
+    );
+}
