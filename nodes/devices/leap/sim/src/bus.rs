@@ -139,11 +139,6 @@ impl Outbox {
         })
     }
 
-    /// Nothing to write.
-    pub fn is_empty(&self) -> bool {
-        self.parts.is_empty()
-    }
-
     /// Forgets what was written.
     pub fn clear(&mut self) {
         self.bytes.clear();
@@ -687,6 +682,82 @@ impl Bus {
                 return;
             }
             self.line.send(n, end, delay, out);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use proptest::prelude::*;
+
+    use super::*;
+    use crate::hand::{leap_limits, HandParams};
+    use crate::servo::ServoOptions;
+    use crate::table::Model;
+    use teleop_leap_protocol::packet::Status;
+
+    const BAUD: u32 = 4_000_000;
+
+    fn bus() -> Bus {
+        let servos = (0..16)
+            .map(|id| Servo::new(Model::Xc330M288, id, 6, 250, ServoOptions::default()))
+            .collect();
+        let hand = Hand::new(HandParams::default(), leap_limits().unwrap(), None);
+        let options = BusOptions {
+            fast_sync_missing: Missing::Omit,
+            crc_status: false,
+        };
+        Bus::new(servos, hand, options, 1)
+    }
+
+    /// The statuses in `out`, parsed: (id, error).
+    fn statuses(out: &Outbox) -> Vec<(u8, u8)> {
+        let mut scratch = vec![0u8; MAX_PACKET];
+        out.parts()
+            .filter_map(|(_, bytes)| {
+                let p = packet::parse(bytes, &mut scratch).ok()?;
+                let s = Status::from_packet(&p).ok()?;
+                Some((s.id, s.error.0))
+            })
+            .collect()
+    }
+
+    proptest! {
+        #[test]
+        fn any_bytes_are_taken_without_a_panic_and_the_servos_still_answer(
+            chunks in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..300), 0..8),
+        ) {
+            let mut b = bus();
+            let mut out = Outbox::new();
+            let mut t = 0.0;
+            for c in &chunks {
+                b.receive(c, BAUD, t, &mut out);
+                t += 0.000_5;
+            }
+            out.clear();
+            let mut request = [0u8; 16];
+            let n = packet::ping(3, &mut request).unwrap();
+            b.receive(&request[..n], BAUD, t + 0.01, &mut out);
+            prop_assert_eq!(statuses(&out), vec![(3, 0)]);
+        }
+    }
+
+    #[test]
+    fn a_status_leaves_after_the_request_the_return_delay_and_its_own_bytes() {
+        let mut b = bus();
+        let mut out = Outbox::new();
+        let mut request = [0u8; 16];
+        let n = packet::ping(BROADCAST_ID, &mut request).unwrap();
+        b.receive(&request[..n], BAUD, 1.0, &mut out);
+        let times: Vec<f64> = out.parts().map(|(at, _)| at).collect();
+        assert_eq!(times.len(), 16);
+        let byte = 10.0 / f64::from(BAUD);
+        // Request (10 bytes), then per status 500 us and 14 bytes, one after the other.
+        for (k, at) in times.iter().enumerate() {
+            let due = 1.0 + 10.0 * byte + (k + 1) as f64 * (0.000_5 + 14.0 * byte);
+            assert!((at - due).abs() < 1e-9, "status {k}: {at} vs {due}");
         }
     }
 }

@@ -181,15 +181,6 @@ impl Hand {
         }
     }
 
-    /// Puts joint `joint` at `rad` (clamped into its limits) at rest (tests).
-    pub fn set_position(&mut self, joint: usize, rad: f64) {
-        if let Some(q) = self.q.get_mut(joint) {
-            let (lo, hi) = self.limits[joint];
-            *q = rad.clamp(lo, hi);
-            self.qd[joint] = 0.0;
-        }
-    }
-
     /// Joint angles, URDF rad.
     pub fn positions(&self) -> [f64; JOINTS] {
         self.q
@@ -204,11 +195,6 @@ impl Hand {
     /// contact).
     pub fn contact(&self) -> [f64; FINGERS] {
         self.contact
-    }
-
-    /// Joint limits, rad.
-    pub fn limits(&self) -> [(f64, f64); JOINTS] {
-        self.limits
     }
 }
 

@@ -83,7 +83,6 @@ impl Shared {
 /// A running simulated hand.
 pub struct Sim {
     shared: Arc<Shared>,
-    link: PathBuf,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -121,14 +120,8 @@ impl Sim {
         };
         Ok(Self {
             shared,
-            link: options.link,
             thread: Some(thread),
         })
-    }
-
-    /// The pty's stable path.
-    pub fn link(&self) -> &std::path::Path {
-        &self.link
     }
 
     /// Runs `f` on the bus, its plant advanced to now first; `f` gets the time too, s.
