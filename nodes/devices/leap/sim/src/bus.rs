@@ -3,7 +3,9 @@
 //! with the time their first bit started on the line, status packets go out scheduled at the
 //! time their last byte would have left the servo.
 //!
-//! What the bus does (ROBOTIS e-manual, Protocol 2.0; `docs/devices/leap.md`):
+//! What the bus does (ROBOTIS e-manual, Protocol 2.0; `docs/devices/leap.md, "Instructions"`,
+//! `docs/devices/leap.md, "Fast Sync Read"`, `docs/devices/leap.md, "Timing"`; what the
+//! documents leave open, `docs/devices/leap.md, "Unknown"`, is an option here):
 //! - bytes are taken at the line's baud rate (10 bits a byte); a request is complete when its
 //!   last byte is, and each status starts its servo's Return Delay Time after the request's
 //!   end (and after the status before it on the line);
@@ -19,7 +21,8 @@
 //!   ID 0xFE with a block per servo, each block's CRC the running CRC (the protocol crate's
 //!   `fast_sync_status`); a servo that does not answer (silent, booting, deaf) is left out of
 //!   the chain ([`Missing::Omit`]) or ends it there ([`Missing::Truncate`]: the bytes before its
-//!   block go out, the rest never comes);
+//!   block go out, the rest never comes); the reply starts after the first answering servo's
+//!   Return Delay Time (the chain's blocks follow without a delay of their own);
 //! - Fast Bulk Read is not simulated (counted as `unsupported`, unanswered).
 //!
 //! Faults (set by the control socket): a status lost (`drop P`), a status with one corrupted

@@ -2,7 +2,8 @@
 //! addressed to it, its control loop per operating mode, hardware errors with their shutdown,
 //! and reboot. Pure: time comes in as seconds.
 //!
-//! Behaviour (ROBOTIS e-manual, Protocol 2.0 and XC330-M288; `docs/devices/leap.md`):
+//! Behaviour (ROBOTIS e-manual, Protocol 2.0 and XC330-M288;
+//! `docs/devices/leap.md, "XC330 control table"`):
 //! - Ping is answered whatever the Status Return Level; Read (and the sync reads) from level 1;
 //!   every other instruction only at level 2 (the default); a broadcast instruction is carried
 //!   out without a status (Read not at all);
@@ -14,8 +15,8 @@
 //!   and comes back with its RAM items at their initial values, no hardware error and Present
 //!   Position within one turn; a power cycle is the same without the answer;
 //! - Operating Mode changes reset every gain to its initial value (the documents give no
-//!   per-mode defaults: `docs/devices/leap.md`), Profile Velocity and Acceleration to 0 and Goal
-//!   PWM and Goal Current to PWM Limit and Current Limit;
+//!   per-mode defaults: `docs/devices/leap.md, "Unknown"`), Profile Velocity and
+//!   Acceleration to 0 and Goal PWM and Goal Current to PWM Limit and Current Limit;
 //! - Torque Enable 0 -> 1 sets Goal Position to Present Position (the servo holds where it is
 //!   until told otherwise);
 //! - the control loop: in modes 3, 4 and 5 a position PID (`P/128`, `I/65536`, `D/16` as the
@@ -40,7 +41,8 @@ pub const COUNTS_PER_TURN: f64 = 4096.0;
 /// Present Position at the URDF's 0 rad (the hand flat: 180 degrees).
 pub const ZERO_COUNTS: f64 = 2048.0;
 /// Output torque per ampere, N m/A: the XC330-M288's stall torque over its stall current
-/// (0.93 N m at 1.8 A, 5 V; ROBOTIS e-manual, XC330-M288, specifications).
+/// (0.93 N m at 1.8 A, 5 V, as quoted in LEAP_Hand_API issue #7;
+/// `docs/devices/leap.md, "Open (unverified)"`).
 pub const TORQUE_PER_AMP: f64 = 0.93 / 1.8;
 /// Present Input Voltage, 0.1 V (the LEAP Hand's 5 V supply).
 pub const INPUT_VOLTAGE: i64 = 50;

@@ -10,7 +10,7 @@
 //!   a value outside the item's range: Data Range Error; a goal beyond the limit another item
 //!   sets (Goal PWM/Current/Velocity beyond PWM/Current/Velocity Limit, Goal Position beyond
 //!   the position limits in mode 3): Data Limit Error, or Data Range Error with
-//!   [`LimitError::Range`] (the documents do not say which: `docs/devices/leap.md`);
+//!   [`LimitError::Range`] (the documents do not say which: `docs/devices/leap.md, "Unknown"`);
 //! - a Write is checked whole before any byte changes: a refused Write changes nothing.
 //!
 //! Items without an initial value in the e-manual start as the firmware would have them: the
