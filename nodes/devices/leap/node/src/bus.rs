@@ -155,19 +155,9 @@ impl<L: Line> Bus<L> {
         self.counters = counters;
     }
 
-    /// The line's timing.
-    pub fn timing(&self) -> &Timing {
-        &self.timing
-    }
-
     /// Sets the timing (after the servos' return delay was written).
     pub fn set_timing(&mut self, timing: Timing) {
         self.timing = timing;
-    }
-
-    /// The line.
-    pub fn line(&mut self) -> &mut L {
-        &mut self.line
     }
 
     /// Pings `id`: its Model Number and firmware version.

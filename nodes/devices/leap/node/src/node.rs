@@ -4,7 +4,7 @@
 //! state out every cycle, the link state while the hand is down, the loop's counters in health.
 //!
 //! Health details: `crc_errors` (replies with a bad CRC), `garbage_bytes` (bytes that were no
-//! packet, came after their request gave up, or packets nobody asked for), `timeouts` (replies
+//! packet, came after their request gave up, or packets nobody asked for), `reply_timeouts` (replies
 //! not there in time), `silent_servos` and `hw_error_servos` (servos silent, or in a hardware
 //! error, now), `reconnects`, `exchange_us_p99` (goal write to state read, 99th percentile),
 //! `overruns` (deadlines missed by more than a period).
@@ -149,7 +149,7 @@ impl Ports<'_> {
         self.errors_counted = self.errors_counted.max(errors);
         health.set_detail("crc_errors", b.crc_errors as f64);
         health.set_detail("garbage_bytes", garbage as f64);
-        health.set_detail("timeouts", b.timeouts as f64);
+        health.set_detail("reply_timeouts", b.timeouts as f64);
         health.set_detail("silent_servos", f64::from(silent));
         health.set_detail("hw_error_servos", f64::from(alerts));
         health.set_detail("reconnects", c.reconnects as f64);

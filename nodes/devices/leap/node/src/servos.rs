@@ -75,11 +75,6 @@ impl Servos {
         }
     }
 
-    /// The IDs in joint order.
-    pub fn ids(&self) -> &[u8; SERVOS] {
-        &self.ids
-    }
-
     /// The IDs this cycle reads (every servo not silent), in joint order, into `out`; how many.
     pub fn read_ids(&self, out: &mut [u8; SERVOS]) -> usize {
         let mut n = 0;
@@ -166,11 +161,6 @@ impl Servos {
     pub fn set_hardware_error(&mut self, j: usize, status: u8) {
         self.alert |= bit(j);
         self.hardware_error[j] = status;
-    }
-
-    /// Joint `j`'s servo holds no torque now (its alert is on).
-    pub fn alert(&self, j: usize) -> bool {
-        self.alert & bit(j) != 0
     }
 
     /// Joints read this cycle.
