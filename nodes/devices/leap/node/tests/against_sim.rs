@@ -4,7 +4,7 @@
 //! rising, the hold on a stale command, a silent servo named while the others keep working, an
 //! overloaded servo stopped and named, bad bytes and CRC errors survived and counted, the
 //! adapter unplugged and back without a restart, torque off on every servo after SIGINT;
-//! `teleop leap info`, `move` and `reboot` against the simulator and a missing adapter.
+//! `teleop leap info`, `move`, `home` and `reboot` against the simulator and a missing adapter.
 //!
 //! Both executables must be built (`cargo build --workspace --bins` besides this crate): they
 //! are looked for next to this test's target folder.
@@ -365,7 +365,7 @@ fn a_silent_servo_that_truncates_the_chain_is_the_only_one_left_out() {
     });
 }
 
-/// `teleop leap info`, `move` and `reboot` against the simulator (the node not running), and
+/// `teleop leap info`, `move`, `home` and `reboot` against the simulator (the node not running), and
 /// a missing adapter named.
 #[test]
 fn teleop_leap_service_commands_against_the_simulator() {
@@ -414,6 +414,22 @@ fn teleop_leap_service_commands_against_the_simulator() {
     assert!(
         (index_pip - 40f64.to_radians()).abs() < 0.05,
         "index_pip at {index_pip} rad after `move index_pip 40`: {stats}\n{text}"
+    );
+    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+
+    // `home`: every joint ramped to the profile's open pose (all 0 rad: flat), then torque off.
+    let (ok, text) = rig
+        .sandbox
+        .cli(&["leap", "--port", &port, "home", "--seconds", "3"]);
+    assert!(ok, "{text}");
+    let stats = sim.ok("stats");
+    let joints: Vec<f64> = list(&stats, "joint")
+        .iter()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        joints.iter().all(|q| q.abs() < 0.05),
+        "home: {joints:?}\n{text}"
     );
     assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
 
