@@ -8,8 +8,8 @@ mod common;
 
 use std::time::{Duration, Instant};
 
-use common::{Sim, BAUD};
-use teleop_leap_protocol::packet::{self, BROADCAST_ID};
+use common::{wait_for, Sim, BAUD};
+use teleop_leap_protocol::packet::{self, instruction, BROADCAST_ID};
 use teleop_leap_protocol::xc330;
 
 const ALL: [u8; 16] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
@@ -235,4 +235,59 @@ fn bad_bytes_are_dropped_and_counted_and_the_line_recovers() {
     let mut host = answering.host(BAUD);
     host.send_raw(&bad);
     assert_eq!(host.status().error, 3);
+}
+
+#[test]
+fn reg_write_and_action_bulk_read_and_write_and_factory_reset_work_as_documented() {
+    let sim = Sim::start(&["--boot-ms", "100"]);
+    let mut host = sim.host(BAUD);
+    // Reg Write waits for Action (broadcast: silent).
+    host.send(|out| packet::encode(2, instruction::REG_WRITE, &[65, 0, 1], out));
+    assert_eq!(host.status().error, 0);
+    assert_eq!(host.read(2, xc330::REGISTERED_INSTRUCTION, 1).value(), 1);
+    assert_eq!(host.read(2, xc330::LED, 1).value(), 0);
+    host.send(|out| packet::encode(BROADCAST_ID, instruction::ACTION, &[], out));
+    host.silence(Duration::from_millis(50));
+    assert_eq!(host.read(2, xc330::LED, 1).value(), 1);
+    host.send(|out| packet::encode(2, instruction::ACTION, &[], out));
+    assert_eq!(host.status().error, 2, "Action without Reg Write");
+
+    // Bulk Write (LED of 1, Goal Position of 3), Bulk Read of both, one status each in order.
+    let mut params = vec![1, 65, 0, 1, 0, 1];
+    params.extend_from_slice(&[3, 116, 0, 4, 0]);
+    params.extend_from_slice(&1900i32.to_le_bytes());
+    host.send(|out| packet::encode(BROADCAST_ID, instruction::BULK_WRITE, &params, out));
+    host.silence(Duration::from_millis(50));
+    let read = [3, 116, 0, 4, 0, 1, 65, 0, 1, 0];
+    host.send(|out| packet::encode(BROADCAST_ID, instruction::BULK_READ, &read, out));
+    let replies = host.statuses(2);
+    assert_eq!((replies[0].id, replies[0].value()), (3, 1900));
+    assert_eq!((replies[1].id, replies[1].value()), (1, 1));
+
+    // Factory Reset keeping ID and baud rate: the mode back at 3, the servo reboots.
+    assert_eq!(host.write(5, xc330::OPERATING_MODE, &[5]), 0);
+    host.send(|out| packet::encode(5, instruction::FACTORY_RESET, &[0x02], out));
+    assert_eq!(host.status().error, 0);
+    wait_for(Duration::from_secs(10), "servo 5 back", || {
+        host.send(|out| packet::ping(5, out));
+        host.statuses_within(1, Duration::from_millis(50)).pop()
+    });
+    assert_eq!(host.read(5, xc330::OPERATING_MODE, 1).value(), 3);
+    // A broadcast Factory Reset of everything is ignored.
+    host.send(|out| packet::encode(BROADCAST_ID, instruction::FACTORY_RESET, &[0xFF], out));
+    host.silence(Duration::from_millis(50));
+    assert_eq!(host.read(7, xc330::ID, 1).value(), 7);
+}
+
+#[test]
+fn the_lite_hands_servos_report_their_own_model() {
+    let sim = Sim::start(&["--model", "xl330-m077"]);
+    let mut host = sim.host(BAUD);
+    host.send(|out| packet::ping(0, out));
+    let r = host.status();
+    assert_eq!(
+        u16::from_le_bytes([r.params[0], r.params[1]]),
+        xc330::MODEL_XL330_M077
+    );
+    assert_eq!(host.read(0, xc330::CURRENT_LIMIT, 2).value(), 1750);
 }
