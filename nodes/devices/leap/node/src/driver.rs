@@ -24,7 +24,7 @@
 //! the process through a [`Host`] (the node's ports, or the CLI's `home` and `move`). Per cycle
 //! it allocates nothing and logs nothing while the servos behave.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use teleop_hand_node::session::{self, Backoff, ConnectError, Ending, Fault, Transport};
 use teleop_hand_profile::HandProfile;
@@ -34,7 +34,7 @@ use crate::bringup::{self, Identity, Names, StepError};
 use crate::bus::{Bus, BusCounters, BusError, FastRead, Line, SerialLine};
 use crate::config::{Settings, SERVOS};
 use crate::servos::{self, bit, joints, Mask, Servos};
-use crate::timing::Timing;
+use crate::timing::{Timing, P99};
 
 /// What the hand should do this cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -181,9 +181,8 @@ pub struct Up<L> {
     /// The silent joint looked for last (round robin).
     looked: usize,
     read: FastRead,
-    /// Exchange times of the current window, 50 us buckets (the last: 5 ms and more).
-    histogram: [u32; 101],
-    window: u32,
+    /// The exchange times' 99th percentile.
+    p99: P99,
 }
 
 impl<H: Host, L: Line> Poll<'_, '_, H, L> {
@@ -380,8 +379,7 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             next_look: now + settings.silent_retry,
             looked: SERVOS - 1,
             read: FastRead::EMPTY,
-            histogram: [0; 101],
-            window: 0,
+            p99: P99::new(P99_WINDOW),
         };
         for j in alerts {
             self.report_alert(&mut up, j);
@@ -482,7 +480,9 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
         self.look_for_silent(up, Instant::now())
             .map_err(|e| lost(&settings.port, e))?;
         let received_ns = teleop_runtime::now_ns();
-        self.count_exchange(up, start.elapsed());
+        if let Some(us) = up.p99.add(start.elapsed()) {
+            self.counters.exchange_us_p99 = us;
+        }
 
         let c = &mut self.counters;
         c.cycles += 1;
@@ -564,28 +564,5 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             why: down.why,
             counters: &self.counters,
         })
-    }
-}
-
-impl<H: Host, L: Line> Poll<'_, '_, H, L> {
-    /// Counts one cycle's exchange time; every [`P99_WINDOW`] cycles the 99th percentile.
-    fn count_exchange(&mut self, up: &mut Up<L>, took: Duration) {
-        let bucket = (took.as_micros() / 50).min(100) as usize;
-        up.histogram[bucket] += 1;
-        up.window += 1;
-        if up.window >= P99_WINDOW {
-            let mut left = up.window - up.window * 99 / 100;
-            let mut p99 = 100;
-            for (b, n) in up.histogram.iter().enumerate().rev() {
-                if *n >= left {
-                    p99 = b;
-                    break;
-                }
-                left -= n;
-            }
-            self.counters.exchange_us_p99 = (p99 as u32 + 1) * 50;
-            up.histogram = [0; 101];
-            up.window = 0;
-        }
     }
 }

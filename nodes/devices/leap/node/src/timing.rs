@@ -39,6 +39,53 @@ impl Timing {
     }
 }
 
+/// Buckets of [`P99`]: 50 us wide, the last one 5 ms and more.
+const BUCKETS: usize = 101;
+/// Width of a [`P99`] bucket, microseconds.
+const BUCKET_US: u128 = 50;
+
+/// The 99th percentile of a run of durations, from a histogram (no allocation): every `window`
+/// samples, the upper edge of the bucket holding it, in microseconds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct P99 {
+    histogram: [u32; BUCKETS],
+    count: u32,
+    window: u32,
+}
+
+impl P99 {
+    /// A percentile over windows of `window` samples (at least 1).
+    pub fn new(window: u32) -> Self {
+        Self {
+            histogram: [0; BUCKETS],
+            count: 0,
+            window: window.max(1),
+        }
+    }
+
+    /// Counts `d`; at the end of a window its 99th percentile (and a new window starts).
+    pub fn add(&mut self, d: Duration) -> Option<u32> {
+        let bucket = (d.as_micros() / BUCKET_US).min(BUCKETS as u128 - 1) as usize;
+        self.histogram[bucket] += 1;
+        self.count += 1;
+        if self.count < self.window {
+            return None;
+        }
+        // The top 1% (at least one sample): the bucket where they start.
+        let mut top = self.count - self.count * 99 / 100;
+        let mut p99 = BUCKETS - 1;
+        for (b, n) in self.histogram.iter().enumerate().rev() {
+            if *n >= top {
+                p99 = b;
+                break;
+            }
+            top -= n;
+        }
+        *self = Self::new(self.window);
+        Some((p99 as u32 + 1) * BUCKET_US as u32)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,5 +115,25 @@ mod tests {
         // Slow rates: 9600 baud is 1.0417 ms per byte.
         let slow = Timing::new(9600, 0, Duration::ZERO);
         assert_eq!(slow.wire(1), Duration::from_nanos(1_041_667), "rounded up");
+    }
+
+    #[test]
+    fn the_99th_percentile_of_each_window() {
+        let mut p = P99::new(200);
+        let us = Duration::from_micros;
+        // 197 fast cycles, 3 slow ones: the 99th percentile is a slow one.
+        for i in 0..199 {
+            let d = if i % 70 == 0 { us(2600) } else { us(400) };
+            assert_eq!(p.add(d), None);
+        }
+        assert_eq!(p.add(us(420)), Some(2650));
+        // A new window: 1 slow of 200 is beyond the 99th percentile.
+        for i in 0..199 {
+            assert_eq!(p.add(if i == 5 { us(9000) } else { us(120) }), None);
+        }
+        assert_eq!(p.add(us(100)), Some(150));
+        // Beyond the last bucket: 5 ms and more.
+        let mut p = P99::new(1);
+        assert_eq!(p.add(Duration::from_secs(1)), Some(5050));
     }
 }
