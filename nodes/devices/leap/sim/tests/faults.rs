@@ -26,7 +26,7 @@ fn torque_on(host: &mut Host, id: u8) {
 
 #[test]
 fn an_overloaded_servo_shuts_down_with_the_alert_until_a_reboot() {
-    let sim = Sim::start(&["--boot-ms", "300"]);
+    let sim = Sim::start(&["--boot-ms", "1000"]);
     let mut host = sim.host(BAUD);
     torque_on(&mut host, 4);
     sim.control_ok("overload 4");
@@ -113,7 +113,7 @@ fn a_silent_servo_is_left_out_of_sync_read_and_of_the_fast_sync_chain() {
         16
     );
     // For a while only.
-    sim.control_ok("silent 9 300");
+    sim.control_ok("silent 9 1000");
     host.send(|out| packet::ping(9, out));
     host.silence(Duration::from_millis(50));
     wait_for(Duration::from_secs(10), "servo 9 back", || {
@@ -171,13 +171,15 @@ fn unplugging_powers_the_servos_off_and_they_come_back_behind_the_same_link() {
     let mut host = sim.host(BAUD);
     torque_on(&mut host, 1);
     assert!(sim.control_ok("unplug 300").contains("300"));
-    wait_for(Duration::from_secs(10), "the link gone", || {
-        (sim.stats()["link"] == "unplugged").then_some(())
-    });
+    wait_for(
+        Duration::from_secs(10),
+        "unplugged and plugged back in",
+        || {
+            let s = sim.stats();
+            (s["unplugs"] == "1" && s["link"] == "plugged").then_some(())
+        },
+    );
     drop(host);
-    wait_for(Duration::from_secs(10), "the link back", || {
-        (sim.stats()["link"] == "plugged").then_some(())
-    });
     let mut host = sim.host(BAUD);
     wait_for(Duration::from_secs(10), "the servos booted", || {
         host.send(|out| packet::ping(1, out));
@@ -193,7 +195,6 @@ fn unplugging_powers_the_servos_off_and_they_come_back_behind_the_same_link() {
         5,
         "EEPROM kept"
     );
-    assert_eq!(sim.counter("unplugs"), 1);
 }
 
 #[test]
