@@ -1,9 +1,10 @@
-//! Finding the servos and bringing them up, as docs/devices/leap.md ("Bring-up") gives it: ping
-//! every ID and check its Model Number, then, step by step over all servos, each step checked by
-//! its status: torque off; the EEPROM items with torque off (Operating Mode 5, current-based
-//! position; Return Delay Time), written only where they differ; the position gains; Goal
-//! Current; Goal Position = Present Position (no jump); torque on last. A refusal names the
-//! servo and the item.
+//! Finding the servos and bringing them up: ping every ID and check its Model Number, then the
+//! shipped API's steps (docs/devices/leap.md, "Bring-up") in an order safe whatever state an
+//! earlier session left the servos in, step by step over all servos, each checked by its status:
+//! torque off; the EEPROM items, which a servo refuses under torque (docs/devices/leap.md,
+//! "Status packets and the error byte"): Operating Mode 5 (current-based position) and Return
+//! Delay Time, written only where they differ; the position gains; Goal Current; Goal Position =
+//! Present Position (no jump); torque on last. A refusal names the servo and the item.
 //!
 //! The same steps bring one servo back (a silent one that answers again, one rebooted after a
 //! hardware error). Every exchange goes through [`Bus`].

@@ -455,8 +455,8 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
                     let applied = up.servos.apply(&ask[..n], &up.read);
                     if applied.missing != 0 {
                         // Which of them is silent: a chain may also end its reply at a silent
-                        // servo, leaving out the ones after it (docs/devices/leap.md, "Fast
-                        // Sync Read": not documented).
+                        // servo, leaving out the ones after it (not documented:
+                        // docs/devices/leap.md, "Unknown").
                         bad = true;
                         self.find_silent(up, applied.missing)
                             .map_err(|e| lost(&settings.port, e))?;

@@ -30,8 +30,10 @@ impl Timing {
         Duration::from_nanos(self.byte_ns.saturating_mul(bytes as u64))
     }
 
-    /// The timeout of a reply of `rx_bytes` from `repliers` servos (each waits its return delay
-    /// before sending) to a request of `tx_bytes`, counted from the start of sending it.
+    /// The timeout of a reply of `rx_bytes` from `repliers` servos to a request of `tx_bytes`,
+    /// counted from the start of sending it. Each replier's return delay is counted: whether the
+    /// servos of a Fast Sync Read chain each wait theirs is not documented (docs/devices/leap.md,
+    /// "Unknown"), so the timeout allows it.
     pub fn reply(&self, tx_bytes: usize, rx_bytes: usize, repliers: usize) -> Duration {
         self.wire(tx_bytes + rx_bytes)
             + Duration::from_nanos(self.return_delay_ns.saturating_mul(repliers as u64))
