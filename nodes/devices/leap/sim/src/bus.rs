@@ -19,7 +19,8 @@
 //!   Read by the servos named; every other broadcast instruction is carried out silently;
 //! - Sync Read: one status per named servo, in request order; Fast Sync Read: one packet from
 //!   ID 0xFE with a block per servo, each block's CRC the running CRC (the protocol crate's
-//!   `fast_sync_status`); a servo that does not answer (silent, booting, deaf) is left out of
+//!   `fast_sync_status`); a servo that does not answer (silent, booting, deaf, firmware before
+//!   46) is left out of
 //!   the chain ([`Missing::Omit`]) or ends it there ([`Missing::Truncate`]: the bytes before its
 //!   block go out, the rest never comes); the reply starts after the first answering servo's
 //!   Return Delay Time (the chain's blocks follow without a delay of their own);
@@ -38,6 +39,9 @@ use crate::servo::Servo;
 
 /// Longest pause between two bytes of one packet before the servos drop it, s.
 pub const BYTE_GAP: f64 = 0.0015;
+/// The first firmware version that takes Fast Sync Read (XC330; ROBOTIS e-manual, Protocol 2.0,
+/// "Fast Sync Read").
+pub const FAST_SYNC_FIRMWARE: u8 = 46;
 /// The plant's sub-step, s.
 pub const PLANT_STEP: f64 = 0.000_25;
 
@@ -638,7 +642,10 @@ impl Bus {
         let mut delay = None;
         for (i, &id) in ids.iter().enumerate() {
             let answered = match self.hearing(id, baud, end) {
-                Some(k) if self.servos[k].status_return_level() >= 1 => {
+                Some(k)
+                    if self.servos[k].status_return_level() >= 1
+                        && self.servos[k].firmware() >= FAST_SYNC_FIRMWARE =>
+                {
                     let s = &self.servos[k];
                     let (error, n) = s.read(addr, len, &mut self.params[i * x..(i + 1) * x]);
                     if n < x {

@@ -28,7 +28,17 @@ use teleop_sim_leap::{Sim, SimOptions};
 #[derive(Parser)]
 #[command(
     version,
-    about = "Simulated LEAP Hand: 16 Dynamixel XC330 servos on a serial bus"
+    about = "Simulated LEAP Hand: 16 Dynamixel XC330 servos on a serial bus",
+    after_help = "Control socket words (one line each, answered `ok ...` or `error: ...`):
+  unplug MS       the USB cable pulled for MS ms (servos powered off, boot when back)
+  drop P          each status lost with probability P
+  crc P           each status with one corrupted byte with probability P
+  silent ID [MS]  servo ID neither hears nor answers (for MS ms, else until clear)
+  noise [N]       N random bytes on the line, heard by host and servos (default 64)
+  overload ID     servo ID overloaded: torque off, Alert, until a reboot
+  overheat ID     servo ID at 80 C, over its Temperature Limit: the same
+  object ball|bar|none; clear (every fault off); stats (key=value words)
+With the torque off a joint stays where it is (no gravity)."
 )]
 struct Args {
     /// The pty's device side is linked at this path (the node's serial port).

@@ -136,6 +136,12 @@ impl Servo {
         s
     }
 
+    /// Firmware Version: Fast Sync Read needs 46 or later (ROBOTIS e-manual, Protocol 2.0,
+    /// "Fast Sync Read").
+    pub fn firmware(&self) -> u8 {
+        self.options.firmware
+    }
+
     /// The control table.
     pub fn table(&self) -> &Table {
         &self.table

@@ -291,3 +291,14 @@ fn the_lite_hands_servos_report_their_own_model() {
     );
     assert_eq!(host.read(0, xc330::CURRENT_LIMIT, 2).value(), 1750);
 }
+
+#[test]
+fn servos_before_firmware_46_do_not_take_fast_sync_read() {
+    let sim = Sim::start(&["--firmware", "45"]);
+    let mut host = sim.host(BAUD);
+    assert!(host
+        .fast_sync_read_raw(xc330::PRESENT_POSITION, 4, &ALL)
+        .is_empty());
+    host.send(|out| packet::sync_read(xc330::PRESENT_POSITION, 4, &ALL, out));
+    assert_eq!(host.statuses(16).len(), 16);
+}
