@@ -456,3 +456,29 @@ fn teleop_leap_service_commands_against_the_simulator() {
         "{text}"
     );
 }
+
+/// Every servo silent (the hand's power lost, the adapter still there): a run of cycles without
+/// any state loses the hand (torque off tried, link down, reconnecting with back-off), and it
+/// comes back without a restart when the servos answer again.
+#[test]
+fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
+    let _one = one_at_a_time();
+    let rig = start("none", &[], "failed_cycle_limit = 20\n");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    for id in 0..16 {
+        rig.sim.ok(&format!("silent {id}"));
+    }
+    rig.wait_log(
+        Duration::from_secs(5),
+        "20 cycles in a row without any servo's state",
+    );
+    rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
+    rig.wait_log(Duration::from_secs(5), "no servo answers on");
+    rig.sim.ok("clear");
+    rig.wait_state(Duration::from_secs(10), "the hand back", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
+}
