@@ -42,8 +42,16 @@ pub const BYTE_GAP: f64 = 0.0015;
 /// The first firmware version that takes Fast Sync Read (XC330; ROBOTIS e-manual, Protocol 2.0,
 /// "Fast Sync Read").
 pub const FAST_SYNC_FIRMWARE: u8 = 46;
+/// The slowest rate the servos take, bit/s: a host's port set slower (or to 0, hung up) is
+/// timed as this (the servos understand neither).
+pub const MIN_BAUD: u32 = 9600;
 /// The plant's sub-step, s.
 pub const PLANT_STEP: f64 = 0.000_25;
+
+/// Seconds a byte takes on the line at `baud` (10 bits; at least [`MIN_BAUD`]'s).
+fn byte_time(baud: u32) -> f64 {
+    wire::byte_time_ns(baud.max(MIN_BAUD)) as f64 * 1e-9
+}
 
 /// What the servos after a missing one in a Fast Sync Read chain do (not documented).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -336,7 +344,7 @@ impl Bus {
     /// `n` random bytes on the line at `now` (both the host and the servos hear them).
     pub fn noise(&mut self, n: usize, baud: u32, now: f64, out: &mut Outbox) {
         let bytes: Vec<u8> = (0..n).map(|_| self.line.dice.byte()).collect();
-        let byte_time = wire::byte_time_ns(baud) as f64 * 1e-9;
+        let byte_time = byte_time(baud);
         let start = now.max(self.rx_last).max(self.line.free_at);
         out.bytes.extend_from_slice(&bytes);
         out.parts
@@ -351,7 +359,7 @@ impl Bus {
         if bytes.is_empty() {
             return;
         }
-        let byte_time = wire::byte_time_ns(baud) as f64 * 1e-9;
+        let byte_time = byte_time(baud);
         self.line.byte_time = byte_time;
         if !self.rx.is_empty() && now - self.rx_last > BYTE_GAP {
             self.line.counters.cut_packets += 1;
@@ -738,14 +746,16 @@ mod tests {
         #[test]
         fn any_bytes_are_taken_without_a_panic_and_the_servos_still_answer(
             chunks in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..300), 0..8),
+            baud in proptest::sample::select(vec![0u32, 57_600, 1_000_000, BAUD]),
         ) {
             let mut b = bus();
             let mut out = Outbox::new();
             let mut t = 0.0;
             for c in &chunks {
-                b.receive(c, BAUD, t, &mut out);
+                b.receive(c, baud, t, &mut out);
                 t += 0.000_5;
             }
+            prop_assert!(out.parts().all(|(at, _)| at.is_finite() && at < t + 1.0));
             out.clear();
             let mut request = [0u8; 16];
             let n = packet::ping(3, &mut request).unwrap();

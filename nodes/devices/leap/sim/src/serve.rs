@@ -256,8 +256,10 @@ fn serve_line(shared: &Shared, link: &std::path::Path, first: pty::Pair) {
                     bus.receive(&buf[..n], baud, now, &mut out);
                 }
                 for (at, bytes) in out.parts() {
-                    let due = shared.start + Duration::from_secs_f64(at.max(0.0));
-                    if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                    let due = Duration::try_from_secs_f64(at.max(0.0))
+                        .ok()
+                        .and_then(|d| shared.start.checked_add(d));
+                    if let Some(wait) = due.and_then(|d| d.checked_duration_since(Instant::now())) {
                         std::thread::sleep(wait);
                     }
                     if master.write_all(bytes).is_err() {
