@@ -229,6 +229,8 @@ pub struct Bus {
     rx_last: f64,
     scratch: Vec<u8>,
     params: Vec<u8>,
+    /// A Fast Sync Read's blocks: (id, error, answered).
+    blocks: Vec<(u8, u8, bool)>,
     /// Per ID: silent until this time, s (`f64::INFINITY`: until told otherwise).
     silent_until: [f64; 256],
 }
@@ -256,6 +258,7 @@ impl Bus {
             rx_last: f64::NEG_INFINITY,
             scratch: vec![0; MAX_PACKET],
             params: vec![0; MAX_PACKET],
+            blocks: Vec::with_capacity(usize::from(packet::MAX_ID) + 1),
             silent_until: [f64::NEG_INFINITY; 256],
         }
     }
@@ -493,9 +496,10 @@ impl Bus {
         }
         match *request {
             Request::Ping if broadcast => {
-                let mut order: Vec<usize> = (0..self.servos.len()).collect();
-                order.sort_by_key(|&k| self.servos[k].id());
-                for k in order {
+                for target in 0..=packet::MAX_ID {
+                    let Some(k) = self.servos.iter().position(|s| s.id() == target) else {
+                        continue;
+                    };
                     if self.hears(k, baud, end) {
                         self.answer_ping(k, end, out);
                     }
@@ -552,25 +556,26 @@ impl Bus {
             | Request::BulkWrite(_)
             | Request::FastBulkRead(_) => {}
             Request::FactoryReset(0xFF) if broadcast => {}
-            _ => {
-                let targets: Vec<usize> = if broadcast {
-                    (0..self.servos.len())
-                        .filter(|&k| self.hears(k, baud, end))
-                        .collect()
-                } else {
-                    self.hearing(id, baud, end).into_iter().collect()
-                };
-                for k in targets {
-                    // Answered as the servo was set when the request came (a Write of Status
-                    // Return Level or Return Delay Time takes effect after its status).
-                    let (level, delay) = {
-                        let s = &self.servos[k];
-                        (s.status_return_level(), s.return_delay())
-                    };
-                    let error = self.execute(k, request, end);
-                    if !broadcast && level >= 2 {
-                        self.line.status(id, error, &[], end, delay, out);
+            _ if broadcast => {
+                for k in 0..self.servos.len() {
+                    if self.hears(k, baud, end) {
+                        self.execute(k, request, end);
                     }
+                }
+            }
+            _ => {
+                let Some(k) = self.hearing(id, baud, end) else {
+                    return;
+                };
+                // Answered as the servo was set when the request came (a Write of Status Return
+                // Level or Return Delay Time takes effect after its status).
+                let (level, delay) = {
+                    let s = &self.servos[k];
+                    (s.status_return_level(), s.return_delay())
+                };
+                let error = self.execute(k, request, end);
+                if level >= 2 {
+                    self.line.status(id, error, &[], end, delay, out);
                 }
             }
         }
@@ -646,7 +651,8 @@ impl Bus {
             return;
         }
         // Per named servo: (id, error, answered); data at params[i * x..].
-        let mut blocks: Vec<(u8, u8, bool)> = Vec::with_capacity(ids.len());
+        let mut blocks = std::mem::take(&mut self.blocks);
+        blocks.clear();
         let mut delay = None;
         for (i, &id) in ids.iter().enumerate() {
             let answered = match self.hearing(id, baud, end) {
@@ -670,7 +676,10 @@ impl Bus {
                 blocks.push((id, 0, false));
             }
         }
-        let Some(delay) = delay else { return };
+        let Some(delay) = delay else {
+            self.blocks = blocks;
+            return;
+        };
         let (n, cut) = match self.options.fast_sync_missing {
             Missing::Omit => {
                 let data = &self.params;
@@ -694,6 +703,7 @@ impl Bus {
                 )
             }
         };
+        self.blocks = blocks;
         if let Ok(n) = n {
             let n = cut.map_or(n, |c| c.min(n));
             if cut == Some(packet::PREFIX_LEN + 1) {
