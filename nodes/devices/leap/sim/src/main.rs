@@ -119,10 +119,10 @@ fn run(args: Args) -> anyhow::Result<()> {
     );
     let control = args.sim.serve(sim, args.link.with_extension("ctl"))?;
     println!(
-        "leap: link {} baud {} model {:?} (control: {})",
+        "leap: link {} baud {} model {} (control: {})",
         args.link.display(),
         args.baud,
-        args.model,
+        args.model.name(),
         control.path().display()
     );
     std::io::stdout().flush()?;

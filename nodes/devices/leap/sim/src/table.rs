@@ -66,6 +66,14 @@ impl std::str::FromStr for Model {
 }
 
 impl Model {
+    /// Its name, as `--model` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Xc330M288 => "xc330-m288",
+            Self::Xl330M077 => "xl330-m077",
+        }
+    }
+
     /// Its control table.
     pub fn table(self) -> xc330::Table {
         match self {
