@@ -3,8 +3,8 @@
 //! calling the stop once per session).
 //!
 //! Connecting opens the serial port, finds the servos and brings them up ([`crate::bringup`]).
-//! A turn sleeps to the next absolute deadline at `rate_hz`, writes every servo's goal in one
-//! Sync Write (the admitted command, or the goals held: for a fresh session where the hand is),
+//! A turn sleeps to the next absolute deadline at `rate_hz`, writes the goals of every servo not
+//! silent in one Sync Write (the admitted command, or the goals held: for a fresh session where the hand is),
 //! and reads current, velocity and position of every servo not silent in one Fast Sync Read.
 //! Faults, each counted and named once:
 //!
@@ -12,7 +12,8 @@
 //!   one read;
 //! - no reply, or a reply without some servos' blocks: those servos are pinged and the silent
 //!   ones named and left out of the reads (their state marked stale); each is looked for again
-//!   every `silent_retry_ms` and brought up again when it answers;
+//!   every `silent_retry_ms` and brought up again when it answers, holding where it is and
+//!   ramping to the commands at `resume_speed`;
 //! - a block with the Alert bit: that servo's Hardware Error Status is read and named in words;
 //!   the servo has turned its torque off and only a reboot clears it (`teleop leap reboot --id
 //!   N`); the others go on, and nothing reboots it automatically. When its alert goes away (it
@@ -27,6 +28,7 @@
 use std::time::Instant;
 
 use teleop_hand_node::session::{self, Backoff, ConnectError, Ending, Fault, Transport};
+use teleop_hand_node::Resume;
 use teleop_hand_profile::HandProfile;
 use teleop_leap_protocol::xc330;
 
@@ -183,6 +185,9 @@ pub struct Up<L> {
     read: FastRead,
     /// The exchange times' 99th percentile.
     p99: P99,
+    /// Servos brought up again while the hand runs: the ramp from where each held to the
+    /// commands (the core's `Resume`, one joint each), until it has caught up.
+    rejoin: [Option<Resume>; SERVOS],
 }
 
 impl<H: Host, L: Line> Poll<'_, '_, H, L> {
@@ -227,6 +232,10 @@ impl<H: Host, L: Line> Poll<'_, '_, H, L> {
         match &failed[j] {
             None => {
                 up.servos.revive(j);
+                // It holds where it is: the commands reach it by a ramp from there.
+                let mut ramp = Resume::new(self.settings.resume_speed);
+                ramp.held_at(&[servos::position_rad(&self.profile.joints[j], up.goals[j])]);
+                up.rejoin[j] = Some(ramp);
                 tracing::info!("{name}: {why}: brought up again, torque on");
             }
             Some((what, StepError::Alert)) => {
@@ -380,6 +389,7 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             looked: SERVOS - 1,
             read: FastRead::EMPTY,
             p99: P99::new(P99_WINDOW),
+            rejoin: [None; SERVOS],
         };
         for j in alerts {
             self.report_alert(&mut up, j);
@@ -418,9 +428,16 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
 
         let holding = match self.host.target() {
             Target::Follow(t) => {
-                for ((g, joint), rad) in up.goals.iter_mut().zip(&self.profile.joints).zip(t) {
-                    if let Some(c) = servos::goal_counts(joint, rad) {
-                        *g = c;
+                let dt = settings.period.as_secs_f64();
+                for (j, joint) in self.profile.joints.iter().enumerate().take(SERVOS) {
+                    let mut rad = [t[j]];
+                    if let Some(ramp) = &mut up.rejoin[j] {
+                        if !ramp.follow(&mut rad, dt) {
+                            up.rejoin[j] = None;
+                        }
+                    }
+                    if let Some(c) = servos::goal_counts(joint, rad[0]) {
+                        up.goals[j] = c;
                     }
                 }
                 false
@@ -431,7 +448,16 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
         for (b, g) in bytes.iter_mut().zip(&up.goals) {
             *b = g.to_le_bytes();
         }
-        let items = settings.ids.iter().zip(&bytes).map(|(id, b)| (*id, &b[..]));
+        // Not to the silent: one that hears again must not jump to a goal it missed the ramp
+        // to (it is brought up again, holding where it is, when it answers).
+        let silent = up.servos.silent();
+        let items = settings
+            .ids
+            .iter()
+            .zip(&bytes)
+            .enumerate()
+            .filter(|(j, _)| silent & bit(*j) == 0)
+            .map(|(_, (id, b))| (*id, &b[..]));
         up.bus
             .sync_write(xc330::GOAL_POSITION, 4, items)
             .map_err(|e| lost(&settings.port, e))?;

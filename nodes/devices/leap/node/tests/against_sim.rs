@@ -482,3 +482,43 @@ fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
     });
     wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
 }
+
+/// A servo back from silence while commands are followed holds where it is and ramps to its
+/// target at `resume_speed`; it does not jump there.
+#[test]
+fn a_servo_back_from_silence_ramps_to_the_command() {
+    let _one = one_at_a_time();
+    let mut rig = start("none", &[], "resume_speed = 0.5\n");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    rig.send(&command(&POSE), Duration::from_millis(2500));
+    rig.sim.ok("silent 11");
+    rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
+    // The command moves the silent joint: it does not hear it.
+    let mut far = POSE;
+    far[11] = 1.2;
+    rig.send(&command(&far), Duration::from_millis(300));
+    rig.sim.ok("clear");
+    let start = Instant::now();
+    let mut seen = Vec::new();
+    while start.elapsed() < Duration::from_millis(2500) {
+        let s = rig.send(&command(&far), Duration::from_millis(20));
+        if s.joints[11].status & status::STALE == 0 {
+            seen.push((start.elapsed().as_secs_f32(), s.joints[11].position));
+        }
+    }
+    rig.wait_log(Duration::from_secs(1), "ring_dip (id 11): answers again");
+    eprintln!("ring_dip after it came back: {seen:?}");
+    let (t0, q0) = seen[0];
+    for (t, q) in &seen {
+        // 0.5 rad/s from where it was, with a cycle's slack.
+        assert!(
+            *q <= q0 + 0.5 * (t - t0) + 0.05,
+            "jumped: {q} rad {:.2} s after {q0} rad: {seen:?}",
+            t - t0
+        );
+    }
+    let (_, last) = seen[seen.len() - 1];
+    assert!(last > q0 + 0.3, "it ramps toward its target: {seen:?}");
+}
