@@ -249,15 +249,16 @@ pub fn stop(child: &mut Child) {
     let _ = child.wait();
 }
 
-/// Why an independent SOEM check cannot run here, if it cannot.
-pub fn pysoem_missing() -> Option<String> {
+/// Why an independent check in Python cannot run here, if it cannot: python3 missing, or
+/// `module` (from `.ci/requirements.txt`) not importable by it.
+pub fn python_module_missing(module: &str) -> Option<String> {
     match Command::new("python3")
-        .args(["-c", "import pysoem; print(pysoem.__version__)"])
+        .args(["-c", &format!("import {module}")])
         .output()
     {
         Ok(o) if o.status.success() => None,
         Ok(o) => Some(format!(
-            "pysoem is not importable by python3 ({}); pip install -r .ci/requirements.txt",
+            "{module} is not importable by python3 ({}); pip install -r .ci/requirements.txt",
             String::from_utf8_lossy(&o.stderr)
                 .lines()
                 .last()

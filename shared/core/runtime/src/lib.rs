@@ -25,7 +25,9 @@
 //!   it ticks (absolute deadlines), pure, for the nodes and for reprocessing alike;
 //! - [`args`]: command-line value parsers (`teleop` and the device service commands);
 //! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
-//!   `launch.toml` gives a process, for its time-critical threads.
+//!   `launch.toml` gives a process, for its time-critical threads;
+//! - [`serial_latency`]: low-latency mode on a serial port and the warning about a slow USB
+//!   adapter's latency timer (the serial device nodes' links).
 //!
 //! Must not depend on: any device protocol, the retargeting or force-feedback logic, or the CLI.
 //!
@@ -44,6 +46,7 @@ pub mod node_main;
 mod ports;
 pub mod realtime;
 pub mod schedule;
+pub mod serial_latency;
 mod signals;
 
 pub use clock::{now_ns, sleep_until, sleep_until_ns};

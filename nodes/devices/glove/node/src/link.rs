@@ -10,7 +10,6 @@
 use std::io::{Read, Write};
 use std::os::fd::AsRawFd;
 use std::path::Path;
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
@@ -18,6 +17,7 @@ use teleop_glove_protocol::{
     decode_values, encode_request, read_request, wire_time, write_request, DecodeError, Register,
     Request, Response, ResponseDecoder, Values, MAX_FRAME,
 };
+use teleop_runtime::serial_latency;
 
 /// Why an exchange failed.
 #[derive(Debug, thiserror::Error)]
@@ -83,13 +83,10 @@ impl LinkStats {
 
 /// Character times without a byte after which the line counts as quiet again once bytes came
 /// in after a timeout. (A USB-serial adapter passes bytes on in bursts every latency-timer
-/// period; at 1 ms, see [`crate::latency`], a burst gap is shorter than this at 115200 baud.
+/// period; at 1 ms, see [`serial_latency`], a burst gap is shorter than this at 115200 baud.
 /// Should a slower adapter split a late answer anyway, its tail has no header and cannot be
 /// taken for an answer.)
 const QUIET_CHARS: usize = 12;
-
-/// Sysfs latency-timer files already warned about: once per process, not on every reopen.
-static WARNED: Mutex<Vec<std::path::PathBuf>> = Mutex::new(Vec::new());
 
 /// An open serial link to the glove with device id `id`.
 pub struct GloveLink {
@@ -121,14 +118,7 @@ impl GloveLink {
                 detail: e.to_string(),
             })?;
         let _ = port.clear(serialport::ClearBuffer::All);
-        let low_latency = match crate::latency::request_low_latency(port.as_raw_fd()) {
-            Ok(()) => true,
-            Err(e) => {
-                tracing::debug!(port = %path, "no low-latency mode: {e}");
-                false
-            }
-        };
-        warn_slow_latency_timer(Path::new(path));
+        let low_latency = serial_latency::tune(port.as_raw_fd(), Path::new(path));
         Ok(Self {
             port,
             path: path.to_string(),
@@ -358,29 +348,6 @@ impl GloveLink {
             source,
         }
     }
-}
-
-/// Warns once per latency-timer file when the USB-serial adapter behind `port` is slow.
-fn warn_slow_latency_timer(port: &Path) {
-    let Some(tty) = crate::latency::tty_name(port) else {
-        return;
-    };
-    let Some(slow) = crate::latency::slow_latency_timer(Path::new("/sys"), &tty) else {
-        return;
-    };
-    let mut warned = WARNED.lock().unwrap_or_else(|e| e.into_inner());
-    if warned.contains(&slow.path) {
-        return;
-    }
-    tracing::warn!(
-        port = %port.display(),
-        "the USB-serial adapter's latency timer is {} ms ({}): every answer waits for it; \
-         for 1 ms run `{}`",
-        slow.ms,
-        slow.path.display(),
-        slow.fix()
-    );
-    warned.push(slow.path);
 }
 
 /// True when `answer` is the answer to `request` (same command, same register address).

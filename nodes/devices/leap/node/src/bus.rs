@@ -11,12 +11,12 @@
 use std::io::{Read, Write};
 use std::os::fd::AsRawFd;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
 use teleop_leap_protocol::packet::{self, ErrorByte, FastSyncReply, Scan, Status};
 use teleop_leap_protocol::{wire, DecodeError, EncodeError};
+use teleop_runtime::serial_latency;
 
 use crate::timing::Timing;
 
@@ -381,13 +381,10 @@ pub struct SerialLine {
 /// How long writing a request may block before the line counts as stuck.
 const WRITE_TIMEOUT: Duration = Duration::from_millis(100);
 
-/// Set once the adapter's slow latency timer was warned about (once per process).
-static WARNED: AtomicBool = AtomicBool::new(false);
-
 impl SerialLine {
     /// Opens `path` at `baud`: asks the driver for `ASYNC_LOW_LATENCY` (a pseudo-terminal
     /// refuses: a debug note) and warns once, naming the fix, when a USB adapter's latency
-    /// timer is above 1 ms (as the glove's link does: `teleop_glove::latency`).
+    /// timer is above 1 ms (`teleop_runtime::serial_latency::tune`, as the glove's link does).
     pub fn open(path: &str, baud: u32) -> Result<Self, serialport::Error> {
         let port = serialport::new(path, baud)
             .data_bits(serialport::DataBits::Eight)
@@ -396,23 +393,7 @@ impl SerialLine {
             .flow_control(serialport::FlowControl::None)
             .timeout(Duration::from_millis(10))
             .open_native()?;
-        if let Err(e) = teleop_glove::latency::request_low_latency(port.as_raw_fd()) {
-            tracing::debug!(port = %path, "no low-latency mode: {e}");
-        }
-        if let Some(slow) = teleop_glove::latency::tty_name(Path::new(path))
-            .and_then(|tty| teleop_glove::latency::slow_latency_timer(Path::new("/sys"), &tty))
-        {
-            if !WARNED.swap(true, Ordering::Relaxed) {
-                tracing::warn!(
-                    port = %path,
-                    "the USB-serial adapter's latency timer is {} ms ({}): every reply waits for \
-                     it; for 1 ms run `{}`",
-                    slow.ms,
-                    slow.path.display(),
-                    slow.fix()
-                );
-            }
-        }
+        serial_latency::tune(port.as_raw_fd(), Path::new(path));
         Ok(Self { port })
     }
 }

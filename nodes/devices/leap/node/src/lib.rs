@@ -6,7 +6,7 @@
 //! - [`timing`]: reply timeouts from the byte time, the return delay and a slack (pure);
 //! - [`bus`]: request and reply over the serial line, every byte through
 //!   `teleop-leap-protocol`, with what else is on the line counted; the serial port in
-//!   low-latency mode with the USB latency-timer warning (`teleop_glove::latency`);
+//!   low-latency mode with the USB latency-timer warning (`teleop_runtime::serial_latency`);
 //! - [`servos`]: the servos between cycles (which are read, silent, in a hardware error; their
 //!   last state) and angle <-> count conversion (pure);
 //! - [`bringup`]: finding the servos (model check) and bringing them up in the documented order;

@@ -13,29 +13,11 @@ use std::process::Command;
 use std::time::Duration;
 
 use common::Sim;
-use teleop_e2e::netns::{run_for, skip};
-
-/// Why the SDK cannot run here, if it cannot.
-fn sdk_missing() -> Option<String> {
-    match Command::new("python3")
-        .args(["-c", "import dynamixel_sdk"])
-        .output()
-    {
-        Ok(o) if o.status.success() => None,
-        Ok(o) => Some(format!(
-            "dynamixel_sdk is not importable by python3 ({}); pip install -r .ci/requirements.txt",
-            String::from_utf8_lossy(&o.stderr)
-                .lines()
-                .last()
-                .unwrap_or("")
-        )),
-        Err(e) => Some(format!("no python3: {e}")),
-    }
-}
+use teleop_e2e::netns::{python_module_missing, run_for, skip};
 
 #[test]
 fn robotis_python_sdk_pings_reads_writes_and_is_refused_an_eeprom_write_under_torque() {
-    if let Some(reason) = sdk_missing() {
+    if let Some(reason) = python_module_missing("dynamixel_sdk") {
         skip(&reason);
         return;
     }

@@ -15,7 +15,7 @@
 
 mod common;
 
-use teleop_e2e::netns::{die_with_parent, pysoem_missing, skip, stop, Netns};
+use teleop_e2e::netns::{die_with_parent, python_module_missing, skip, stop, Netns};
 use teleop_e2e::skip_unless_privileged;
 
 use common::{position_command, positions};
@@ -281,7 +281,7 @@ fn pump_on_interface_reaches_op_follows_commands_and_survives_an_interface_reset
 #[test]
 fn soem_brings_the_emulated_revo2_to_op_over_the_veth_pair() {
     skip_unless_privileged!();
-    if let Some(reason) = pysoem_missing() {
+    if let Some(reason) = python_module_missing("pysoem") {
         skip(&reason);
         return;
     }

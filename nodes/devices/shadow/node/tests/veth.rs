@@ -10,13 +10,13 @@
 //! (`cargo build --workspace --bins`).
 #![allow(clippy::unwrap_used)]
 
-use teleop_e2e::netns::{pysoem_missing, skip, Netns};
+use teleop_e2e::netns::{python_module_missing, skip, Netns};
 use teleop_e2e::skip_unless_privileged;
 
 #[test]
 fn soem_brings_both_emulated_subdevices_to_op_over_a_veth_pair() {
     skip_unless_privileged!();
-    if let Some(reason) = pysoem_missing() {
+    if let Some(reason) = python_module_missing("pysoem") {
         skip(&reason);
         return;
     }

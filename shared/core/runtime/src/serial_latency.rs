@@ -1,4 +1,5 @@
-//! Low-latency serial: what the glove link asks of the port's driver when it opens the port.
+//! Low-latency serial: what a serial device node (the glove's link, the LEAP Hand's bus) asks
+//! of the port's driver when it opens the port ([`tune`]).
 //!
 //! Every exchange is a short question and answer, so the delay a serial driver adds before it
 //! hands received bytes over counts in full, twice per exchange. Two knobs matter on Linux:
@@ -13,7 +14,8 @@
 use std::os::fd::RawFd;
 use std::path::{Path, PathBuf};
 
-/// The largest adapter latency timer that does not slow the glove down, milliseconds.
+/// The largest adapter latency timer that does not slow a question-and-answer link down,
+/// milliseconds.
 pub const MAX_LATENCY_TIMER_MS: u32 = 1;
 
 /// Sets `ASYNC_LOW_LATENCY` on the tty open at `fd` (a no-op when it is already set). The error
@@ -91,7 +93,7 @@ mod sys {
     }
 }
 
-/// A USB-serial adapter's latency timer that is too slow for the glove.
+/// A USB-serial adapter's latency timer that is too slow for a question-and-answer link.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SlowLatencyTimer {
     /// The sysfs attribute (symlinks resolved).
@@ -135,6 +137,38 @@ pub fn slow_latency_timer(sysfs: &Path, tty: &str) -> Option<SlowLatencyTimer> {
         }
     };
     (ms > MAX_LATENCY_TIMER_MS).then_some(SlowLatencyTimer { path, ms })
+}
+
+/// Sysfs latency-timer files already warned about: once per process, not on every reopen.
+static WARNED: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+
+/// Tunes the serial port `port` (open at `fd`) for short questions and answers: asks for
+/// [`request_low_latency`] (a refusal, as by a pseudo-terminal, is a debug note) and warns once
+/// per adapter, naming the fix, when its latency timer is above [`MAX_LATENCY_TIMER_MS`]
+/// (every answer waits for it). True when the driver took low-latency mode.
+pub fn tune(fd: RawFd, port: &Path) -> bool {
+    let low_latency = match request_low_latency(fd) {
+        Ok(()) => true,
+        Err(e) => {
+            tracing::debug!(port = %port.display(), "no low-latency mode: {e}");
+            false
+        }
+    };
+    if let Some(slow) = tty_name(port).and_then(|tty| slow_latency_timer(Path::new("/sys"), &tty)) {
+        let mut warned = WARNED.lock().unwrap_or_else(|e| e.into_inner());
+        if !warned.contains(&slow.path) {
+            tracing::warn!(
+                port = %port.display(),
+                "the USB-serial adapter's latency timer is {} ms ({}): every answer waits for \
+                 it; for 1 ms run `{}`",
+                slow.ms,
+                slow.path.display(),
+                slow.fix()
+            );
+            warned.push(slow.path);
+        }
+    }
+    low_latency
 }
 
 #[cfg(test)]
