@@ -26,6 +26,9 @@
 //!   Return Delay Time (the chain's blocks follow without a delay of their own);
 //! - Fast Bulk Read is not simulated (counted as `unsupported`, unanswered).
 //!
+//! Every request heard whole is noted in the [`Outbox`] with the time it ended ([`Heard`]), for
+//! a wire tap.
+//!
 //! Faults (set by the control socket): a status lost (`drop P`), a status with one corrupted
 //! byte (`crc P`), a servo silent (neither hears nor answers).
 
@@ -131,17 +134,36 @@ pub struct Counters {
     pub silenced: u64,
 }
 
-/// Status packets to write, each at the time its last byte leaves the servo.
+/// A request the servos heard whole, as a wire tap reports it ([`crate::serve::Tap`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Heard {
+    /// When its last byte ended on the line, s.
+    pub end: f64,
+    /// Its instruction byte.
+    pub instruction: u8,
+    /// For a Sync Write of Goal Position (116, 4 bytes): the goal counts by ID (0..15; `None`
+    /// for an ID it does not name).
+    pub goals: Option<[Option<i32>; JOINTS]>,
+}
+
+/// Status packets to write, each at the time its last byte leaves the servo, and the requests
+/// heard meanwhile.
 #[derive(Debug, Default)]
 pub struct Outbox {
     bytes: Vec<u8>,
     parts: Vec<(f64, usize)>,
+    heard: Vec<Heard>,
 }
 
 impl Outbox {
     /// Empty.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// The requests heard whole since the last [`Outbox::clear`], in order.
+    pub fn heard(&self) -> &[Heard] {
+        &self.heard
     }
 
     /// Each part to write: when (s) and its bytes, in order.
@@ -158,6 +180,7 @@ impl Outbox {
     pub fn clear(&mut self) {
         self.bytes.clear();
         self.parts.clear();
+        self.heard.clear();
     }
 }
 
@@ -419,6 +442,11 @@ impl Bus {
             Ok(p) => {
                 match Request::from_packet(&p) {
                     Ok(request) => {
+                        out.heard.push(Heard {
+                            end,
+                            instruction: p.instruction,
+                            goals: goals(&request),
+                        });
                         self.advance(end);
                         self.request(p.id, &request, baud, end, out);
                     }
@@ -712,6 +740,28 @@ impl Bus {
             self.line.send(n, end, delay, out);
         }
     }
+}
+
+/// The goal counts by ID of a Sync Write of Goal Position (4 bytes each, IDs 0..15).
+fn goals(request: &Request<'_>) -> Option<[Option<i32>; JOINTS]> {
+    let Request::SyncWrite {
+        addr,
+        len: 4,
+        items,
+    } = request
+    else {
+        return None;
+    };
+    if *addr != xc330::GOAL_POSITION {
+        return None;
+    }
+    let mut goals = [None; JOINTS];
+    for (id, data) in items.iter() {
+        if let (Some(goal), Ok(bytes)) = (goals.get_mut(usize::from(id)), data.try_into()) {
+            *goal = Some(i32::from_le_bytes(bytes));
+        }
+    }
+    Some(goals)
 }
 
 #[cfg(test)]

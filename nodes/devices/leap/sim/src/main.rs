@@ -109,6 +109,7 @@ fn options(args: &Args) -> anyhow::Result<SimOptions> {
         limits: leap_limits().map_err(anyhow::Error::msg)?,
         object: args.object.object()?,
         seed: args.sim.seed,
+        tap: None,
     })
 }
 

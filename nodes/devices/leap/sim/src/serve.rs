@@ -11,6 +11,10 @@
 //!
 //! Unplugging removes the link, powers the servos off, and plugs a new pty in behind the same
 //! link after the pause; the servos boot (silent for their boot time) with their EEPROM kept.
+//!
+//! A wire tap ([`Tap`], off unless [`SimOptions::tap`] sets one) reports, for measurements,
+//! every request the servos heard whole with the time its last byte ended on the line, and
+//! every status written with the time its last byte left, on the tap's clock.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -23,7 +27,7 @@ use serialport::SerialPort;
 use teleop_sim_kit::pty::{self, Cable};
 use teleop_sim_kit::{lock, Object, Stats};
 
-use crate::bus::{Bus, BusOptions, Outbox};
+use crate::bus::{Bus, BusOptions, Heard, Outbox};
 use crate::hand::{Hand, HandParams, JOINTS};
 use crate::servo::{Servo, ServoOptions};
 use crate::table::Model;
@@ -57,6 +61,78 @@ pub struct SimOptions {
     pub object: Option<Object>,
     /// Seed of the fault dice.
     pub seed: u64,
+    /// A wire tap, for measurements (`None`: off).
+    pub tap: Option<Arc<Tap>>,
+}
+
+/// What a [`Tap`] saw on the line, times in ns on its clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TapEvent {
+    /// A request the servos heard whole ([`Heard`]): when its last byte ended on the line, its
+    /// instruction, and for a Sync Write of Goal Position the goal counts by ID.
+    Request {
+        /// When its last byte ended on the line.
+        end_ns: u64,
+        /// Its instruction byte.
+        instruction: u8,
+        /// The goal counts by ID (0..15) of a Sync Write of Goal Position.
+        goals: Option<[Option<i32>; JOINTS]>,
+    },
+    /// Bytes written to the host: a status packet or a Fast Sync Read reply (or a noise burst,
+    /// `noise N`).
+    Written {
+        /// When its last byte left by the line's timing.
+        due_ns: u64,
+        /// When the simulator had written it to the pty (no earlier than `due_ns`).
+        written_ns: u64,
+        /// Its length in bytes.
+        len: usize,
+        /// Its ID byte (byte 4; 0 when shorter).
+        id: u8,
+    },
+}
+
+/// A wire tap: the line's events ([`TapEvent`]) with times on a clock of the caller's (e.g.
+/// CLOCK_MONOTONIC ns), for measurements. Bounded: events beyond its capacity are counted
+/// ([`Tap::overflow`]), not kept, until [`Tap::drain_into`] takes the ones it holds; it
+/// allocates nothing after [`Tap::new`].
+#[derive(Debug)]
+pub struct Tap {
+    clock: fn() -> u64,
+    events: Mutex<Vec<TapEvent>>,
+    overflow: AtomicU64,
+}
+
+impl Tap {
+    /// A tap that holds up to `capacity` events, its times read from `clock` (ns; the
+    /// simulator's own times are converted with one reading of it at start, so `clock` must
+    /// tick with CLOCK_MONOTONIC, as `std::time::Instant` does on Linux).
+    pub fn new(capacity: usize, clock: fn() -> u64) -> Self {
+        Self {
+            clock,
+            events: Mutex::new(Vec::with_capacity(capacity)),
+            overflow: AtomicU64::new(0),
+        }
+    }
+
+    /// Moves the events held, in order, to the end of `into`.
+    pub fn drain_into(&self, into: &mut Vec<TapEvent>) {
+        into.extend(lock(&self.events).drain(..));
+    }
+
+    /// Events lost because the tap was full.
+    pub fn overflow(&self) -> u64 {
+        self.overflow.load(Ordering::SeqCst)
+    }
+
+    fn push(&self, event: TapEvent) {
+        let mut events = lock(&self.events);
+        if events.len() < events.capacity() {
+            events.push(event);
+        } else {
+            self.overflow.fetch_add(1, Ordering::SeqCst);
+        }
+    }
 }
 
 struct Shared {
@@ -72,12 +148,50 @@ struct Shared {
     line_baud: AtomicU64,
     /// Statuses the pty would not take (the host not reading).
     overruns: AtomicU64,
+    /// The wire tap and its clock's reading at `start`.
+    tap: Option<(Arc<Tap>, u64)>,
 }
 
 impl Shared {
     fn now(&self) -> f64 {
         self.start.elapsed().as_secs_f64()
     }
+
+    /// Reports what `out` heard to the tap, if there is one.
+    fn tap_heard(&self, out: &Outbox) {
+        if let Some((tap, start_ns)) = &self.tap {
+            for &Heard {
+                end,
+                instruction,
+                goals,
+            } in out.heard()
+            {
+                tap.push(TapEvent::Request {
+                    end_ns: tap_ns(*start_ns, end),
+                    instruction,
+                    goals,
+                });
+            }
+        }
+    }
+
+    /// Reports bytes written to the host (due at `at` s) to the tap, if there is one.
+    fn tap_written(&self, at: f64, bytes: &[u8]) {
+        if let Some((tap, start_ns)) = &self.tap {
+            tap.push(TapEvent::Written {
+                due_ns: tap_ns(*start_ns, at),
+                written_ns: (tap.clock)(),
+                len: bytes.len(),
+                id: bytes.get(4).copied().unwrap_or(0),
+            });
+        }
+    }
+}
+
+/// A time of the simulator's (`t` s after start) on the tap's clock, which read `start_ns` at
+/// start.
+fn tap_ns(start_ns: u64, t: f64) -> u64 {
+    start_ns.saturating_add((t.max(0.0) * 1e9).round() as u64)
 }
 
 /// A running simulated hand.
@@ -101,15 +215,21 @@ impl Sim {
             })
             .collect();
         let hand = Hand::new(HandParams::default(), options.limits, options.object);
+        let start = Instant::now();
+        let tap = options.tap.map(|tap| {
+            let start_ns = (tap.clock)();
+            (tap, start_ns)
+        });
         let shared = Arc::new(Shared {
             bus: Mutex::new(Bus::new(servos, hand, options.bus, options.seed)),
-            start: Instant::now(),
+            start,
             stop: AtomicBool::new(false),
             cable: Cable::new(),
             noise: AtomicUsize::new(0),
             powered_off: AtomicBool::new(false),
             line_baud: AtomicU64::new(0),
             overruns: AtomicU64::new(0),
+            tap,
         });
         let first = pty::open(&options.link, PTY_READ_TIMEOUT)?;
         let thread = {
@@ -255,6 +375,7 @@ fn serve_line(shared: &Shared, link: &std::path::Path, first: pty::Pair) {
                     }
                     bus.receive(&buf[..n], baud, now, &mut out);
                 }
+                shared.tap_heard(&out);
                 for (at, bytes) in out.parts() {
                     let due = Duration::try_from_secs_f64(at.max(0.0))
                         .ok()
@@ -264,6 +385,8 @@ fn serve_line(shared: &Shared, link: &std::path::Path, first: pty::Pair) {
                     }
                     if master.write_all(bytes).is_err() {
                         shared.overruns.fetch_add(1, Ordering::SeqCst);
+                    } else {
+                        shared.tap_written(at, bytes);
                     }
                 }
             }
