@@ -1,8 +1,8 @@
 //! One admission rule for every hand (ARCHITECTURE.md, "Command admission"): the same bad hand
-//! commands go to each hand node running against its simulator, and every hand does what the
-//! table says. A command for another hand or none (`UNKNOWN`), in the wrong units, of an
-//! unknown mode or one the hand lacks, of another joint count, or with a NaN, +inf or -inf
-//! target is refused: the hand holds (`hand/state` says so, the joints stay) and the refusal is
+//! commands go to each hand node (Revo2, Shadow, Allegro, LEAP) running against its simulator,
+//! and every hand does what the table says. A command for another hand or none (`UNKNOWN`), in
+//! the wrong units, of an unknown mode or one the hand lacks, of another joint count, or with a
+//! NaN, +inf or -inf target is refused: the hand holds (`hand/state` says so, the joints stay) and the refusal is
 //! counted in health (`errors`). A position target out of the profile's limits, in every
 //! position mode the hand has, is clamped: followed (no hold) and counted (`clamps`).
 #![allow(clippy::unwrap_used)]
@@ -79,6 +79,21 @@ impl Hand {
                     format!(
                         "link = \"slcan:{slcan}\"\nprotocol = \"v4\"\nhealth_period_ms = 100\n"
                     ),
+                    &[control_mode::POSITION],
+                    Some(control_mode::POSITION_TIME),
+                )
+            }
+            "leap" => {
+                let link = rig.path("leap-link").display().to_string();
+                let control = rig.path("leap.ctl").display().to_string();
+                rig.start_sim(
+                    "sim-leap",
+                    bin("teleop-sim-leap"),
+                    &["--link", &link, "--control", &control],
+                    "leap: link",
+                );
+                (
+                    format!("port = \"{link}\"\nhealth_period_ms = 100\n"),
                     &[control_mode::POSITION],
                     Some(control_mode::POSITION_TIME),
                 )
@@ -291,4 +306,9 @@ fn the_shadow_hand_follows_the_one_admission_rule() {
 #[test]
 fn the_allegro_hand_follows_the_one_admission_rule() {
     check("allegro");
+}
+
+#[test]
+fn the_leap_hand_follows_the_one_admission_rule() {
+    check("leap");
 }

@@ -2,7 +2,7 @@
 //! launch file's session comes up (every stage flowing, the hand node's state naming its hand,
 //! joint count and link), the scripted operator's grasp closes the hand on the simulated ball,
 //! the hand's own measure of it rises (the Revo2's tactile force, the Allegro's effort, the
-//! Shadow Hand's PST pressure), the glove's finger on the ball feels force from it, the session
+//! Shadow Hand's PST pressure, the LEAP Hand's servo current), the glove's finger on the ball feels force from it, the session
 //! stops cleanly with its summary, the recording holds it all, and `teleop reprocess`
 //! reproduces the recorded hand commands. Every failure names the hand.
 #![allow(clippy::unwrap_used)]
@@ -158,6 +158,50 @@ impl Grasp for ShadowGrasp {
     }
 }
 
+/// The LEAP Hand's middle finger (flexion servos 5, 6, 7 in the profile's and the motor-ID
+/// order) is stopped by the ball short of its target while the servos' current-based position
+/// loop pushes: the finger's closure (the three joints' sum) short of the command's, and the
+/// largest present current among them (mA).
+#[derive(Default)]
+struct LeapGrasp {
+    max_current: f32,
+    max_gap: f32,
+}
+
+/// The LEAP Hand's middle-finger flexion servos.
+const LEAP_MIDDLE: [usize; 3] = [5, 6, 7];
+
+impl Grasp for LeapGrasp {
+    fn observe(&mut self, w: &Watcher) {
+        let mut target = f32::NAN;
+        w.cmd
+            .drain(|c| target = LEAP_MIDDLE.iter().map(|&j| c.joints[j].target).sum());
+        w.state.drain(|s| {
+            for j in LEAP_MIDDLE {
+                self.max_current = self.max_current.max(s.joints[j].current_ma.abs());
+            }
+            let closure: f32 = LEAP_MIDDLE.iter().map(|&j| s.joints[j].position).sum();
+            if target.is_finite() {
+                self.max_gap = self.max_gap.max(target - closure);
+            }
+        });
+    }
+    fn shown(&self) -> bool {
+        self.max_current > 200.0 && self.max_gap > 0.15
+    }
+    fn check(&self, hand: &str, sandbox: &Sandbox, session: &Session) {
+        let status = sandbox.control("teleop-sim-leap.ctl", "stats");
+        assert!(
+            self.shown(),
+            "{hand}: the ball stops the middle finger short of its target ({} rad) and its \
+             servos push ({} mA); sim: {status}\n{}",
+            self.max_gap,
+            self.max_current,
+            session.log()
+        );
+    }
+}
+
 const REVO2: Hand = Hand {
     name: "Revo2",
     launch: "launch.toml",
@@ -209,6 +253,23 @@ const SHADOW: Hand = Hand {
     grasp: || Box::<ShadowGrasp>::default(),
 };
 
+const LEAP: Hand = Hand {
+    name: "LEAP",
+    launch: "launch/leap.toml",
+    config: "config/leap",
+    model: device_model::LEAP,
+    joints: 16,
+    link: link_kind::SERIAL,
+    source: contact_source::CURRENT,
+    on_the_ball: None,
+    numb: Some(0),
+    tactile: false,
+    replay: false,
+    watch_for: Duration::from_secs(8),
+    early: true,
+    grasp: || Box::<LeapGrasp>::default(),
+};
+
 #[test]
 fn the_revo2_session_closes_the_loop_and_reprocesses() {
     session(&REVO2);
@@ -224,8 +285,13 @@ fn the_shadow_session_closes_the_loop_and_reprocesses() {
     session(&SHADOW);
 }
 
+#[test]
+fn the_leap_session_closes_the_loop_and_reprocesses() {
+    session(&LEAP);
+}
+
 /// The sessions run one at a time, as they did when each hand's was a test binary of its own:
-/// three hands' sessions at once on a small machine would test the machine.
+/// several hands' sessions at once on a small machine would test the machine.
 static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn session(hand: &Hand) {
