@@ -133,7 +133,8 @@ pub mod link_kind {
     pub const ETHERCAT: u8 = 1;
     /// CAN (Allegro Hand).
     pub const CAN: u8 = 2;
-    /// A serial line (the glove: USB serial, Bluetooth SPP or the simulator's pseudo-terminal).
+    /// A serial line (the glove: USB serial, Bluetooth SPP or the simulator's pseudo-terminal;
+    /// the LEAP Hand's Dynamixel bus through a USB adapter such as the U2D2).
     pub const SERIAL: u8 = 3;
 }
 
