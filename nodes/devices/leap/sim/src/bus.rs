@@ -96,23 +96,37 @@ pub struct Faults {
 }
 
 /// Requests by instruction, and what became of the bytes and statuses.
-#[allow(missing_docs)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Counters {
+    /// Ping requests heard.
     pub ping: u64,
+    /// Read requests heard.
     pub read: u64,
+    /// Write requests heard.
     pub write: u64,
+    /// Reg Write requests heard.
     pub reg_write: u64,
+    /// Action requests heard.
     pub action: u64,
+    /// Factory Reset requests heard.
     pub factory_reset: u64,
+    /// Reboot requests heard.
     pub reboot: u64,
+    /// Clear requests heard.
     pub clear: u64,
+    /// Control Table Backup requests heard.
     pub backup: u64,
+    /// Sync Read requests heard.
     pub sync_read: u64,
+    /// Fast Sync Read requests heard.
     pub fast_sync_read: u64,
+    /// Sync Write requests heard.
     pub sync_write: u64,
+    /// Bulk Read requests heard.
     pub bulk_read: u64,
+    /// Bulk Write requests heard.
     pub bulk_write: u64,
+    /// Requests not simulated (Fast Bulk Read, an unknown instruction): unanswered.
     pub unsupported: u64,
     /// Packets with a good CRC that are no request (bad parameters, a status heard).
     pub malformed: u64,
