@@ -55,8 +55,9 @@ struct Args {
     #[arg(long, default_value_t = 500)]
     return_delay_us: u32,
     /// What the servos after a silent one in a Fast Sync Read chain do (not documented):
-    /// `omit` its block (the reply is shorter) or `truncate` the reply at it.
-    #[arg(long, default_value = "omit")]
+    /// `truncate` the reply at it (the default: the first servo has announced the whole
+    /// length before the others answer) or `omit` its block (the reply is shorter).
+    #[arg(long, default_value = "truncate")]
     fast_sync_missing: Missing,
     /// The servos: `xc330-m288` (the LEAP Hand's) or `xl330-m077` (the Lite hand's).
     #[arg(long, default_value = "xc330-m288")]

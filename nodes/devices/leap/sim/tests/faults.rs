@@ -124,8 +124,9 @@ fn a_silent_servo_is_left_out_of_sync_read_and_of_the_fast_sync_chain() {
 }
 
 #[test]
-fn with_truncate_the_fast_sync_reply_ends_at_the_silent_servo() {
-    let sim = Sim::start(&["--fast-sync-missing", "truncate"]);
+fn by_default_the_fast_sync_reply_ends_at_the_silent_servo() {
+    // `--fast-sync-missing truncate`, the default.
+    let sim = Sim::start(&[]);
     let mut host = sim.host(BAUD);
     let full = host.fast_sync_read_raw(xc330::STATE_ADDR, xc330::STATE_LEN, &ALL);
     assert_eq!(full.len(), 8 + 16 * 14);
