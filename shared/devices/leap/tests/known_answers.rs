@@ -224,3 +224,50 @@ fn fast_sync_reply_example() {
         ]
     );
 }
+
+#[test]
+fn the_good_blocks_of_a_fast_sync_reply_cut_short_or_damaged() {
+    let ids = |raw: &[u8]| -> Vec<u8> {
+        FastSyncReply::prefix(raw, 4)
+            .blocks()
+            .map(|b| b.id)
+            .collect()
+    };
+    // Whole: every block; cut anywhere: the blocks whose CRC arrived.
+    assert_eq!(ids(FAST_SYNC_REPLY), [3, 7, 4]);
+    for (cut, want) in [
+        (0, &[][..]),
+        (8, &[]),
+        (15, &[]),
+        (16, &[3]),
+        (23, &[3]),
+        (24, &[3, 7]),
+        (31, &[3, 7]),
+    ] {
+        assert_eq!(ids(&FAST_SYNC_REPLY[..cut]), want, "cut at {cut}");
+    }
+    // A damaged byte: the blocks before it (block 0 ends at byte 15, block 1 at 23).
+    for (at, want) in [
+        (4, &[][..]),
+        (9, &[]),
+        (16, &[3]),
+        (20, &[3]),
+        (24, &[3, 7]),
+        (31, &[3, 7]),
+    ] {
+        let mut bad = FAST_SYNC_REPLY.to_vec();
+        bad[at] ^= 0x10;
+        assert_eq!(ids(&bad), want, "byte {at}");
+    }
+    // Bytes after the announced length are not another block.
+    let mut longer = FAST_SYNC_REPLY.to_vec();
+    longer.extend_from_slice(&FAST_SYNC_REPLY[8..16]);
+    assert_eq!(ids(&longer), [3, 7, 4]);
+    let block = FastSyncReply::prefix(&FAST_SYNC_REPLY[..20], 4)
+        .block(0)
+        .expect("block 0");
+    assert_eq!(
+        (block.error, block.data),
+        (ErrorByte::OK, &[0xA6, 0, 0, 0][..])
+    );
+}

@@ -234,6 +234,25 @@ proptest! {
         }
     }
 
+    /// Any bytes give a prefix of whole blocks within them; a whole reply cut anywhere gives
+    /// the blocks whose CRC arrived.
+    #[test]
+    fn fast_sync_prefixes_are_total_and_keep_the_blocks_that_arrived(
+        bytes in proptest::collection::vec(any::<u8>(), 0..300),
+        n in 1usize..17,
+        cut in any::<prop::sample::Index>(),
+    ) {
+        let reply = FastSyncReply::prefix(&bytes, 10);
+        prop_assert!(reply.len() * 14 <= bytes.len());
+        let data = [7u8; 10];
+        let blocks = (0..n as u8).map(|id| (id, 0u8, &data[..]));
+        let mut out = [0u8; MAX_PACKET];
+        let len = packet::fast_sync_status(blocks, &mut out).expect("fits");
+        let at = cut.index(len + 1);
+        let got = FastSyncReply::prefix(&out[..at], 10).len();
+        prop_assert_eq!(got, (at.saturating_sub(8) / 14).min(n));
+    }
+
     #[test]
     fn table_values_round_trip(index in any::<prop::sample::Index>(), value in any::<i32>()) {
         let item = index.get(ITEMS);

@@ -240,6 +240,52 @@ impl<'a> FastSyncReply<'a> {
         Ok(())
     }
 
+    /// The blocks at the start of `raw`, the bytes of a Fast Sync Read reply of `data_len`
+    /// bytes per device from its header on, that arrived whole with their running CRC right:
+    /// what is left of a reply cut short (a chain that ends at a silent device, not
+    /// documented) or damaged further on. Each block's CRC covers every byte from the header
+    /// through its data, so a block whose CRC checks vouches for everything before it; the
+    /// first block that is cut, or whose CRC does not check, ends the prefix (none: empty). Not
+    /// beyond the length the header announces. Total: any bytes give a (possibly empty) reply.
+    pub fn prefix(raw: &'a [u8], data_len: u16) -> Self {
+        let x = usize::from(data_len);
+        let stride = x + 4;
+        let start = PREFIX_LEN + 1;
+        let empty = FastSyncReply {
+            params: &[],
+            data_len: x,
+        };
+        let ours = raw.len() >= start
+            && raw[..HEADER.len()] == HEADER
+            && raw[4] == BROADCAST_ID
+            && raw[PREFIX_LEN] == instruction::STATUS;
+        if !ours {
+            return empty;
+        }
+        // The packet ends at PREFIX_LEN + LEN; its last block's CRC is the packet's.
+        let announced = PREFIX_LEN + usize::from(u16::from_le_bytes([raw[5], raw[6]]));
+        let raw = &raw[..raw.len().min(announced)];
+        let mut crc = 0;
+        let mut from = 0;
+        let mut good = 0;
+        loop {
+            let end = start + good * stride + 2 + x;
+            let Some(received) = raw.get(end..end + 2) else {
+                break;
+            };
+            crc = crc16(crc, &raw[from..end]);
+            if crc != u16::from_le_bytes([received[0], received[1]]) {
+                break;
+            }
+            from = end;
+            good += 1;
+        }
+        FastSyncReply {
+            params: &raw[start..start + good * stride],
+            data_len: x,
+        }
+    }
+
     /// The number of blocks (devices that answered).
     pub fn len(&self) -> usize {
         (self.params.len() + 2) / (self.data_len + 4)
