@@ -2,8 +2,15 @@
 //! `teleop-leap-protocol`. A [`Line`] moves bytes (the serial port, [`SerialLine`], or a test's
 //! script); the [`Bus`] sends a request and waits for its reply until the reply's timeout
 //! ([`crate::timing`]), and counts what else it finds on the line: bytes that are no packet,
-//! replies with a bad CRC, packets nobody asked for, bytes that came after their request gave up.
-//! Nothing is dropped uncounted.
+//! replies with a bad CRC, packets nobody asked for (or not the reply asked for: another
+//! length), bytes that came after their request gave up. Nothing is dropped uncounted.
+//!
+//! A packet that does not check (a bad CRC, or noise that looks like a header and claims a
+//! length) loses only its first byte: the scan goes on from the next one until the reply's
+//! deadline, so a good reply behind noise is still found. A Fast Sync Read reply cut short or
+//! damaged keeps the blocks at its start whose running CRC checks
+//! (`teleop_leap_protocol::packet::FastSyncReply::prefix`). A request's deadline counts from
+//! when the line is free of the Sync Write sent before it (which no status follows).
 //!
 //! Allocation-free: requests are encoded into, and replies scanned and unstuffed in, buffers the
 //! bus owns.
@@ -14,7 +21,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
-use teleop_leap_protocol::packet::{self, ErrorByte, FastSyncReply, Scan, Status};
+use teleop_leap_protocol::packet::{self, ErrorByte, FastSyncReply, Scan, Status, PREFIX_LEN};
 use teleop_leap_protocol::{wire, DecodeError, EncodeError};
 use teleop_runtime::serial_latency;
 
@@ -72,7 +79,8 @@ pub struct BusCounters {
     pub garbage_runs: u64,
     /// Bytes that came after their request had given up, dropped before the next request.
     pub late_bytes: u64,
-    /// Whole packets nobody waited for (another ID, or not a status packet).
+    /// Whole packets nobody waited for (another ID, not a status packet, or a status of
+    /// another length than the reply asked for: a late one to an earlier request).
     pub unexpected: u64,
     /// Replies not there (complete) in time.
     pub timeouts: u64,
@@ -129,6 +137,12 @@ pub struct Bus<L> {
     rx_len: usize,
     scratch: [u8; RX_CAP],
     counters: BusCounters,
+    /// When the bytes of the last request sent without a reply (a Sync Write, a broadcast
+    /// Write) have left the line.
+    line_free: Instant,
+    /// Bytes of a packet that did not check, still ahead in the scan (not counted again as
+    /// garbage when they are skipped).
+    suspect: usize,
 }
 
 impl<L: Line> Bus<L> {
@@ -142,6 +156,8 @@ impl<L: Line> Bus<L> {
             rx_len: 0,
             scratch: [0; RX_CAP],
             counters: BusCounters::default(),
+            line_free: Instant::now(),
+            suspect: 0,
         }
     }
 
@@ -177,7 +193,7 @@ impl<L: Line> Bus<L> {
     }
 
     /// Reads `len` bytes at `addr` of `id` (the reply's error byte is the caller's to judge;
-    /// with an error the data may be absent).
+    /// with an error number the data may be absent or of another length).
     pub fn read(&mut self, id: u8, addr: u16, len: u16) -> Result<Reply, BusError> {
         self.transact(id, usize::from(len), |out| packet::read(id, addr, len, out))
     }
@@ -200,14 +216,36 @@ impl<L: Line> Bus<L> {
         items: impl IntoIterator<Item = (u8, &'a [u8])>,
     ) -> Result<(), BusError> {
         let n = packet::sync_write(addr, len, items, &mut self.tx).map_err(BusError::Encode)?;
+        self.send_unanswered(n)
+    }
+
+    /// Writes `data` at `addr` of every servo at once (broadcast ID 0xFE: every servo that
+    /// hears it carries it out, none answers; ROBOTIS e-manual, Protocol 2.0, "Instruction").
+    pub fn broadcast_write(&mut self, addr: u16, data: &[u8]) -> Result<(), BusError> {
+        let n = packet::write(packet::BROADCAST_ID, addr, data, &mut self.tx)
+            .map_err(BusError::Encode)?;
+        self.send_unanswered(n)
+    }
+
+    /// Sends `tx[..n]`, which nothing answers: its bytes take their time on the wire before
+    /// the next request's.
+    fn send_unanswered(&mut self, n: usize) -> Result<(), BusError> {
+        let start = self.send_start();
         self.send(n)?;
-        // Nothing answers: the bytes take their time on the wire before the next request.
+        self.line_free = start + self.timing.wire(n);
         Ok(())
     }
 
+    /// When a request sent now starts on the wire: now, or when the line is free of the
+    /// unanswered request before it.
+    fn send_start(&self) -> Instant {
+        Instant::now().max(self.line_free)
+    }
+
     /// One Fast Sync Read of `len` bytes at `addr` from `ids`: the blocks found, in the order
-    /// of `ids`. The whole reply is one packet; a bad CRC (the packet's or a block's) loses
-    /// all of it (`Corrupt`).
+    /// of `ids`. `Ok` when the whole reply came; otherwise `Timeout` (nothing, or a reply cut
+    /// short) or `Corrupt` (a reply that does not check), with the blocks at its start whose
+    /// running CRC checks in `out`.
     pub fn fast_sync_read(
         &mut self,
         addr: u16,
@@ -217,48 +255,54 @@ impl<L: Line> Bus<L> {
     ) -> Result<(), BusError> {
         *out = FastRead::EMPTY;
         let n = packet::fast_sync_read(addr, len, ids, &mut self.tx).map_err(BusError::Encode)?;
-        let start = Instant::now();
+        let start = self.send_start();
         self.send(n)?;
         let expect = wire::fast_sync_reply_len(ids.len(), usize::from(len));
         let deadline = start + self.timing.reply(n, expect, ids.len());
+        let mut corrupt = None;
         loop {
-            let raw_len = self.next_packet(deadline)?;
+            let Some(raw_len) = self.next_packet(deadline)? else {
+                // What arrived of a reply cut short: its whole blocks.
+                let reply = FastSyncReply::prefix(&self.rx[..self.rx_len], len);
+                if reply.len() > count(out) {
+                    *out = FastRead::EMPTY;
+                    take_blocks(&reply, ids, out);
+                    self.consume(PREFIX_LEN + 1 + reply.len() * (usize::from(len) + 4));
+                }
+                self.counters.unexpected += u64::from(out.foreign_blocks);
+                return Err(self.gave_up(corrupt));
+            };
             let parsed = packet::parse(&self.rx[..raw_len], &mut self.scratch);
-            let reply = match parsed.and_then(|p| FastSyncReply::new(&p, len)) {
-                Ok(reply) => reply,
+            match parsed.and_then(|p| FastSyncReply::new(&p, len)) {
+                Ok(reply) => {
+                    *out = FastRead::EMPTY;
+                    take_blocks(&reply, ids, out);
+                    self.counters.unexpected += u64::from(out.foreign_blocks);
+                    self.consume(raw_len);
+                    return Ok(());
+                }
                 Err(DecodeError::NotFastSync(_)) | Err(DecodeError::NotStatus(_)) => {
                     // A whole packet, but another one (a late single reply, an echo).
                     self.counters.unexpected += 1;
                     self.consume(raw_len);
-                    continue;
                 }
                 Err(e) => {
-                    // A bad CRC (the packet's, or one block's) loses the whole reply.
-                    self.count_decode(e);
-                    self.consume(raw_len);
-                    return Err(BusError::Corrupt(e));
+                    // Its good blocks are kept; the scan goes on from its next byte.
+                    let reply = FastSyncReply::prefix(&self.rx[..raw_len], len);
+                    if reply.len() > count(out) {
+                        *out = FastRead::EMPTY;
+                        take_blocks(&reply, ids, out);
+                    }
+                    corrupt = Some(e);
+                    self.reject(raw_len, e);
                 }
-            };
-            for block in reply.blocks() {
-                let Some(slot) = ids.iter().position(|id| *id == block.id) else {
-                    out.foreign_blocks += 1;
-                    continue;
-                };
-                let mut data = [0u8; MAX_BLOCK];
-                let k = block.data.len().min(MAX_BLOCK);
-                data[..k].copy_from_slice(&block.data[..k]);
-                out.blocks[slot] = Some(Block {
-                    error: block.error,
-                    data,
-                });
             }
-            self.counters.unexpected += u64::from(out.foreign_blocks);
-            self.consume(raw_len);
-            return Ok(());
         }
     }
 
-    /// Sends the request `encode` writes and waits for `id`'s status with `params` bytes.
+    /// Sends the request `encode` writes and waits for `id`'s status with `params` bytes of
+    /// data (or any, with an error number: a refusal may carry none). A status of another
+    /// length is not this request's reply (a late one to an earlier request): counted, skipped.
     fn transact(
         &mut self,
         id: u8,
@@ -266,11 +310,14 @@ impl<L: Line> Bus<L> {
         encode: impl FnOnce(&mut [u8]) -> Result<usize, EncodeError>,
     ) -> Result<Reply, BusError> {
         let n = encode(&mut self.tx).map_err(BusError::Encode)?;
-        let start = Instant::now();
+        let start = self.send_start();
         self.send(n)?;
         let deadline = start + self.timing.reply(n, wire::status_len(params), 1);
+        let mut corrupt = None;
         loop {
-            let raw_len = self.next_packet(deadline)?;
+            let Some(raw_len) = self.next_packet(deadline)? else {
+                return Err(self.gave_up(corrupt));
+            };
             let decoded = packet::parse(&self.rx[..raw_len], &mut self.scratch)
                 .and_then(|p| Status::from_packet(&p).map(|s| (s.id, s.error, s.params)));
             let (from, error, data) = match decoded {
@@ -282,12 +329,12 @@ impl<L: Line> Bus<L> {
                     continue;
                 }
                 Err(e) => {
-                    self.count_decode(e);
-                    self.consume(raw_len);
-                    return Err(BusError::Corrupt(e));
+                    corrupt = Some(e);
+                    self.reject(raw_len, e);
+                    continue;
                 }
             };
-            if from != id {
+            if from != id || (data.len() != params && error.number().is_none()) {
                 self.counters.unexpected += 1;
                 self.consume(raw_len);
                 continue;
@@ -304,6 +351,27 @@ impl<L: Line> Bus<L> {
         }
     }
 
+    /// A packet of `raw_len` bytes at the front did not decode: counted, and only its first
+    /// byte dropped (it may be noise that looks like a header, with the reply inside what it
+    /// claims); the rest is scanned again without being counted as garbage.
+    fn reject(&mut self, raw_len: usize, e: DecodeError) {
+        self.count_decode(e);
+        self.consume(1);
+        self.suspect = raw_len - 1;
+    }
+
+    /// The deadline passed without a reply: `Corrupt` when one that did not check came
+    /// (counted then), else `Timeout` (counted).
+    fn gave_up(&mut self, corrupt: Option<DecodeError>) -> BusError {
+        match corrupt {
+            Some(e) => BusError::Corrupt(e),
+            None => {
+                self.counters.timeouts += 1;
+                BusError::Timeout
+            }
+        }
+    }
+
     /// Counts a reply that did not decode.
     fn count_decode(&mut self, e: DecodeError) {
         match e {
@@ -316,6 +384,7 @@ impl<L: Line> Bus<L> {
     fn send(&mut self, n: usize) -> Result<(), BusError> {
         self.counters.late_bytes += self.rx_len as u64;
         self.rx_len = 0;
+        self.suspect = 0;
         loop {
             let got = self
                 .line
@@ -332,15 +401,23 @@ impl<L: Line> Bus<L> {
             .map_err(|e| BusError::Io(e.kind()))
     }
 
-    /// Receives until a whole packet starts the buffer (bytes before it counted as garbage);
-    /// its length. `Timeout` at `deadline`.
-    fn next_packet(&mut self, deadline: Instant) -> Result<usize, BusError> {
+    /// Receives until a whole packet starts the buffer (bytes before it counted as garbage,
+    /// unless they are what is left of a packet that did not check); its length. `None` at
+    /// `deadline` (the buffer then starts with what arrived of a packet, if anything).
+    fn next_packet(&mut self, deadline: Instant) -> Result<Option<usize>, BusError> {
         loop {
             match packet::scan(&self.rx[..self.rx_len]) {
-                Scan::Packet(len) => return Ok(len),
+                Scan::Packet(len) => {
+                    self.suspect = 0;
+                    return Ok(Some(len));
+                }
                 Scan::Skip(n) if n > 0 => {
-                    self.counters.garbage_bytes += n as u64;
-                    self.counters.garbage_runs += 1;
+                    let garbage = n - n.min(self.suspect);
+                    self.suspect -= n.min(self.suspect);
+                    if garbage > 0 {
+                        self.counters.garbage_bytes += garbage as u64;
+                        self.counters.garbage_runs += 1;
+                    }
                     self.consume(n);
                     continue;
                 }
@@ -353,8 +430,7 @@ impl<L: Line> Bus<L> {
             }
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                self.counters.timeouts += 1;
-                return Err(BusError::Timeout);
+                return Ok(None);
             }
             let got = self
                 .line
@@ -369,6 +445,29 @@ impl<L: Line> Bus<L> {
         let n = n.min(self.rx_len);
         self.rx.copy_within(n..self.rx_len, 0);
         self.rx_len -= n;
+    }
+}
+
+/// How many blocks `read` holds.
+fn count(read: &FastRead) -> usize {
+    read.blocks.iter().filter(|b| b.is_some()).count()
+}
+
+/// The blocks of `reply` into `out`, in the order of the `ids` asked (the others counted in
+/// `foreign_blocks`).
+fn take_blocks(reply: &FastSyncReply<'_>, ids: &[u8], out: &mut FastRead) {
+    for block in reply.blocks() {
+        let Some(slot) = ids.iter().position(|id| *id == block.id) else {
+            out.foreign_blocks += 1;
+            continue;
+        };
+        let mut data = [0u8; MAX_BLOCK];
+        let k = block.data.len().min(MAX_BLOCK);
+        data[..k].copy_from_slice(&block.data[..k]);
+        out.blocks[slot] = Some(Block {
+            error: block.error,
+            data,
+        });
     }
 }
 
@@ -437,12 +536,14 @@ mod tests {
 
     use super::*;
 
-    /// A line that answers each request with the next scripted bytes (and records requests).
+    /// A line that answers each request with the next scripted bytes (and records requests,
+    /// and the deadline of every wait).
     #[derive(Default)]
     struct Script {
         replies: VecDeque<Vec<u8>>,
         pending: Vec<u8>,
         sent: Vec<Vec<u8>>,
+        waits: Vec<Instant>,
     }
 
     impl Line for Script {
@@ -453,7 +554,8 @@ mod tests {
             }
             Ok(())
         }
-        fn recv(&mut self, buf: &mut [u8], _: Duration) -> std::io::Result<usize> {
+        fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+            self.waits.push(Instant::now() + timeout);
             let n = self.pending.len().min(buf.len());
             buf[..n].copy_from_slice(&self.pending[..n]);
             self.pending.drain(..n);
@@ -514,6 +616,15 @@ mod tests {
             let e = bus.fast_sync_read(126, 10, &ids, &mut read).unwrap_err();
             assert!(matches!(e, BusError::Corrupt(_)), "byte {at}: {e:?}");
             assert_eq!(bus.counters().crc_errors, 1, "byte {at}");
+            assert_eq!(bus.counters().garbage_runs, 0, "byte {at}: counted once");
+            // The blocks before the damaged one are kept (each 14 bytes from byte 8 on).
+            let good = (at - 8) / 14;
+            let kept: Vec<bool> = read.blocks.iter().map(Option::is_some).collect();
+            assert_eq!(
+                kept,
+                (0..16).map(|k| k < good).collect::<Vec<_>>(),
+                "byte {at}"
+            );
         }
         // Servo 11 silent: its block is missing from a good reply.
         let without: Vec<u8> = ids.iter().copied().filter(|i| *i != 11).collect();
@@ -522,6 +633,86 @@ mod tests {
         bus.fast_sync_read(126, 10, &ids, &mut read).unwrap();
         assert!(read.blocks[11].is_none());
         assert_eq!(read.blocks.iter().filter(|b| b.is_some()).count(), 15);
+    }
+
+    #[test]
+    fn a_reply_cut_short_keeps_its_whole_blocks() {
+        let ids: Vec<u8> = (0..16).collect();
+        // A chain that ends at servo 5: its header announced all 16.
+        let cut = reply(&ids, 300)[..8 + 5 * 14 + 6].to_vec();
+        let mut bus = bus(vec![cut]);
+        let mut read = FastRead::EMPTY;
+        let e = bus.fast_sync_read(126, 10, &ids, &mut read).unwrap_err();
+        assert_eq!(e, BusError::Timeout);
+        let kept: Vec<bool> = read.blocks.iter().map(Option::is_some).collect();
+        assert_eq!(kept, (0..16).map(|k| k < 5).collect::<Vec<_>>());
+        let state = State::decode(&read.blocks[4].unwrap().data[..10]).unwrap();
+        assert_eq!(state.position, 300);
+        assert_eq!(bus.counters().timeouts, 1);
+        // The part of block 5 that came is late when the next request goes out.
+        let _ = bus.ping(1);
+        assert_eq!(bus.counters().late_bytes, 6);
+    }
+
+    #[test]
+    fn noise_that_looks_like_a_header_does_not_hide_the_reply_behind_it() {
+        // A header claiming 17 bytes in all, then the real status (14 bytes): the claim takes
+        // in part of the reply, whose CRC does not check; dropping one byte and scanning on
+        // finds the reply.
+        let mut status = [0u8; 32];
+        let n = packet::status(3, 0, &[0xD8, 0x04, 52], &mut status).unwrap();
+        let mut line = vec![0xFF, 0xFF, 0xFD, 0x00, 0x03, 0x0A, 0x00];
+        line.extend_from_slice(&status[..n]);
+        let mut bus = bus(vec![line]);
+        assert_eq!(bus.ping(3), Ok((1240, 52)));
+        assert_eq!(bus.counters().crc_errors, 1);
+        assert_eq!(
+            (bus.counters().garbage_runs, bus.counters().timeouts),
+            (0, 0)
+        );
+    }
+
+    #[test]
+    fn a_late_status_of_another_length_is_not_the_reply() {
+        // The empty status of an earlier Write to servo 3 comes before the Read's reply.
+        let mut late = [0u8; 32];
+        let n = packet::status(3, 0, &[], &mut late).unwrap();
+        let mut line = late[..n].to_vec();
+        let mut data = [0u8; 32];
+        let m = packet::status(3, 0, &1234i32.to_le_bytes(), &mut data).unwrap();
+        line.extend_from_slice(&data[..m]);
+        let mut bus = bus(vec![line]);
+        let r = bus.read(3, 132, 4).unwrap();
+        assert_eq!(r.data(), 1234i32.to_le_bytes());
+        assert_eq!(bus.counters().unexpected, 1);
+        // A refusal may carry no data: it is the reply.
+        let mut refused = [0u8; 32];
+        let n = packet::status(3, 0x07, &[], &mut refused).unwrap();
+        let mut bus = self::bus(vec![refused[..n].to_vec()]);
+        let r = bus.read(3, 300, 4).unwrap();
+        assert!(r.error.number().is_some() && r.data().is_empty());
+    }
+
+    #[test]
+    fn a_fast_sync_read_waits_for_the_sync_write_before_it_to_leave_the_line() {
+        let ids: Vec<u8> = (0..16).collect();
+        let mut bus = bus(vec![Vec::new(), reply(&ids, 2048)]);
+        let goals = [[0u8; 4]; 16];
+        let t0 = Instant::now();
+        bus.sync_write(116, 4, ids.iter().zip(&goals).map(|(id, g)| (*id, &g[..])))
+            .unwrap();
+        let mut read = FastRead::EMPTY;
+        bus.fast_sync_read(126, 10, &ids, &mut read).unwrap();
+        let timing = Timing::new(4_000_000, 0, Duration::from_millis(1));
+        let (write, request, answer) = (94, 30, 232);
+        let earliest = t0 + timing.wire(write) + timing.reply(request, answer, 16);
+        // The longest wait is the reply's (sending drains the line without waiting).
+        let waited = bus.line.waits.iter().copied().max().unwrap();
+        assert!(
+            waited >= earliest,
+            "the reply's deadline is {:?} short",
+            earliest - waited
+        );
     }
 
     proptest! {
