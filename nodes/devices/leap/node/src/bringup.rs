@@ -2,16 +2,21 @@
 //! shipped API's steps (docs/devices/leap.md, "Bring-up") in an order safe whatever state an
 //! earlier session left the servos in, step by step over all servos, each checked by its status:
 //! torque off; the EEPROM items, which a servo refuses under torque (docs/devices/leap.md,
-//! "Status packets and the error byte"): Operating Mode 5 (current-based position) and Return
-//! Delay Time, written only where they differ; the position gains; Goal Current; Goal Position =
-//! Present Position (no jump); torque on last. A refusal names the servo and the item.
+//! "Status packets and the error byte"): Operating Mode 5 (current-based position), Drive Mode
+//! 0 (bit 0 would reverse the direction), Return Delay Time and Homing Offset 0, written only
+//! where they differ; the position gains; Profile Acceleration and Velocity 0 (no profile: the
+//! node ramps), where they differ; Goal Current; Goal Position = Present Position (no jump; the
+//! state read there is where the hand is); torque on last, and only when no servo refused a
+//! step (a refusal names the servo and the item). A setting another tool left that differs from
+//! what the node relies on is logged when it is written back.
 //!
-//! The same steps bring one servo back (a silent one that answers again, one rebooted after a
-//! hardware error). Every exchange goes through [`Bus`].
+//! The same steps bring one servo back (one rebooted after a hardware error); a servo back from
+//! silence that still has its torque on in mode 5 only has its goal set where it is (no limp
+//! moment). Every exchange goes through [`Bus`].
 
 use teleop_hand_node::ConnectError;
 use teleop_leap_protocol::packet::ErrorByte;
-use teleop_leap_protocol::xc330;
+use teleop_leap_protocol::xc330::{self, State};
 
 use crate::bus::{Bus, BusError, Line, Reply};
 use crate::config::{Settings, SERVOS};
@@ -142,37 +147,52 @@ enum Step {
     TorqueOff,
     Eeprom,
     Gains,
+    Profiles,
     GoalCurrent,
     GoalAtPresent,
     TorqueOn,
 }
 
-const STEPS: [Step; 6] = [
+const STEPS: [Step; 7] = [
     Step::TorqueOff,
     Step::Eeprom,
     Step::Gains,
+    Step::Profiles,
     Step::GoalCurrent,
     Step::GoalAtPresent,
     Step::TorqueOn,
 ];
 
+/// A servo's failed step: the item, and why.
+pub type Failure = (&'static str, StepError);
+
 /// Brings up the servos of `joints` step by step (each step on every servo before the next);
-/// their Present Positions (the goals they hold) go into `goals`. A servo that fails is left
-/// out of the later steps and returned with why, in joint order; the others come up.
+/// their state at the goal step (Present Position: the goal they hold) goes into `states`. A
+/// servo that fails is left out of the later steps and returned with why, in joint order; the
+/// others come up, but none has its torque turned on when one refused a step (the node does not
+/// run with a setting refused).
 pub fn bring_up<L: Line>(
     bus: &mut Bus<L>,
     settings: &Settings,
     joints: Mask,
-    goals: &mut [i32; SERVOS],
-    failed: &mut [Option<(&'static str, StepError)>; SERVOS],
+    states: &mut [Option<State>; SERVOS],
+    failed: &mut [Option<Failure>; SERVOS],
 ) {
     let mut going = joints;
     for step in STEPS {
+        if step == Step::TorqueOn
+            && failed
+                .iter()
+                .flatten()
+                .any(|(_, e)| matches!(e, StepError::Refused(_)))
+        {
+            return;
+        }
         for j in 0..SERVOS {
             if going & bit(j) == 0 {
                 continue;
             }
-            if let Err(e) = run_step(bus, settings, j, step, goals) {
+            if let Err(e) = run_step(bus, settings, j, step, states) {
                 going &= !bit(j);
                 failed[j] = Some(e);
                 if matches!(e.1, StepError::Io(_)) {
@@ -189,24 +209,54 @@ pub fn bring_up<L: Line>(
     }
 }
 
+/// Brings joint `j`'s servo back into the loop (it answers again, or its hardware error was
+/// cleared): with its torque still on in mode 5 (it held through a lost reply or a cable
+/// glitch) only its goal is set where it is; otherwise every step of [`bring_up`]. Its state
+/// at the goal step (where it holds).
+pub fn bring_up_again<L: Line>(
+    bus: &mut Bus<L>,
+    settings: &Settings,
+    j: usize,
+) -> Result<State, Failure> {
+    let id = settings.ids[j];
+    let mut states = [None; SERVOS];
+    let what = "Operating Mode (read)";
+    let mode = exchange(|| bus.read(id, xc330::OPERATING_MODE, 1), what)?;
+    let what = "Torque Enable (read)";
+    let torque = exchange(|| bus.read(id, xc330::TORQUE_ENABLE, 1), what)?;
+    if mode.data() == [CURRENT_BASED_POSITION] && torque.data() == [1] {
+        run_step(bus, settings, j, Step::GoalAtPresent, &mut states)?;
+    } else {
+        let mut failed = [None; SERVOS];
+        bring_up(bus, settings, bit(j), &mut states, &mut failed);
+        if let Some(f) = failed[j] {
+            return Err(f);
+        }
+    }
+    states[j].ok_or((
+        "Present Position (read)",
+        StepError::NoReply(BusError::Timeout),
+    ))
+}
+
 /// One step on joint `j`'s servo; on failure the item and why.
 fn run_step<L: Line>(
     bus: &mut Bus<L>,
     settings: &Settings,
     j: usize,
     step: Step,
-    goals: &mut [i32; SERVOS],
-) -> Result<(), (&'static str, StepError)> {
+    states: &mut [Option<State>; SERVOS],
+) -> Result<(), Failure> {
     let id = settings.ids[j];
     match step {
         Step::TorqueOff => write(bus, id, xc330::TORQUE_ENABLE, &[0], "Torque Enable (off)"),
         Step::Eeprom => {
-            // Return Delay Time (9), Drive Mode (10), Operating Mode (11): written only where
-            // they differ, sparing the EEPROM.
-            let what = "Return Delay Time and Operating Mode (read)";
+            // Return Delay Time (9), Drive Mode (10), Operating Mode (11), Homing Offset (20):
+            // written only where they differ, sparing the EEPROM.
+            let what = "Return Delay Time, Drive Mode and Operating Mode (read)";
             let reply = exchange(|| bus.read(id, xc330::RETURN_DELAY_TIME, 3), what)?;
-            let (delay, mode) = match reply.data() {
-                [delay, _, mode] => (*delay, *mode),
+            let (delay, drive, mode) = match reply.data() {
+                [delay, drive, mode] => (*delay, *drive, *mode),
                 _ => return Err((what, StepError::NoReply(BusError::Timeout))),
             };
             if mode != CURRENT_BASED_POSITION {
@@ -218,6 +268,12 @@ fn run_step<L: Line>(
                     "Operating Mode (5, current-based position)",
                 )?;
             }
+            if drive != 0 {
+                // Bit 0 reverses the direction, bit 2 makes the profile time-based (ROBOTIS
+                // e-manual, XC330 control table, Drive Mode).
+                tracing::warn!("servo id {id}: Drive Mode was {drive} (another tool's): set to 0");
+                write(bus, id, xc330::DRIVE_MODE, &[0], "Drive Mode (0)")?;
+            }
             if delay != settings.return_delay {
                 write(
                     bus,
@@ -225,6 +281,43 @@ fn run_step<L: Line>(
                     xc330::RETURN_DELAY_TIME,
                     &[settings.return_delay],
                     "Return Delay Time",
+                )?;
+            }
+            let what = "Homing Offset (read)";
+            let reply = exchange(|| bus.read(id, xc330::HOMING_OFFSET, 4), what)?;
+            let offset = match reply.data() {
+                [a, b, c, d] => i32::from_le_bytes([*a, *b, *c, *d]),
+                _ => return Err((what, StepError::NoReply(BusError::Timeout))),
+            };
+            if offset != 0 {
+                // Present Position = actual + offset: the profile's zero would move.
+                tracing::warn!(
+                    "servo id {id}: Homing Offset was {offset} (another tool's): set to 0"
+                );
+                write(bus, id, xc330::HOMING_OFFSET, &[0; 4], "Homing Offset (0)")?;
+            }
+            Ok(())
+        }
+        Step::Profiles => {
+            // Profile Acceleration (108) and Velocity (112): 0, no profile between the goals
+            // the node writes (it ramps them itself).
+            let what = "Profile Acceleration and Velocity (read)";
+            let reply = exchange(|| bus.read(id, xc330::PROFILE_ACCELERATION, 8), what)?;
+            if reply.data().len() != 8 {
+                return Err((what, StepError::NoReply(BusError::Timeout)));
+            }
+            if reply.data() != [0; 8] {
+                tracing::warn!(
+                    "servo id {id}: Profile Acceleration/Velocity were {:?} (another tool's): \
+                     set to 0",
+                    reply.data()
+                );
+                write(
+                    bus,
+                    id,
+                    xc330::PROFILE_ACCELERATION,
+                    &[0; 8],
+                    "Profile Acceleration and Velocity (0)",
                 )?;
             }
             Ok(())
@@ -252,20 +345,19 @@ fn run_step<L: Line>(
             "Goal Current",
         ),
         Step::GoalAtPresent => {
-            let what = "Present Position (read)";
-            let reply = exchange(|| bus.read(id, xc330::PRESENT_POSITION, 4), what)?;
-            let present = match reply.data() {
-                [a, b, c, d] => i32::from_le_bytes([*a, *b, *c, *d]),
-                _ => return Err((what, StepError::NoReply(BusError::Timeout))),
-            };
+            // Current, velocity and position: where the hand is, published before any command.
+            let what = "Present Current, Velocity and Position (read)";
+            let reply = exchange(|| bus.read(id, xc330::STATE_ADDR, xc330::STATE_LEN), what)?;
+            let state = State::decode(reply.data())
+                .map_err(|_| (what, StepError::NoReply(BusError::Timeout)))?;
             write(
                 bus,
                 id,
                 xc330::GOAL_POSITION,
-                &present.to_le_bytes(),
+                &state.position.to_le_bytes(),
                 "Goal Position",
             )?;
-            goals[j] = present;
+            states[j] = Some(state);
             Ok(())
         }
         Step::TorqueOn => write(bus, id, xc330::TORQUE_ENABLE, &[1], "Torque Enable (on)"),
@@ -279,7 +371,7 @@ fn write<L: Line>(
     addr: u16,
     data: &[u8],
     what: &'static str,
-) -> Result<(), (&'static str, StepError)> {
+) -> Result<(), Failure> {
     exchange(|| bus.write(id, addr, data), what).map(|_| ())
 }
 
@@ -287,7 +379,7 @@ fn write<L: Line>(
 fn exchange(
     f: impl FnMut() -> Result<Reply, BusError>,
     what: &'static str,
-) -> Result<Reply, (&'static str, StepError)> {
+) -> Result<Reply, Failure> {
     let reply = retry(f).map_err(|e| match e {
         BusError::Io(_) => (what, StepError::Io(e)),
         e => (what, StepError::NoReply(e)),

@@ -2,28 +2,34 @@
 //! (`teleop_hand_node::session`, which owns reconnect, back-off, the link-down reports and
 //! calling the stop once per session).
 //!
-//! Connecting opens the serial port, finds the servos and brings them up ([`crate::bringup`]).
-//! A turn sleeps to the next absolute deadline at `rate_hz`, writes the goals of every servo not
-//! silent in one Sync Write (the admitted command, or the goals held: for a fresh session where the hand is),
-//! and reads current, velocity and position of every servo not silent in one Fast Sync Read.
-//! Faults, each counted and named once:
+//! Connecting opens the serial port, finds the servos and brings them up ([`crate::bringup`]);
+//! a servo that refuses a step leaves every servo's torque off and the connect fails. The host
+//! is then told where the hand is (the state read at bring-up), before its first command, so
+//! that the ramp to the commands starts there. A turn sleeps to the next absolute deadline at
+//! `rate_hz`, writes the goals of every servo brought up and not silent in one Sync Write (the
+//! admitted command within the profile's limits, or the goals held: for a fresh session where
+//! the hand is), and reads current, velocity and position of every servo not silent in one
+//! Fast Sync Read. Faults, each counted and named once:
 //!
-//! - a reply with a bad CRC, or bytes that are no packet: counted; the cycle's state is the last
-//!   one read;
-//! - no reply, or a reply without some servos' blocks: those servos are pinged and the silent
-//!   ones named and left out of the reads (their state marked stale); each is looked for again
-//!   every `silent_retry_ms` and brought up again when it answers, holding where it is and
-//!   ramping to the commands at `resume_speed`;
+//! - a reply with a bad CRC, or bytes that are no packet: counted; the blocks of the reply
+//!   whose CRC checks are taken, the others' state is the last one read;
+//! - no reply, or a reply without some servos' blocks (cut short at a silent one): the first
+//!   servo missing is pinged (asked again after a lost reply) and, silent, named and left out
+//!   of the reads and goals (its state marked stale); each is looked for again every
+//!   `silent_retry_ms` and brought back when it answers (its goal set where it is; brought up
+//!   again if it lost its torque), ramping to the commands at `resume_speed`;
 //! - a block with the Alert bit: that servo's Hardware Error Status is read and named in words;
-//!   the servo has turned its torque off and only a reboot clears it (`teleop leap reboot --id
-//!   N`); the others go on, and nothing reboots it automatically. When its alert goes away (it
-//!   was rebooted) it is brought up again;
+//!   the servo has turned its torque off and only a reboot clears it (the node holds the port:
+//!   power-cycle the hand, or stop the node and run `teleop leap reboot`); the others go on,
+//!   and nothing reboots it automatically. When its alert goes away (it was rebooted) it is
+//!   brought up again;
 //! - `failed_cycle_limit` cycles in a row without any servo's state, or a failing line: the hand
 //!   is lost (the session loop reconnects with back-off).
 //!
-//! Every session ends with torque off on every servo that answers. The loop talks to the rest of
-//! the process through a [`Host`] (the node's ports, or the CLI's `home` and `move`). Per cycle
-//! it allocates nothing and logs nothing while the servos behave.
+//! Every session ends with torque off: one broadcast Write that every servo hearing it carries
+//! out (one the node took for silent too), then each answering servo confirmed. The loop talks
+//! to the rest of the process through a [`Host`] (the node's ports, or the CLI's `home` and
+//! `move`). Per cycle it allocates nothing and logs nothing while the servos behave.
 
 use std::time::Instant;
 
@@ -98,6 +104,8 @@ pub struct Connected<'a> {
     pub identity: &'a Identity,
     /// The servo IDs, in joint order.
     pub ids: &'a [u8; SERVOS],
+    /// Where the hand is: the servos as read at bring-up (the goals they hold).
+    pub bring_up: &'a Cycle<'a>,
 }
 
 /// The hand is not running.
@@ -115,7 +123,7 @@ pub trait Host {
     fn stop_requested(&self) -> bool;
     /// What to do this cycle (called once per cycle).
     fn target(&mut self) -> Target;
-    /// The hand came up (after every bring-up).
+    /// The hand came up (after every bring-up, before the first [`Host::target`]).
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()>;
     /// One cycle was run.
     fn cycle(&mut self, cycle: &Cycle<'_>) -> anyhow::Result<()>;
@@ -176,6 +184,8 @@ pub struct Up<L> {
     servos: Servos,
     identity: Identity,
     goals: [i32; SERVOS],
+    /// Joints whose servo was brought up (its goal set where it was): the only ones written.
+    driven: Mask,
     announced: bool,
     next: Instant,
     failed_run: u32,
@@ -213,51 +223,57 @@ impl<H: Host, L: Line> Poll<'_, '_, H, L> {
             bringup::hardware_error_text,
         );
         tracing::error!(
-            "{name}: {what}: the servo has turned its torque off; only a reboot clears it \
-             (`teleop leap reboot --id {id}`); the other servos go on"
+            "{name}: {what}: the servo has turned its torque off and only a reboot clears it: \
+             power-cycle the hand, or stop this node (it holds the port) and run `teleop leap \
+             reboot --id {id}`; the other servos go on"
         );
     }
 
-    /// Joint `j`'s servo answers again (or was rebooted): brings it up alone.
+    /// Joint `j`'s servo answers again (or was rebooted): brings it back alone
+    /// ([`bringup::bring_up_again`]).
     fn revive(&mut self, up: &mut Up<L>, j: usize, why: &str) {
-        let mut failed = [const { None }; SERVOS];
-        bringup::bring_up(
-            &mut up.bus,
-            self.settings,
-            bit(j),
-            &mut up.goals,
-            &mut failed,
-        );
         let name = self.names().of(j);
-        match &failed[j] {
-            None => {
+        match bringup::bring_up_again(&mut up.bus, self.settings, j) {
+            Ok(state) => {
                 up.servos.revive(j);
+                up.servos.take(j, state);
+                up.goals[j] = state.position;
+                up.driven |= bit(j);
                 // It holds where it is: the commands reach it by a ramp from there.
                 let mut ramp = Resume::new(self.settings.resume_speed);
-                ramp.held_at(&[servos::position_rad(&self.profile.joints[j], up.goals[j])]);
+                ramp.held_at(&[servos::position_rad(
+                    &self.profile.joints[j],
+                    state.position,
+                )]);
                 up.rejoin[j] = Some(ramp);
-                tracing::info!("{name}: {why}: brought up again, torque on");
+                tracing::info!("{name}: {why}: back in the loop, torque on");
             }
-            Some((what, StepError::Alert)) => {
+            Err((what, StepError::Alert)) => {
                 tracing::warn!("{name}: {why}, but {what}: still in a hardware error");
                 self.report_alert(up, j);
             }
-            Some((what, e)) => {
-                tracing::warn!("{}", bringup::describe(&name, what, e));
+            Err((what, e)) => {
+                tracing::warn!("{}", bringup::describe(&name, what, &e));
             }
         }
     }
 
-    /// The servos asked gave no reply: pings each, and names and leaves out the silent ones.
-    fn find_silent(&mut self, up: &mut Up<L>, asked: Mask) -> Result<(), BusError> {
-        for j in joints(asked) {
-            match up.bus.ping(self.settings.ids[j]) {
-                Ok(_) => {}
-                Err(e @ BusError::Io(_)) => return Err(e),
-                Err(_) => self.silent(up, j),
+    /// Servos asked sent no block: the first of them is pinged (asked again after a lost
+    /// reply) and, silent, named and left out. Only the first: a chain cut short at a silent
+    /// servo loses the blocks after it too, and those are asked again next cycle (a ping costs
+    /// a reply's timeout, and sixteen would stall the loop).
+    fn find_silent(&mut self, up: &mut Up<L>, missing: Mask) -> Result<(), BusError> {
+        let Some(j) = joints(missing).next() else {
+            return Ok(());
+        };
+        match bringup::ping(&mut up.bus, self.settings.ids[j]) {
+            Ok(_) => Ok(()),
+            Err(e @ BusError::Io(_)) => Err(e),
+            Err(_) => {
+                self.silent(up, j);
+                Ok(())
             }
         }
-        Ok(())
     }
 
     /// Joint `j`'s servo is silent: named, left out of the reads.
@@ -303,6 +319,39 @@ impl<H: Host, L: Line> Poll<'_, '_, H, L> {
     }
 }
 
+/// Torque off on every servo: one broadcast Write of Torque Enable = 0 (carried out by every
+/// servo that hears it, also one the node took for silent; none answers), then each servo not
+/// in `silent` confirmed by its own status (asked twice). How many confirmed, and the joints
+/// that did not.
+fn torque_off<L: Line>(bus: &mut Bus<L>, ids: &[u8; SERVOS], silent: Mask) -> (u32, Mask) {
+    // A failing line fails the confirmations too: they say so.
+    let _ = bus.broadcast_write(xc330::TORQUE_ENABLE, &[0]);
+    let mut off = 0;
+    let mut unconfirmed = 0;
+    for (j, &id) in ids.iter().enumerate() {
+        if silent & bit(j) != 0 {
+            continue;
+        }
+        let mut done = false;
+        for _ in 0..2 {
+            match bus.write(id, xc330::TORQUE_ENABLE, &[0]) {
+                Ok(r) if r.error.number().is_none() => {
+                    done = true;
+                    break;
+                }
+                Err(BusError::Io(_)) => break,
+                _ => {}
+            }
+        }
+        if done {
+            off += 1;
+        } else {
+            unconfirmed |= bit(j);
+        }
+    }
+    (off, unconfirmed)
+}
+
 /// The line failed: the hand is lost.
 fn lost<E>(port: &str, e: BusError) -> Fault<E> {
     Fault::Lost(format!("{port}: {e}"))
@@ -334,14 +383,14 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
                 self.names().of(j)
             );
         }
-        let mut goals = [0i32; SERVOS];
+        let mut states = [None; SERVOS];
         let mut failed = [const { None }; SERVOS];
         let all: Mask = Mask::MAX >> (Mask::BITS as usize - SERVOS);
         bringup::bring_up(
             &mut bus,
             settings,
             all & !identity.silent,
-            &mut goals,
+            &mut states,
             &mut failed,
         );
         bus.set_timing(Timing::new(
@@ -350,6 +399,17 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             settings.reply_slack,
         ));
         let mut servos = Servos::new(settings.ids, identity.silent);
+        let mut goals = [0i32; SERVOS];
+        let mut driven: Mask = 0;
+        for (j, state) in states.iter().enumerate() {
+            if let Some(state) = state {
+                servos.take(j, *state);
+                goals[j] = state.position;
+                if failed[j].is_none() {
+                    driven |= bit(j);
+                }
+            }
+        }
         let mut alerts = Vec::new();
         for (j, f) in failed.iter().enumerate() {
             let Some((what, e)) = f else { continue };
@@ -358,11 +418,13 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
                     return Err(ConnectError::Lost(format!("{}: {b}", settings.port)))
                 }
                 StepError::Refused(_) => {
-                    return Err(ConnectError::Setting(bringup::describe(
-                        &self.names().of(j),
-                        what,
-                        e,
-                    )))
+                    // None runs with a setting refused: torque off on every one that may
+                    // have turned it on (a refusal of the torque-on itself).
+                    let (off, _) = torque_off(&mut bus, &settings.ids, identity.silent);
+                    return Err(ConnectError::Setting(format!(
+                        "{}; torque off on {off} servos",
+                        bringup::describe(&self.names().of(j), what, e)
+                    )));
                 }
                 StepError::Alert => alerts.push(j),
                 StepError::NoReply(_) => {
@@ -382,6 +444,7 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             servos,
             identity,
             goals,
+            driven,
             announced: false,
             next: now,
             failed_run: 0,
@@ -412,6 +475,13 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
                     port: &settings.port,
                     identity: &up.identity,
                     ids: &settings.ids,
+                    bring_up: &Cycle {
+                        servos: &up.servos,
+                        goals: &up.goals,
+                        holding: true,
+                        counters: &self.counters,
+                        received_ns: teleop_runtime::now_ns(),
+                    },
                 })
                 .map_err(Fault::Failed)?;
             up.next = Instant::now();
@@ -448,15 +518,16 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
         for (b, g) in bytes.iter_mut().zip(&up.goals) {
             *b = g.to_le_bytes();
         }
-        // Not to the silent: one that hears again must not jump to a goal it missed the ramp
-        // to (it is brought up again, holding where it is, when it answers).
-        let silent = up.servos.silent();
+        // Only to the servos brought up (a goal where the hand is not known is no goal), and
+        // not to the silent: one that hears again must not jump to a goal it missed the ramp
+        // to (it is brought back, holding where it is, when it answers).
+        let written = up.driven & !up.servos.silent();
         let items = settings
             .ids
             .iter()
             .zip(&bytes)
             .enumerate()
-            .filter(|(j, _)| silent & bit(*j) == 0)
+            .filter(|(j, _)| written & bit(*j) != 0)
             .map(|(_, (id, b))| (*id, &b[..]));
         up.bus
             .sync_write(xc330::GOAL_POSITION, 4, items)
@@ -467,40 +538,28 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
         let n = up.servos.read_ids(&mut ask);
         let mut bad = false;
         if n > 0 {
-            let asked: Mask = ask[..n]
-                .iter()
-                .filter_map(|id| up.servos.joint_of(*id))
-                .fold(0, |m, j| m | bit(j));
-            match up.bus.fast_sync_read(
-                xc330::STATE_ADDR,
-                xc330::STATE_LEN,
-                &ask[..n],
-                &mut up.read,
-            ) {
-                Ok(()) => {
-                    let applied = up.servos.apply(&ask[..n], &up.read);
-                    if applied.missing != 0 {
-                        // Which of them is silent: a chain may also end its reply at a silent
-                        // servo, leaving out the ones after it (not documented:
-                        // docs/devices/leap.md, "Unknown").
-                        bad = true;
-                        self.find_silent(up, applied.missing)
-                            .map_err(|e| lost(&settings.port, e))?;
-                    }
-                    for j in joints(applied.new_alerts) {
-                        self.report_alert(up, j);
-                    }
-                    for j in joints(applied.cleared_alerts) {
-                        self.revive(up, j, "its hardware error cleared (rebooted)");
-                    }
-                }
-                Err(e @ BusError::Io(_)) => return Err(lost(&settings.port, e)),
-                Err(BusError::Timeout) => {
-                    bad = true;
-                    self.find_silent(up, asked)
-                        .map_err(|e| lost(&settings.port, e))?;
-                }
-                Err(_) => bad = true,
+            let read =
+                up.bus
+                    .fast_sync_read(xc330::STATE_ADDR, xc330::STATE_LEN, &ask[..n], &mut up.read);
+            if let Err(e @ BusError::Io(_)) = read {
+                return Err(lost(&settings.port, e));
+            }
+            // The blocks that came whole (all of them, or those at the start of a reply cut
+            // short or damaged).
+            let applied = up.servos.apply(&ask[..n], &up.read);
+            bad = read.is_err() || applied.missing != 0;
+            if applied.missing != 0 && !matches!(read, Err(BusError::Corrupt(_))) {
+                // Which is silent: a chain may end its reply at a silent servo, leaving out
+                // the ones after it (not documented: docs/devices/leap.md, "Unknown"). Noise
+                // (a reply that does not check) names nobody.
+                self.find_silent(up, applied.missing)
+                    .map_err(|e| lost(&settings.port, e))?;
+            }
+            for j in joints(applied.new_alerts) {
+                self.report_alert(up, j);
+            }
+            for j in joints(applied.cleared_alerts) {
+                self.revive(up, j, "its hardware error cleared (rebooted)");
             }
         }
         self.look_for_silent(up, Instant::now())
@@ -538,37 +597,15 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
     }
 
     fn stop(&mut self, mut up: Up<L>, ending: Ending<'_>) {
-        // Torque off on every servo that answers, each checked by its status.
-        let mut off = 0;
-        let mut refused = Vec::new();
-        for (j, &id) in self.settings.ids.iter().enumerate() {
-            if up.servos.silent() & bit(j) != 0 {
-                continue;
-            }
-            let mut done = false;
-            for _ in 0..2 {
-                match up.bus.write(id, xc330::TORQUE_ENABLE, &[0]) {
-                    Ok(r) if r.error.number().is_none() => {
-                        done = true;
-                        break;
-                    }
-                    Err(BusError::Io(_)) => break,
-                    _ => {}
-                }
-            }
-            if done {
-                off += 1;
-            } else {
-                refused.push(self.names().of(j));
-            }
-        }
+        let (off, unconfirmed) = torque_off(&mut up.bus, &self.settings.ids, up.servos.silent());
+        let refused: Vec<String> = joints(unconfirmed).map(|j| self.names().of(j)).collect();
         self.counters.bus = *up.bus.counters();
         let port = &self.settings.port;
         let silent = up.servos.silent().count_ones();
         let summary = format!(
             "torque off on {off} servos{}{}",
             if silent > 0 {
-                format!(", {silent} silent")
+                format!(", {silent} silent (the broadcast only)")
             } else {
                 String::new()
             },

@@ -24,7 +24,8 @@ fn saturate(v: u64) -> u32 {
 
 /// The `hand/state` sample of one cycle: positions (rad, the profile's device map), speeds
 /// (rad/s), currents (mA), no effort (NaN: the servos measure current, not torque), `status`
-/// the joint's word (`crate::servos::status`: stale, silent, alert, hardware error bits).
+/// the joint's word (`crate::servos::status`: stale, silent, alert, hardware error bits). A
+/// joint never read since the hand came up has NaN for all of them: nothing is held there.
 /// `link_errors` counts cycles with a bad exchange, `lost_frames` cycles without any state.
 pub fn hand_state(profile: &HandProfile, cycle: &Cycle<'_>) -> HandState {
     let mut state = HandState {
@@ -40,11 +41,17 @@ pub fn hand_state(profile: &HandProfile, cycle: &Cycle<'_>) -> HandState {
     };
     for (j, (out, joint)) in state.joints.iter_mut().zip(&profile.joints).enumerate() {
         let r = cycle.servos.reading(j);
+        out.status = cycle.servos.status_word(j);
+        out.effort = f32::NAN;
+        if out.status & servos::status::UNKNOWN != 0 {
+            out.position = f32::NAN;
+            out.speed = f32::NAN;
+            out.current_ma = f32::NAN;
+            continue;
+        }
         out.position = servos::position_rad(joint, r.position) as f32;
         out.speed = servos::speed_rad_s(joint, r.velocity) as f32;
         out.current_ma = f32::from(r.current_ma);
-        out.effort = f32::NAN;
-        out.status = cycle.servos.status_word(j);
     }
     state.header.origin_ns = cycle.received_ns;
     state
@@ -186,6 +193,10 @@ impl Host for Ports<'_> {
             "LEAP Hand connected"
         );
         self.hand.connected(info)?;
+        // Where the hand is, before the first command: the ramp to the commands starts here
+        // (with nothing held, the first command would pass through: a jump).
+        self.hand
+            .publish(&hand_state(self.profile, hand.bring_up), None)?;
         Ok(())
     }
 
@@ -277,5 +288,37 @@ mod tests {
         assert_eq!(ids_text(&[0, 1, 2, 3, 5, 7, 8, 9]), "0-3,5,7-9");
         assert_eq!(ids_text(&[4]), "4");
         assert_eq!(ids_text(&[]), "");
+    }
+
+    #[test]
+    fn a_joint_never_read_is_published_as_nan_not_as_a_position() {
+        let profile = HandProfile::builtin("leap").expect("the shipped profile");
+        let mut ids = [0u8; SERVOS];
+        for (j, id) in ids.iter_mut().enumerate() {
+            *id = j as u8;
+        }
+        let mut servos = servos::Servos::new(ids, servos::bit(3));
+        for j in (0..SERVOS).filter(|j| *j != 3) {
+            let state = teleop_leap_protocol::xc330::State {
+                current_ma: 20,
+                velocity: 0,
+                position: 2048,
+            };
+            servos.take(j, state);
+        }
+        let counters = Counters::default();
+        let cycle = Cycle {
+            servos: &servos,
+            goals: &[2048; SERVOS],
+            holding: true,
+            counters: &counters,
+            received_ns: 1,
+        };
+        let s = hand_state(&profile, &cycle);
+        let j3 = s.joints[3];
+        assert!(j3.position.is_nan() && j3.speed.is_nan() && j3.current_ma.is_nan());
+        assert_ne!(j3.status & servos::status::UNKNOWN, 0);
+        assert!(s.joints[2].position.abs() < 1e-6, "2048 counts: 0 rad");
+        assert_eq!(s.joints[2].current_ma, 20.0);
     }
 }

@@ -1,6 +1,8 @@
-//! The servos between cycles (pure): which ones the cycle asks, what each last reported, which
-//! are silent or in a hardware error, and the conversion between joint angles and servo counts
-//! (the hand profile's device map). No I/O, no clock, no allocation.
+//! The servos between cycles (pure): which ones the cycle asks, what each last reported (the
+//! bring-up's read first), which are silent or in a hardware error, and the conversion between
+//! joint angles and servo counts (the hand profile's device map, `Joint::to_device` and
+//! `from_device`, in its f32; goals within the profile's limits). No I/O, no clock, no
+//! allocation.
 
 use teleop_hand_profile::Joint;
 use teleop_leap_protocol::xc330::{self, State};
@@ -16,7 +18,7 @@ pub mod status {
     pub const SILENT: u32 = 1 << 1;
     /// The servo reports a hardware error (its Alert bit): it turned its torque off.
     pub const ALERT: u32 = 1 << 2;
-    /// Never read since the hand came up: the values mean nothing.
+    /// Never read since the hand came up: the values mean nothing (published as NaN).
     pub const UNKNOWN: u32 = 1 << 3;
     /// The servo's Hardware Error Status (control table 70) is in bits 8..15.
     pub const HARDWARE_ERROR_SHIFT: u32 = 8;
@@ -163,6 +165,11 @@ impl Servos {
         self.hardware_error[j] = status;
     }
 
+    /// Joints read at least once since the hand came up.
+    pub fn known(&self) -> Mask {
+        self.known
+    }
+
     /// Joints read this cycle.
     pub fn fresh(&self) -> Mask {
         self.fresh
@@ -217,20 +224,22 @@ pub fn joints(mask: Mask) -> impl Iterator<Item = usize> {
 /// control table, Goal Position: +-256 revolutions).
 pub const GOAL_LIMIT: i32 = 1_048_575;
 
-/// A joint's angle as the servo's Goal Position (the profile's device map, counts; rounded to
-/// the nearest count, within [`GOAL_LIMIT`]). A non-finite angle gives `None`.
+/// A joint's angle as the servo's Goal Position: within the profile's limits (a second guard
+/// after admission: mode 5 ignores the servo's own position limits), through the profile's
+/// device map, rounded to the nearest count, within [`GOAL_LIMIT`]. A non-finite angle gives
+/// `None`.
 pub fn goal_counts(joint: &Joint, radians: f64) -> Option<i32> {
-    let counts = f64::from(joint.device.offset) + f64::from(joint.device.scale) * radians;
-    counts.is_finite().then(|| {
+    let counts = joint.to_device(joint.clamp(radians as f32));
+    (radians.is_finite() && counts.is_finite()).then(|| {
         counts
             .round()
-            .clamp(-f64::from(GOAL_LIMIT), f64::from(GOAL_LIMIT)) as i32
+            .clamp(-(GOAL_LIMIT as f32), GOAL_LIMIT as f32) as i32
     })
 }
 
-/// A servo's Present Position as the joint's angle, rad.
+/// A servo's Present Position as the joint's angle, rad (the profile's device map).
 pub fn position_rad(joint: &Joint, counts: i32) -> f64 {
-    (f64::from(counts) - f64::from(joint.device.offset)) / f64::from(joint.device.scale)
+    f64::from(joint.from_device(counts as f32))
 }
 
 /// A servo's Present Velocity as the joint's speed, rad/s: 0.229 rpm per unit is
@@ -296,10 +305,15 @@ mod tests {
     fn angles_and_counts() {
         let j = joint();
         assert_eq!(goal_counts(&j, 0.0), Some(2048));
-        assert_eq!(goal_counts(&j, std::f64::consts::FRAC_PI_2), Some(3072));
-        assert_eq!(goal_counts(&j, -std::f64::consts::PI), Some(0));
+        assert_eq!(goal_counts(&j, 1.0), Some(2700));
         assert_eq!(goal_counts(&j, f64::NAN), None);
-        assert_eq!(goal_counts(&j, 1e12), Some(GOAL_LIMIT));
+        assert_eq!(goal_counts(&j, f64::INFINITY), None);
+        // Beyond the profile's limits (-0.506..1.885 rad): at the limit.
+        assert_eq!(
+            goal_counts(&j, -std::f64::consts::PI),
+            goal_counts(&j, -0.506)
+        );
+        assert_eq!(goal_counts(&j, 1e12), Some(3277));
         assert!((position_rad(&j, 3072) - std::f64::consts::FRAC_PI_2).abs() < 1e-6);
         // 60 units = 13.74 rpm = 1.4388 rad/s.
         let w = speed_rad_s(&j, 60);
@@ -310,13 +324,13 @@ mod tests {
     }
 
     proptest! {
-        /// A goal read back is the angle to within half a count.
+        /// A goal within the limits read back is the angle to within half a count.
         #[test]
-        fn goals_round_trip(rad in -3.0f64..3.0) {
+        fn goals_round_trip(rad in -0.506f64..1.885) {
             let j = joint();
             let counts = goal_counts(&j, rad).unwrap();
             let back = position_rad(&j, counts);
-            prop_assert!((back - rad).abs() <= 0.5 / f64::from(j.device.scale) + 1e-9);
+            prop_assert!((back - rad).abs() <= 0.5 / f64::from(j.device.scale) + 1e-6);
         }
     }
 

@@ -1,11 +1,13 @@
 //! The node's loop (`teleop_leap::driver::run_on`) on a recording line: sixteen servos that
 //! answer what the requests ask, keep a control table each, refuse EEPROM writes while their
 //! torque is on (Access Error, as the ROBOTIS e-manual says), and start with the torque on (a
-//! crashed earlier session). What the loop wrote, in order, shows the bring-up as
-//! docs/devices/leap.md gives it: torque off before any EEPROM write, Operating Mode 5 and
-//! Return Delay Time, the gains, Goal Current, the goal at the present position (no jump),
-//! torque on last; then one Sync Write of the goals and one Fast Sync Read per cycle; torque
-//! off on stop.
+//! crashed earlier session; one with the settings another tool left). What the loop wrote, in
+//! order, shows the bring-up as docs/devices/leap.md gives it: torque off before any EEPROM
+//! write, Operating Mode 5, Drive Mode and Homing Offset 0 where they differ, Return Delay
+//! Time, the gains, the profiles 0 where they differ, Goal Current, the goal at the present
+//! position (no jump), torque on last; then one Sync Write of the goals and one Fast Sync Read
+//! per cycle; torque off on stop, broadcast first. A servo that refuses a step leaves every
+//! servo's torque off.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::VecDeque;
@@ -27,6 +29,8 @@ struct Servos {
     tables: Vec<[u8; 256]>,
     pending: VecDeque<u8>,
     log: Arc<Mutex<Vec<Record>>>,
+    /// A servo refusing writes at an address (Data Limit Error).
+    refuse: Option<(u8, u16)>,
 }
 
 impl Servos {
@@ -38,10 +42,16 @@ impl Servos {
         table[11] = 3; // Operating Mode: position (the factory's)
         table[64] = 1; // torque on, left so by an earlier session
         table[132..136].copy_from_slice(&1500i32.to_le_bytes());
+        let mut tables = vec![table; 16];
+        // Servo 2 as another tool left it: reversed, offset, with a profile.
+        tables[2][10] = 1;
+        tables[2][20..24].copy_from_slice(&100i32.to_le_bytes());
+        tables[2][112..116].copy_from_slice(&50u32.to_le_bytes());
         Self {
-            tables: vec![table; 16],
+            tables,
             pending: VecDeque::new(),
             log,
+            refuse: None,
         }
     }
 
@@ -65,11 +75,28 @@ impl Servos {
                 let (a, l) = (usize::from(addr), usize::from(len));
                 self.status(id, 0, &t[a..a + l]);
             }
+            Request::Write { addr, data } if id == packet::BROADCAST_ID => {
+                // Carried out by every servo, answered by none.
+                self.log
+                    .lock()
+                    .unwrap()
+                    .push((id, instruction::WRITE, addr, data.to_vec()));
+                let a = usize::from(addr);
+                for t in &mut self.tables {
+                    if addr >= xc330::RAM_START || t[64] == 0 {
+                        t[a..a + data.len()].copy_from_slice(data);
+                    }
+                }
+            }
             Request::Write { addr, data } => {
                 self.log
                     .lock()
                     .unwrap()
                     .push((id, instruction::WRITE, addr, data.to_vec()));
+                if self.refuse == Some((id, addr)) {
+                    self.status(id, 6, &[]);
+                    return;
+                }
                 let t = &mut self.tables[usize::from(id)];
                 if addr < xc330::RAM_START && t[64] == 1 {
                     self.status(id, 7, &[]);
@@ -189,21 +216,38 @@ fn bring_up_in_the_documented_order_then_one_write_and_one_read_per_cycle() {
         for g in [d, i, p] {
             gains.extend(g.to_le_bytes());
         }
-        assert_eq!(
-            writes,
-            vec![
-                (xc330::TORQUE_ENABLE, vec![0]),
-                (xc330::OPERATING_MODE, vec![5]),
-                (xc330::RETURN_DELAY_TIME, vec![0]),
-                (xc330::POSITION_D_GAIN, gains),
-                (xc330::GOAL_CURRENT, 350u16.to_le_bytes().to_vec()),
-                (xc330::GOAL_POSITION, 1500i32.to_le_bytes().to_vec()),
-                (xc330::TORQUE_ENABLE, vec![1]),
-                (xc330::TORQUE_ENABLE, vec![0]),
-            ],
-            "servo {id}"
-        );
+        let mut want = vec![
+            (xc330::TORQUE_ENABLE, vec![0]),
+            (xc330::OPERATING_MODE, vec![5]),
+            (xc330::RETURN_DELAY_TIME, vec![0]),
+            (xc330::POSITION_D_GAIN, gains),
+            (xc330::GOAL_CURRENT, 350u16.to_le_bytes().to_vec()),
+            (xc330::GOAL_POSITION, 1500i32.to_le_bytes().to_vec()),
+            (xc330::TORQUE_ENABLE, vec![1]),
+            (xc330::TORQUE_ENABLE, vec![0]),
+        ];
+        if id == 2 {
+            // What another tool left, set back with the torque off.
+            want.insert(2, (xc330::DRIVE_MODE, vec![0]));
+            want.insert(4, (xc330::HOMING_OFFSET, vec![0; 4]));
+            want.insert(6, (xc330::PROFILE_ACCELERATION, vec![0; 8]));
+        }
+        assert_eq!(writes, want, "servo {id}");
     }
+    // Stop: one broadcast torque off after the last cycle, then each servo confirmed.
+    let broadcast: Vec<usize> = log
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.0 == packet::BROADCAST_ID && r.1 == instruction::WRITE)
+        .map(|(k, _)| k)
+        .collect();
+    assert_eq!(broadcast.len(), 1);
+    assert_eq!(log[broadcast[0]].2, xc330::TORQUE_ENABLE);
+    let last_read = log
+        .iter()
+        .rposition(|r| r.1 == instruction::FAST_SYNC_READ)
+        .unwrap();
+    assert!(broadcast[0] > last_read);
     // Every servo's bring-up steps run before any cycle; torque on is the last of them.
     let last_on = log
         .iter()
@@ -227,5 +271,71 @@ fn bring_up_in_the_documented_order_then_one_write_and_one_read_per_cycle() {
             && r.3 == 1500i32.to_le_bytes()));
         assert_eq!(c[16].1, instruction::FAST_SYNC_READ);
         assert_eq!((c[16].2, c[16].3.len()), (xc330::STATE_ADDR, 16));
+    }
+}
+
+/// Gives up at the first report that the hand is down.
+struct Down1;
+
+impl Host for Down1 {
+    fn stop_requested(&self) -> bool {
+        false
+    }
+    fn target(&mut self) -> Target {
+        Target::Hold
+    }
+    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("the hand came up")
+    }
+    fn cycle(&mut self, _: &Cycle<'_>) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("down: {}", down.why)
+    }
+}
+
+#[test]
+fn a_servo_refusing_a_step_leaves_every_servo_torque_off() {
+    let settings = LeapConfig::default().validate().unwrap();
+    let profile = HandProfile::builtin("leap").unwrap();
+    let log = Arc::new(Mutex::new(Vec::new()));
+    let mut servos = Servos::new(log.clone());
+    // Servo 5's Current Limit below the Goal Current asked (another tool lowered it).
+    servos.refuse = Some((5, xc330::GOAL_CURRENT));
+    let tables = Arc::new(Mutex::new(Vec::new()));
+    let mut line = Some(Recorded(servos, tables.clone()));
+    let mut open = move || line.take().ok_or_else(|| "opened twice".to_string());
+    let err = driver::run_on(&settings, &profile, &mut Down1, &mut open).unwrap_err();
+    let err = err.to_string();
+    assert!(
+        err.contains("middle_mcp_forward (id 5): Goal Current refused"),
+        "{err}"
+    );
+    let log = log.lock().unwrap().clone();
+    assert!(
+        !log.iter()
+            .any(|r| r.1 == instruction::WRITE && r.2 == xc330::TORQUE_ENABLE && r.3 == [1]),
+        "no torque on: {log:?}"
+    );
+    let tables = tables.lock().unwrap();
+    assert!(tables.iter().all(|t| t[64] == 0), "every torque off");
+}
+
+/// The servos' line, their tables copied out when the loop drops it.
+struct Recorded(Servos, Arc<Mutex<Vec<[u8; 256]>>>);
+
+impl Drop for Recorded {
+    fn drop(&mut self) {
+        *self.1.lock().unwrap() = self.0.tables.clone();
+    }
+}
+
+impl Line for Recorded {
+    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.0.send(bytes)
+    }
+    fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+        self.0.recv(buf, timeout)
     }
 }
