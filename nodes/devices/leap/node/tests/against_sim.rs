@@ -1,9 +1,11 @@
 //! The real `teleop-leap` process against the real `teleop-sim-leap` through its pseudo-terminal
-//! (the node's real serial-port path): bring-up (every servo in mode 5 with torque on), the
-//! full-state rate, a commanded pose reached, a finger stopping at the ball with its current
-//! rising, the hold on a stale command, a silent servo named while the others keep working, an
-//! overloaded servo stopped and named, bad bytes and CRC errors survived and counted, the
-//! adapter unplugged and back without a restart, torque off on every servo after SIGINT;
+//! (the node's real serial-port path): bring-up (every servo in mode 5 with torque on), every
+//! cycle the simulator served answered whole, a commanded pose reached, a finger stopping at
+//! the ball with its current rising, the hold on a stale command, a silent servo named while
+//! the others keep working, an overloaded servo stopped and named, bad bytes and CRC errors
+//! survived and counted, the adapter unplugged and back without a restart (and, under a moving
+//! command, a ramp from where the hand is, not a jump), torque off on every servo after SIGINT
+//! (also on one the node took for silent), every torque off when a servo refuses its bring-up;
 //! `teleop leap info`, `move`, `home` and `reboot` against the simulator and a missing adapter.
 //!
 //! Both executables must be built (`cargo build --workspace --bins` besides this crate): they
@@ -17,7 +19,10 @@ use std::time::{Duration, Instant};
 use teleop_e2e::hand::HandNode;
 use teleop_e2e::rig::Rig as TestRig;
 use teleop_e2e::{bin, Sandbox};
+use teleop_leap::bus::{Bus, SerialLine};
+use teleop_leap::protocol::xc330;
 use teleop_leap::servos::status;
+use teleop_leap::timing::Timing;
 use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth};
 
 /// One hand session at a time: each test runs the simulated servos and a node at 500 Hz over
@@ -184,22 +189,35 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     assert!(list(&stats, "mode").iter().all(|m| m == "5"), "{stats}");
     assert!(list(&stats, "torque").iter().all(|t| t == "1"), "{stats}");
 
-    // The full-state rate: a state per cycle, every servo read.
+    // Every cycle answered whole: a state per Fast Sync Read the simulator served, every servo
+    // read in it (behaviour, not a rate: the machine may be busy).
     rig.states.drain(|_| {});
+    let served = |stats: &str| -> u64 { field(stats, "fast_sync_read").parse().unwrap() };
+    let before = served(&rig.sim.ok("stats"));
     let start = Instant::now();
-    let (mut n, mut all_fresh) = (0u64, 0u64);
+    let (mut n, mut all_fresh, mut seqs) = (0u64, 0u64, (u64::MAX, 0u64));
     while start.elapsed() < Duration::from_secs(1) {
         rig.states.drain(|s| {
             n += 1;
+            seqs = (seqs.0.min(s.header.seq), seqs.1.max(s.header.seq));
             if s.joints[..16].iter().all(|j| j.status & status::STALE == 0) {
                 all_fresh += 1;
             }
         });
         std::thread::sleep(Duration::from_millis(2));
     }
-    eprintln!("{n} hand states in 1 s, {all_fresh} with every servo read");
-    assert!(n >= 250, "{n} states in 1 s");
+    let reads = served(&rig.sim.ok("stats")) - before;
+    let cycles = seqs.1 + 1 - seqs.0;
+    eprintln!(
+        "{cycles} cycles ({n} states received, {all_fresh} with every servo read), {reads} Fast \
+         Sync Reads served"
+    );
+    assert!(n > 0, "no hand state");
     assert!(all_fresh * 10 >= n * 9, "{all_fresh} of {n} complete");
+    assert!(
+        reads * 10 >= cycles * 9,
+        "{cycles} cycles, {reads} reads served"
+    );
 
     // A commanded pose, reached.
     let s = rig.send(&command(&POSE), Duration::from_millis(2500));
@@ -276,7 +294,11 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     // An overloaded servo: its torque off, named, the others keep working, no reboot.
     rig.sim.ok("overload 6");
     rig.wait_log(Duration::from_secs(2), "middle_pip (id 6): overload");
-    rig.wait_log(Duration::from_secs(1), "teleop leap reboot --id 6");
+    rig.wait_log(
+        Duration::from_secs(1),
+        "power-cycle the hand, or stop this node (it holds the port) and run `teleop leap \
+         reboot --id 6`",
+    );
     let s = rig.wait_state(Duration::from_secs(2), "id 6 in alert", |s| {
         s.joints[6].status & status::ALERT != 0
     });
@@ -521,4 +543,138 @@ fn a_servo_back_from_silence_ramps_to_the_command() {
     }
     let (_, last) = seen[seen.len() - 1];
     assert!(last > q0 + 0.3, "it ramps toward its target: {seen:?}");
+}
+
+/// Follows `cmd` for `d`, publishing every 10 ms; the states received meanwhile.
+fn follow(rig: &mut Rig, cmd: &HandCommand, d: Duration) -> Vec<HandState> {
+    let start = Instant::now();
+    let mut out = Vec::new();
+    while start.elapsed() < d {
+        rig.commands.publish(cmd).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+        rig.states.drain(|s| out.push(*s));
+    }
+    out
+}
+
+/// The adapter unplugged while the commands go on and move the hand away: after the reconnect
+/// the hand ramps at `resume_speed` from where it is (the state read at bring-up), it does not
+/// jump to the command.
+#[test]
+fn after_an_unplug_under_a_moving_command_the_hand_ramps_from_where_it_is() {
+    let _one = one_at_a_time();
+    let mut rig = start("none", &[], "resume_speed = 0.5\n");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    rig.send(&command(&POSE), Duration::from_millis(2500));
+    // The adapter goes; meanwhile the command moves index_pip 1.2 rad away.
+    rig.sim.ok("unplug 500");
+    let mut far = POSE;
+    far[2] = 1.5;
+    let start = Instant::now();
+    let (mut down, mut seen) = (false, Vec::new());
+    while start.elapsed() < Duration::from_secs(10) {
+        for s in follow(&mut rig, &command(&far), Duration::from_millis(20)) {
+            if s.link_up == 0 {
+                down = true;
+            } else if down && s.joints[2].status & status::UNKNOWN == 0 {
+                seen.push((start.elapsed().as_secs_f32(), s.joints[2].position));
+            }
+        }
+        if seen
+            .first()
+            .is_some_and(|(t0, _)| start.elapsed().as_secs_f32() > t0 + 1.5)
+        {
+            break;
+        }
+    }
+    assert!(down, "the link went down\n{}", rig.log());
+    assert!(!seen.is_empty(), "the hand came back\n{}", rig.log());
+    eprintln!("index_pip after the reconnect: {seen:?}");
+    let (t0, q0) = seen[0];
+    assert!(q0 < 1.2, "not at the command before the ramp: {seen:?}");
+    for (t, q) in &seen {
+        // 0.5 rad/s from where it was, with a cycle's slack.
+        assert!(
+            *q <= q0 + 0.5 * (t - t0) + 0.05,
+            "jumped: {q} rad {:.2} s after {q0} rad: {seen:?}",
+            t - t0
+        );
+    }
+    let (_, last) = seen[seen.len() - 1];
+    assert!(last > q0 + 0.3, "it ramps toward its target: {seen:?}");
+}
+
+/// The stop reaches a servo the node took for silent (it hears again, but the node has not
+/// looked for it yet): the broadcast torque off, before each answering servo is confirmed.
+#[test]
+fn the_stop_turns_off_a_servo_the_node_took_for_silent() {
+    let _one = one_at_a_time();
+    let mut rig = start("none", &[], "silent_retry_ms = 60000\n");
+    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
+        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
+    });
+    rig.sim.ok("silent 11 300");
+    rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
+    // It hears again; the node looks for it only in a minute.
+    rig.wait_state(Duration::from_secs(3), "id 11 still marked silent", |s| {
+        s.joints[11].status & status::SILENT != 0
+    });
+    std::thread::sleep(Duration::from_millis(500));
+    assert_eq!(field(&rig.sim.ok("stats"), "silent"), "none");
+    let exit = rig.node().stop();
+    assert!(exit.success(), "{exit:?}\n{}", rig.log());
+    assert!(
+        rig.log()
+            .contains("torque off on 15 servos, 1 silent (the broadcast only)"),
+        "{}",
+        rig.log()
+    );
+    let stats = rig.sim.ok("stats");
+    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+}
+
+/// A servo refusing a step of the bring-up (its Current Limit, lowered by another tool, below
+/// the node's Goal Current): the node does not run, and no servo is left with its torque on.
+#[test]
+fn a_servo_refusing_its_bring_up_leaves_every_servo_torque_off() {
+    let _one = one_at_a_time();
+    let mut rig = TestRig::new();
+    let sim = Sim::start(&mut rig, "none", &[]);
+    {
+        let line = SerialLine::open(&sim.link.display().to_string(), 4_000_000).unwrap();
+        let mut bus = Bus::new(line, Timing::new(4_000_000, 250, Duration::from_millis(20)));
+        // The servos boot when the adapter is first opened.
+        let start = Instant::now();
+        while bus.ping(5).is_err() {
+            assert!(start.elapsed() < Duration::from_secs(5), "servo 5 boots");
+        }
+        let r = bus
+            .write(5, xc330::CURRENT_LIMIT, &200u16.to_le_bytes())
+            .unwrap();
+        assert!(r.error.is_ok(), "{}", r.error);
+    }
+    let config = format!(
+        "port = \"{}\"\nhealth_period_ms = 100\nreconnect_backoff_ms = [100, 200]\n\
+         hand_profile = \"{}\"\n",
+        sim.link.display(),
+        Sandbox::repo().join("config/hands/leap.toml").display()
+    );
+    let rig = HandNode::start_with(rig, "leap", env!("CARGO_BIN_EXE_teleop-leap"), &config, sim);
+    rig.wait_log(
+        Duration::from_secs(10),
+        "middle_mcp_forward (id 5): Goal Current refused",
+    );
+    // Looked at again, refused again: never a servo with its torque on.
+    for _ in 0..10 {
+        let stats = rig.sim.ok("stats");
+        assert!(
+            list(&stats, "torque").iter().all(|t| t == "0"),
+            "{stats}\n{}",
+            rig.log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
 }
