@@ -31,6 +31,8 @@ struct Servos {
     log: Arc<Mutex<Vec<Record>>>,
     /// A servo refusing writes at an address (Data Limit Error).
     refuse: Option<(u8, u16)>,
+    /// A servo that neither hears nor answers while set.
+    deaf: Arc<Mutex<Option<u8>>>,
 }
 
 impl Servos {
@@ -52,6 +54,7 @@ impl Servos {
             pending: VecDeque::new(),
             log,
             refuse: None,
+            deaf: Arc::new(Mutex::new(None)),
         }
     }
 
@@ -65,6 +68,10 @@ impl Servos {
         let mut scratch = [0u8; 1100];
         let p = packet::parse(raw, &mut scratch).unwrap();
         let id = p.id;
+        let deaf = *self.deaf.lock().unwrap();
+        if deaf == Some(id) {
+            return;
+        }
         match Request::from_packet(&p).unwrap() {
             Request::Ping => {
                 let t = self.tables[usize::from(id)];
@@ -127,6 +134,7 @@ impl Servos {
                 let tables = &self.tables;
                 let blocks = ids
                     .iter()
+                    .filter(|id| Some(**id) != deaf)
                     .map(|id| (*id, 0u8, &tables[usize::from(*id)][a..a + l]));
                 let mut out = [0u8; 600];
                 let n = packet::fast_sync_status(blocks, &mut out).unwrap();
@@ -338,4 +346,82 @@ impl Line for Recorded {
     fn recv(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
         self.0.recv(buf, timeout)
     }
+}
+
+/// Makes servo 9 deaf at the third cycle and hears again at the tenth; stops once it is back
+/// in the reads.
+struct Deaf {
+    deaf: Arc<Mutex<Option<u8>>>,
+    cycles: u32,
+    back: bool,
+}
+
+impl Host for Deaf {
+    fn stop_requested(&self) -> bool {
+        self.back || self.cycles > 5000
+    }
+    fn target(&mut self) -> Target {
+        Target::Hold
+    }
+    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn cycle(&mut self, cycle: &Cycle<'_>) -> anyhow::Result<()> {
+        self.cycles += 1;
+        match self.cycles {
+            3 => *self.deaf.lock().unwrap() = Some(9),
+            10 => *self.deaf.lock().unwrap() = None,
+            n if n > 10 => self.back = cycle.servos.silent() == 0,
+            _ => {}
+        }
+        Ok(())
+    }
+    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("down: {}", down.why)
+    }
+}
+
+#[test]
+fn a_servo_back_from_silence_with_its_torque_on_only_gets_its_goal_set() {
+    let config = LeapConfig {
+        silent_retry_ms: 10,
+        ..LeapConfig::default()
+    };
+    let settings = config.validate().unwrap();
+    let profile = HandProfile::builtin("leap").unwrap();
+    let log = Arc::new(Mutex::new(Vec::new()));
+    let servos = Servos::new(log.clone());
+    let mut host = Deaf {
+        deaf: servos.deaf.clone(),
+        cycles: 0,
+        back: false,
+    };
+    let mut line = Some(servos);
+    let mut open = move || line.take().ok_or_else(|| "opened twice".to_string());
+    driver::run_on(&settings, &profile, &mut host, &mut open).unwrap();
+    assert!(host.back, "servo 9 back in the reads");
+    let log = log.lock().unwrap().clone();
+    let first_cycle = log
+        .iter()
+        .position(|r| r.1 == instruction::SYNC_WRITE)
+        .unwrap();
+    // Between the bring-up and the stop's broadcast, servo 9 got one write: its goal where it
+    // is (its torque never off: no limp moment).
+    let stop = log
+        .iter()
+        .position(|r| r.0 == packet::BROADCAST_ID && r.1 == instruction::WRITE)
+        .unwrap();
+    let writes: Vec<&Record> = log[first_cycle..stop]
+        .iter()
+        .filter(|r| r.0 == 9 && r.1 == instruction::WRITE)
+        .collect();
+    assert_eq!(
+        writes,
+        [&(
+            9,
+            instruction::WRITE,
+            xc330::GOAL_POSITION,
+            1500i32.to_le_bytes().to_vec()
+        )]
+    );
 }
