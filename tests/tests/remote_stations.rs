@@ -554,13 +554,18 @@ fn operator_estop(
     });
 }
 
-/// The Allegro's and the Shadow Hand's stations close their loops across the bridges too: the
-/// operator's commands reach the hand node, its states come back, the glove feels the ball.
+/// The Allegro's, the Shadow Hand's and the LEAP Hand's stations close their loops across the
+/// bridges too: the operator's commands reach the hand node, its states come back, the glove
+/// feels the ball.
 #[test]
 fn every_hand_closes_its_loop_across_stations() {
     skip_unless_privileged!();
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    for (hand, node) in [("allegro", "allegro"), ("shadow", "shadow")] {
+    for (hand, node) in [
+        ("allegro", "allegro"),
+        ("shadow", "shadow"),
+        ("leap", "leap"),
+    ] {
         let (_op_ns, _robot_ns, operator, robot) =
             teleop_e2e::stations::start_hand("tlsh", hand, |_, t| t);
         let both = (&operator, &robot);
