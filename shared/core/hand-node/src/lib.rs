@@ -11,6 +11,9 @@
 //!   rate-limited, the ramp back after any hold, `hand/state` and `hand/tactile` out, health and
 //!   device info periodically, also while the link is down;
 //! - [`Resume`] ([`resume`]): the ramp from a held target back to the operator's pose (pure);
+//! - [`RampedMove`] ([`moves`]): a service command's move (`home`, `move J DEG`) toward an
+//!   [`Aim`], ramped with [`Resume`] from where the hand was first seen, ending after a time,
+//!   and its report;
 //! - [`session`]: the one session loop a device runs under, through its [`Transport`]: connect
 //!   with typed errors (a lost link retried with back-off, a wrong device or setting looked at
 //!   again slowly), one turn of the device's clock at a time, the device's hold on stop once per
@@ -27,11 +30,13 @@
 //! [`session`], which itself uses no message types); the retargeting and force-feedback logic.
 
 pub mod admission;
+pub mod moves;
 pub mod ports;
 pub mod resume;
 pub mod session;
 
 pub use admission::{Admission, Modes, Refusal};
+pub use moves::{Aim, RampedMove};
 pub use ports::{HandPorts, Timing, REFUSAL_LOG_PERIOD};
 pub use resume::Resume;
 pub use session::{Backoff, Cause, ConnectError, Down, Ending, Fault, Transport};

@@ -8,7 +8,7 @@
 //!
 //! Pure: no clock, no I/O, no allocation (the caller gives the time step): every hand node
 //! ramps through [`HandPorts`](crate::HandPorts), and a device's service command that moves
-//! the hand (the Allegro's `home` and `move`) can ramp the same way.
+//! the hand (`home` and `move`) ramps the same way through [`RampedMove`](crate::RampedMove).
 
 /// Most joints a [`Resume`] ramps (the contract's `MAX_JOINTS`).
 pub const MAX_JOINTS: usize = teleop_msgs::MAX_JOINTS;

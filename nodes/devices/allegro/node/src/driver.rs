@@ -31,7 +31,7 @@ pub enum Target {
     Hold,
     /// Go to these joint angles (rad, joint order) this cycle, as they are: the host has
     /// admitted them and ramps them after a hold (the node: `teleop-hand-node`'s `HandPorts`;
-    /// a service command: its `Resume`).
+    /// a service command: its `RampedMove`).
     Follow([f64; JOINTS]),
 }
 

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use clap::Subcommand;
 use teleop_allegro_protocol::{v4, Generation, Protocol, JOINTS};
 use teleop_can_link::{CanLink, LinkError};
-use teleop_hand_node::Resume;
+use teleop_hand_node::{Aim, RampedMove};
 use teleop_hand_profile::HandProfile;
 use teleop_runtime::args::parse_seconds;
 
@@ -273,67 +273,32 @@ fn print_info(
     Ok(())
 }
 
-/// What `home` and `move` aim at.
-#[derive(Debug, Clone, Copy)]
-enum Aim {
-    /// Every joint.
-    Pose([f64; JOINTS]),
-    /// One joint; the others where they were at the first cycle.
-    Joint(usize, f64),
-}
-
-/// The CLI as the loop's host: the aim for `seconds` after the hand came up, ramped there from
-/// where the hand was at `resume_speed` (as the node ramps after a hold), then stop (the loop
-/// sends zero torque and SYSTEM_OFF).
+/// The CLI as the loop's host: the core's ramped move (toward the aim from where the hand was
+/// at `resume_speed`, as the node ramps after a hold, for `seconds` after the hand came up),
+/// then stop (the loop sends zero torque and SYSTEM_OFF).
 struct CliHost {
-    resume: Resume,
-    period_s: f64,
-    aim: Aim,
-    limits: [(f64, f64); JOINTS],
-    seconds: Duration,
-    until: Option<Instant>,
-    start: Option<[f64; JOINTS]>,
-    goal: [f64; JOINTS],
+    ramp: RampedMove<JOINTS>,
     last: Option<Cycle>,
     generation: Option<Generation>,
 }
 
 impl Host for CliHost {
     fn stop_requested(&self) -> bool {
-        teleop_runtime::stop_signal().is_some() || self.until.is_some_and(|t| Instant::now() >= t)
+        teleop_runtime::stop_signal().is_some() || self.ramp.over(Instant::now())
     }
 
     fn target(&mut self) -> Goal {
-        let Some(start) = self.start else {
-            return Goal::Hold;
-        };
-        self.resume.held_at(&start);
-        let mut target = self.goal;
-        self.resume.follow(&mut target, self.period_s);
-        Goal::Follow(target)
+        self.ramp.target().map_or(Goal::Hold, Goal::Follow)
     }
 
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {
-        self.until = Some(Instant::now() + self.seconds);
+        self.ramp.started(Instant::now());
         self.generation = Some(hand.generation);
         Ok(())
     }
 
     fn cycle(&mut self, cycle: &Cycle) -> anyhow::Result<()> {
-        if self.start.is_none() {
-            self.start = Some(cycle.q);
-            self.goal = match self.aim {
-                Aim::Pose(p) => p,
-                Aim::Joint(j, rad) => {
-                    let mut g = cycle.q;
-                    g[j] = rad;
-                    g
-                }
-            };
-            for (g, (lo, hi)) in self.goal.iter_mut().zip(self.limits) {
-                *g = g.clamp(lo, hi);
-            }
-        }
+        self.ramp.seen(&cycle.q);
         self.last = Some(*cycle);
         Ok(())
     }
@@ -347,23 +312,18 @@ fn drive(
     link: Box<dyn CanLink>,
     settings: &Settings,
     profile: &HandProfile,
-    aim: Aim,
+    aim: Aim<JOINTS>,
     seconds: Duration,
 ) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
-    let mut limits = [(0.0, 0.0); JOINTS];
-    for (l, j) in limits.iter_mut().zip(&profile.joints) {
-        *l = (f64::from(j.lower), f64::from(j.upper));
-    }
     let mut host = CliHost {
-        resume: Resume::new(settings.resume_speed),
-        period_s: settings.period.as_secs_f64(),
-        aim,
-        limits,
-        seconds,
-        until: None,
-        start: None,
-        goal: [0.0; JOINTS],
+        ramp: RampedMove::new(
+            profile,
+            aim,
+            settings.resume_speed,
+            settings.period,
+            seconds,
+        ),
         last: None,
         generation: None,
     };
@@ -388,30 +348,8 @@ fn drive(
         settings.link,
         seconds.as_secs_f64()
     )?;
-    let joints: Vec<usize> = match aim {
-        Aim::Pose(_) => (0..JOINTS).collect(),
-        Aim::Joint(j, _) => vec![j],
-    };
-    let mut worst = (0usize, 0.0f64);
-    for &j in &joints {
-        let err = (host.goal[j] - last.q[j]).abs();
-        if err > worst.1 {
-            worst = (j, err);
-        }
-        writeln!(
-            out,
-            "{:<10} target {:>7.1} deg  reached {:>7.1} deg  effort {:>6.3} N m",
-            profile.joints[j].name,
-            host.goal[j].to_degrees(),
-            last.q[j].to_degrees(),
-            last.torque[j]
-        )?;
-    }
-    writeln!(
-        out,
-        "largest error {:.2} deg ({})",
-        worst.1.to_degrees(),
-        profile.joints[worst.0].name
-    )?;
+    host.ramp.report(&mut out, profile, &last.q, |j| {
+        format!("effort {:>6.3} N m", last.torque[j])
+    })?;
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! serial port (the LEAP node must not be running: it holds the port). `info` pings and reads
 //! every servo; `reboot` clears a hardware error (the servo comes back with its torque off);
 //! `home` and `move` run the node's own loop ([`crate::driver`]) for a few seconds, ramping with
-//! the core's `Resume`, and end as every session does: torque off on every servo (the hand goes
+//! the core's `RampedMove`, and end as every session does: torque off on every servo (the hand goes
 //! limp). The command-line arguments ([`Target`], [`LeapCommand`]) are here; `teleop` only
 //! dispatches to [`run`].
 
@@ -12,7 +12,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use clap::Subcommand;
-use teleop_hand_node::Resume;
+use teleop_hand_node::{Aim, RampedMove};
 use teleop_hand_profile::HandProfile;
 use teleop_leap_protocol::xc330;
 use teleop_runtime::args::parse_seconds;
@@ -260,27 +260,12 @@ fn reboot(settings: &Settings, profile: &HandProfile, id: Option<u8>) -> anyhow:
     Ok(())
 }
 
-/// What `home` and `move` aim at.
-#[derive(Debug, Clone, Copy)]
-enum Aim {
-    /// Every joint.
-    Pose([f64; SERVOS]),
-    /// One joint; the others where they were at the first cycle.
-    Joint(usize, f64),
-}
-
-/// The CLI as the loop's host: the aim, ramped there from where the hand was at
-/// `resume_speed` (as the node ramps after a hold), until `seconds` after bring-up; then stop
-/// (the loop turns the torque off).
+/// The CLI as the loop's host: the core's ramped move (toward the aim from where the hand was
+/// at `resume_speed`, as the node ramps after a hold, until `seconds` after bring-up); then
+/// stop (the loop turns the torque off).
 struct CliHost<'p> {
     profile: &'p HandProfile,
-    resume: Resume,
-    period_s: f64,
-    aim: Aim,
-    seconds: Duration,
-    until: Option<Instant>,
-    start: Option<[f64; SERVOS]>,
-    goal: [f64; SERVOS],
+    ramp: RampedMove<SERVOS>,
     last: [f64; SERVOS],
     last_current: [f64; SERVOS],
     last_status: [u32; SERVOS],
@@ -289,21 +274,15 @@ struct CliHost<'p> {
 
 impl Host for CliHost<'_> {
     fn stop_requested(&self) -> bool {
-        teleop_runtime::stop_signal().is_some() || self.until.is_some_and(|t| Instant::now() >= t)
+        teleop_runtime::stop_signal().is_some() || self.ramp.over(Instant::now())
     }
 
     fn target(&mut self) -> Goal {
-        let Some(start) = self.start else {
-            return Goal::Hold;
-        };
-        self.resume.held_at(&start);
-        let mut target = self.goal;
-        self.resume.follow(&mut target, self.period_s);
-        Goal::Follow(target)
+        self.ramp.target().map_or(Goal::Hold, Goal::Follow)
     }
 
     fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
-        self.until = Some(Instant::now() + self.seconds);
+        self.ramp.started(Instant::now());
         Ok(())
     }
 
@@ -315,20 +294,7 @@ impl Host for CliHost<'_> {
             self.last_status[j] = cycle.servos.status_word(j);
         }
         self.cycles += 1;
-        if self.start.is_none() {
-            self.start = Some(self.last);
-            self.goal = match self.aim {
-                Aim::Pose(p) => p,
-                Aim::Joint(j, rad) => {
-                    let mut g = self.last;
-                    g[j] = rad;
-                    g
-                }
-            };
-            for (g, joint) in self.goal.iter_mut().zip(&self.profile.joints) {
-                *g = g.clamp(f64::from(joint.lower), f64::from(joint.upper));
-            }
-        }
+        self.ramp.seen(&self.last);
         Ok(())
     }
 
@@ -340,19 +306,19 @@ impl Host for CliHost<'_> {
 fn drive(
     settings: &Settings,
     profile: &HandProfile,
-    aim: Aim,
+    aim: Aim<SERVOS>,
     seconds: Duration,
 ) -> anyhow::Result<()> {
     teleop_runtime::install_stop_handlers();
     let mut host = CliHost {
         profile,
-        resume: Resume::new(settings.resume_speed),
-        period_s: settings.period.as_secs_f64(),
-        aim,
-        seconds,
-        until: None,
-        start: None,
-        goal: [0.0; SERVOS],
+        ramp: RampedMove::new(
+            profile,
+            aim,
+            settings.resume_speed,
+            settings.period,
+            seconds,
+        ),
         last: [0.0; SERVOS],
         last_current: [0.0; SERVOS],
         last_status: [0; SERVOS],
@@ -381,16 +347,7 @@ fn drive(
         settings.baud,
         seconds.as_secs_f64()
     )?;
-    let joints: Vec<usize> = match aim {
-        Aim::Pose(_) => (0..SERVOS).collect(),
-        Aim::Joint(j, _) => vec![j],
-    };
-    let mut worst = (0usize, 0.0f64);
-    for &j in &joints {
-        let err = (host.goal[j] - host.last[j]).abs();
-        if err > worst.1 {
-            worst = (j, err);
-        }
+    host.ramp.report(&mut out, profile, &host.last, |j| {
         let note = if host.last_status[j] & status::SILENT != 0 {
             "  (silent)"
         } else if host.last_status[j] & status::ALERT != 0 {
@@ -398,20 +355,7 @@ fn drive(
         } else {
             ""
         };
-        writeln!(
-            out,
-            "{:<20} target {:>7.1} deg  reached {:>7.1} deg  current {:>5.0} mA{note}",
-            profile.joints[j].name,
-            host.goal[j].to_degrees(),
-            host.last[j].to_degrees(),
-            host.last_current[j],
-        )?;
-    }
-    writeln!(
-        out,
-        "largest error {:.2} deg ({})",
-        worst.1.to_degrees(),
-        profile.joints[worst.0].name
-    )?;
+        format!("current {:>5.0} mA{note}", host.last_current[j])
+    })?;
     Ok(())
 }
