@@ -21,7 +21,8 @@
 //!
 //! A device plugs in below this as a [`Transport`] (the EtherCAT master's cycle with a driver,
 //! the Allegro's CAN stream): each turn asks
-//! [`HandPorts::command`] for the command to follow (`None`: hold) and hands the turn's state
+//! [`HandPorts::command`] for the command to follow (`None`: hold; [`HandPorts::target`] for
+//! a hand that takes joint angles: its [`Target`]) and hands the turn's state
 //! to [`HandPorts::publish`]; its link-down reports go to [`HandPorts::publish_down`].
 //!
 //! # What it must not depend on
@@ -37,6 +38,6 @@ pub mod session;
 
 pub use admission::{Admission, Modes, Refusal};
 pub use moves::{Aim, RampedMove};
-pub use ports::{HandPorts, Timing, REFUSAL_LOG_PERIOD};
+pub use ports::{HandPorts, Target, Timing, REFUSAL_LOG_PERIOD};
 pub use resume::Resume;
 pub use session::{Backoff, Cause, ConnectError, Down, Ending, Fault, Transport};

@@ -10,6 +10,7 @@ use std::time::{Duration, Instant};
 
 use teleop_hand_profile::HandProfile;
 
+use crate::ports::Target;
 use crate::resume::Resume;
 
 /// What a move aims at (rad, joint order).
@@ -95,13 +96,15 @@ impl<const N: usize> RampedMove<N> {
         }
     }
 
-    /// The target of this cycle: `None` (hold) until the hand was [`seen`](Self::seen), then
-    /// one ramp step further toward the goal.
-    pub fn target(&mut self) -> Option<[f64; N]> {
-        self.start?;
+    /// The target of this cycle: hold until the hand was [`seen`](Self::seen), then one ramp
+    /// step further toward the goal.
+    pub fn target(&mut self) -> Target<N> {
+        if self.start.is_none() {
+            return Target::Hold;
+        }
         let mut target = self.goal;
         self.resume.follow(&mut target, self.period_s);
-        Some(target)
+        Target::Follow(target)
     }
 
     /// Where the move goes (known once the hand was seen).
@@ -188,7 +191,7 @@ mod tests {
             Duration::from_millis(10),
             Duration::from_secs(2),
         );
-        assert_eq!(m.target(), None, "not seen: hold");
+        assert_eq!(m.target(), Target::Hold, "not seen: hold");
         assert_eq!(m.goal(), None);
         // Where the hand is: each joint in the middle of its limits.
         let at: [f64; 16] =
@@ -202,17 +205,19 @@ mod tests {
             .zip(at)
             .enumerate()
             .all(|(j, (g, a))| j == 2 || *g == a));
-        let first = m.target().expect("seen");
+        let Target::Follow(first) = m.target() else {
+            panic!("seen: followed")
+        };
         assert!(
             (first[2] - (at[2] + 0.01)).abs() < 1e-12,
             "one step of 0.01: {first:?}"
         );
         assert_eq!(first[0], at[0], "the others hold");
-        let mut last = first;
+        let mut last = m.target();
         for _ in 0..1000 {
-            last = m.target().expect("seen");
+            last = m.target();
         }
-        assert_eq!(last, goal, "caught up");
+        assert_eq!(last, Target::Follow(goal), "caught up");
         assert_eq!(m.aimed(), 2..3);
         let mut reached = goal;
         reached[2] -= 0.5;

@@ -32,6 +32,17 @@ pub struct Timing {
     pub resume_speed: f64,
 }
 
+/// What a hand that takes joint angles should do this cycle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Target<const N: usize> {
+    /// Hold the last target followed (where the hand was at bring-up when there was none).
+    Hold,
+    /// Go to these joint angles (the commands' units, joint order) this cycle, as they are:
+    /// whoever gives them has admitted them and ramps them after a hold ([`HandPorts`], or a
+    /// service command's [`RampedMove`](crate::RampedMove)).
+    Follow([f64; N]),
+}
+
 /// A hand node's ports and policy (see the module documentation).
 pub struct HandPorts {
     admission: Admission,
@@ -152,6 +163,21 @@ impl HandPorts {
                 self.refused();
                 None
             }
+        }
+    }
+
+    /// [`command`](Self::command) as the targets of a hand that takes `N` joint angles: the
+    /// command's first `N` joint targets to follow, or [`Target::Hold`]. Call once per cycle.
+    pub fn target<const N: usize>(&mut self) -> Target<N> {
+        match self.command() {
+            Some(cmd) => {
+                let mut t = [0.0; N];
+                for (t, j) in t.iter_mut().zip(&cmd.joints) {
+                    *t = f64::from(j.target);
+                }
+                Target::Follow(t)
+            }
+            None => Target::Hold,
         }
     }
 

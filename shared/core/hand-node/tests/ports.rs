@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
+use teleop_hand_node::{Admission, HandPorts, Modes, Target, Timing};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{control_mode, units, HandCommand};
 use teleop_runtime::{IpcSettings, NodeRuntime};
@@ -69,4 +69,13 @@ fn each_command_sample_is_counted_once_and_a_loss_of_commands_once() {
     assert!(ports.command().is_some());
     assert_eq!(ports.health().counters().clamps, 2);
     assert_eq!(ports.health().counters().timeouts, 1);
+    // As the targets of a hand that takes joint angles: the command's, then a hold once stale.
+    let Target::Follow(targets) = ports.target::<16>() else {
+        panic!("a fresh command is followed");
+    };
+    for (t, j) in targets.iter().zip(&cmd.joints) {
+        assert_eq!(*t, f64::from(j.target));
+    }
+    std::thread::sleep(Duration::from_millis(150));
+    assert_eq!(ports.target::<16>(), Target::Hold);
 }

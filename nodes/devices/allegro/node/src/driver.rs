@@ -23,17 +23,11 @@ use crate::gather::{Gather, Pushed};
 use crate::pace::{Pace, Timeout};
 use crate::wire::{Incoming, Wire};
 
-/// What the hand should do this cycle.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Target {
-    /// Hold the last target followed (where the hand was at its first cycle since bring-up if
-    /// there was none).
-    Hold,
-    /// Go to these joint angles (rad, joint order) this cycle, as they are: the host has
-    /// admitted them and ramps them after a hold (the node: `teleop-hand-node`'s `HandPorts`;
-    /// a service command: its `RampedMove`).
-    Follow([f64; JOINTS]),
-}
+/// What the hand should do this cycle (rad, joint order): hold the last target followed (where
+/// the hand was at its first cycle since bring-up if there was none), or follow the host's,
+/// admitted and ramped by it (the node: `teleop-hand-node`'s `HandPorts`; a service command:
+/// its `RampedMove`).
+pub type Target = teleop_hand_node::Target<JOINTS>;
 
 /// Counters since the loop started (across reconnects).
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]

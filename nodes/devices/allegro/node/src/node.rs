@@ -132,16 +132,7 @@ impl Host for Ports {
     }
 
     fn target(&mut self) -> Target {
-        match self.hand.command() {
-            Some(cmd) => {
-                let mut t = [0.0; JOINTS];
-                for (t, j) in t.iter_mut().zip(&cmd.joints) {
-                    *t = f64::from(j.target);
-                }
-                Target::Follow(t)
-            }
-            None => Target::Hold,
-        }
+        self.hand.target()
     }
 
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {

@@ -288,7 +288,7 @@ impl Host for CliHost {
     }
 
     fn target(&mut self) -> Goal {
-        self.ramp.target().map_or(Goal::Hold, Goal::Follow)
+        self.ramp.target()
     }
 
     fn connected(&mut self, hand: &Connected<'_>) -> anyhow::Result<()> {

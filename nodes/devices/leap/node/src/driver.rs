@@ -44,14 +44,10 @@ use crate::config::{Settings, SERVOS};
 use crate::servos::{self, bit, joints, Mask, Servos};
 use crate::timing::{Timing, P99};
 
-/// What the hand should do this cycle.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Target {
-    /// Hold the goals last written (where the hand was at bring-up when none was).
-    Hold,
-    /// Go to these joint angles (rad, joint order), admitted and ramped by the host.
-    Follow([f64; SERVOS]),
-}
+/// What the hand should do this cycle (rad, joint order): hold the goals last written (where
+/// the hand was at bring-up when none was), or follow the host's, admitted and ramped by it
+/// (the node: `teleop-hand-node`'s `HandPorts`; a service command: its `RampedMove`).
+pub type Target = teleop_hand_node::Target<SERVOS>;
 
 /// Counters since the loop started (across reconnects).
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]

@@ -278,7 +278,7 @@ impl Host for CliHost<'_> {
     }
 
     fn target(&mut self) -> Goal {
-        self.ramp.target().map_or(Goal::Hold, Goal::Follow)
+        self.ramp.target()
     }
 
     fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
