@@ -14,7 +14,8 @@
 //! - [`pty`]: the pseudo-terminal device behind a stable link, unplugged and plugged back in;
 //! - [`outage`]: a fault that lasts a while (link down, bus off), a later one replacing the end;
 //! - [`dice`]: seedable fault dice;
-//! - [`plant`]: the joint plant's clock (fixed sub-steps up to a time) and first-order lags;
+//! - [`plant`]: the joint plant's clock (fixed sub-steps up to a time), a torque-driven joint
+//!   against hard stops, and first-order lags;
 //! - [`object`]: the virtual objects a simulated hand can hold, one name each;
 //! - [`testing`]: a simulator process under test (its directory, announce line, control
 //!   socket, SIGINT at the end).

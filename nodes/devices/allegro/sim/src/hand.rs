@@ -14,7 +14,7 @@
 //! [`HandParams::step_s`].
 
 use teleop_hand_profile::HandProfile;
-use teleop_sim_kit::plant::{lag, Clock};
+use teleop_sim_kit::plant::{lag, Clock, Joint};
 use teleop_sim_kit::Object;
 
 /// Joints: index 0-3, middle 4-7, ring 8-11, thumb 12-15 (the CAN order).
@@ -430,18 +430,18 @@ impl Hand {
     fn step(&mut self, h: f64) {
         let p = self.params;
         self.external_torques();
+        let joint = Joint {
+            inertia: p.inertia,
+            damping: p.damping,
+        };
         for j in 0..JOINTS {
-            let tau = self.motor[j] + self.external[j] - p.damping * self.qd[j];
-            self.qd[j] += tau / p.inertia * h;
-            self.q[j] += self.qd[j] * h;
-            let (lo, hi) = self.limits[j];
-            if self.q[j] <= lo {
-                self.q[j] = lo;
-                self.qd[j] = self.qd[j].max(0.0);
-            } else if self.q[j] >= hi {
-                self.q[j] = hi;
-                self.qd[j] = self.qd[j].min(0.0);
-            }
+            joint.step(
+                &mut self.q[j],
+                &mut self.qd[j],
+                self.motor[j] + self.external[j],
+                h,
+                self.limits[j],
+            );
             let rise = p.heat_c_per_nm2 * self.motor[j] * self.motor[j];
             let target = p.ambient_c + rise;
             self.temperature[j] = lag(self.temperature[j], target, h, p.thermal_tau_s);

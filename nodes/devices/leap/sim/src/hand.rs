@@ -16,6 +16,7 @@
 //! Pure: the caller steps it ([`Hand::step`]) with the servos' torques.
 
 use teleop_hand_profile::HandProfile;
+use teleop_sim_kit::plant::Joint;
 use teleop_sim_kit::Object;
 
 /// Joints (= servos), in motor-ID order.
@@ -160,24 +161,23 @@ impl Hand {
                 }
             }
         }
-        let p = self.params;
+        let joint = Joint {
+            inertia: self.params.inertia,
+            damping: self.params.damping,
+        };
         for j in 0..JOINTS {
             let motor = if torque[j].is_finite() {
                 torque[j]
             } else {
                 0.0
             };
-            let tau = motor + external[j] - p.damping * self.qd[j];
-            self.qd[j] += tau / p.inertia * h;
-            self.q[j] += self.qd[j] * h;
-            let (lo, hi) = self.limits[j];
-            if self.q[j] <= lo {
-                self.q[j] = lo;
-                self.qd[j] = self.qd[j].max(0.0);
-            } else if self.q[j] >= hi {
-                self.q[j] = hi;
-                self.qd[j] = self.qd[j].min(0.0);
-            }
+            joint.step(
+                &mut self.q[j],
+                &mut self.qd[j],
+                motor + external[j],
+                h,
+                self.limits[j],
+            );
         }
     }
 
