@@ -92,10 +92,43 @@ impl Stats {
 
     /// The value of `key`, if there is one.
     pub fn get(&self, key: &str) -> Option<&str> {
-        self.0
-            .iter()
-            .find(|(k, _)| k == key)
-            .map(|(_, v)| v.as_str())
+        self.value(key).map(String::as_str)
+    }
+
+    fn value(&self, key: &str) -> Option<&String> {
+        self.0.iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    }
+
+    /// A `stats` answer read back (`ok key=value ...`, as [`answer`] gives it, e.g. a test's
+    /// from a simulator's control socket); `Err` says what it is not.
+    pub fn parse(answer: &str) -> Result<Self, String> {
+        let words = match answer.strip_prefix("ok") {
+            Some("") => "",
+            Some(rest) if rest.starts_with(' ') => rest,
+            _ => return Err(format!("not an `ok` answer: {answer:?}")),
+        };
+        words
+            .split_whitespace()
+            .map(|w| {
+                w.split_once('=')
+                    .map(|(k, v)| (k.to_string(), v.to_string()))
+                    .ok_or_else(|| format!("{w:?} is no key=value word in {answer:?}"))
+            })
+            .collect::<Result<_, _>>()
+            .map(Self)
+    }
+}
+
+/// `stats["key"]`: the value of `key`.
+///
+/// # Panics
+/// When there is no `key` (as a map's index does).
+impl std::ops::Index<&str> for Stats {
+    type Output = String;
+
+    fn index(&self, key: &str) -> &String {
+        self.value(key)
+            .unwrap_or_else(|| panic!("no {key} in the stats {self}"))
     }
 }
 
@@ -199,5 +232,25 @@ mod tests {
             Stats::new().field("state", "SAFE OP").to_string(),
             "state=SAFE_OP"
         );
+    }
+
+    #[test]
+    fn a_stats_answer_reads_back_as_it_was_written() {
+        let toy = Toy {
+            drop: Mutex::new(0.25),
+        };
+        let read = Stats::parse(&answer(&toy, "stats")).expect("an ok answer");
+        assert_eq!(read, toy.stats());
+        assert_eq!(read["frames"], "3");
+        assert_eq!(Stats::parse("ok"), Ok(Stats::new()));
+        for bad in [
+            "error: stats: expected nothing more",
+            "okay x=1",
+            "ok x=1 y",
+        ] {
+            assert!(Stats::parse(bad).is_err(), "{bad}");
+        }
+        let missing = std::panic::catch_unwind(|| read["missing"].clone());
+        assert!(missing.is_err(), "no such key: a panic, as a map's index");
     }
 }

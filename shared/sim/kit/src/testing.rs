@@ -1,11 +1,13 @@
 //! A simulator process under test: started in a temporary directory of its own, waited for
 //! until it prints the line saying where it serves, talked to on its control socket, stopped
-//! with SIGINT when dropped.
+//! with SIGINT when dropped; its `stats` read back.
 
 use std::io::{BufRead, BufReader, Write};
 use std::os::unix::net::UnixStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+
+use crate::control::Stats;
 
 /// A running simulator process.
 pub struct SimProcess {
@@ -65,6 +67,14 @@ impl SimProcess {
         let mut reply = String::new();
         let _ = BufReader::new(s).read_line(&mut reply);
         reply.trim_end().to_string()
+    }
+
+    /// The `stats` answer, read back.
+    ///
+    /// # Panics
+    /// When the answer is no `ok key=value ...` (this is for tests).
+    pub fn stats(&self) -> Stats {
+        Stats::parse(&self.control("stats")).unwrap_or_else(|e| panic!("stats: {e}"))
     }
 }
 

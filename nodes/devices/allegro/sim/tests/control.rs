@@ -2,7 +2,6 @@
 //! sees over the socket bus, `stats` parses, bad arguments are refused.
 #![allow(clippy::unwrap_used)]
 
-use std::collections::HashMap;
 use std::ffi::OsString;
 use std::path::Path;
 use std::process::Command;
@@ -12,6 +11,7 @@ use teleop_allegro_protocol::{doc, v4, Generation};
 use teleop_can_link::local::SocketLink;
 use teleop_can_link::{CanFrame, CanLink};
 use teleop_sim_kit::testing::SimProcess;
+use teleop_sim_kit::Stats;
 
 struct Sim(SimProcess);
 
@@ -39,19 +39,8 @@ impl Sim {
         self.0.control(command)
     }
 
-    fn status(&self) -> HashMap<String, String> {
-        let reply = self.control("stats");
-        let rest = reply
-            .strip_prefix("ok ")
-            .unwrap_or_else(|| panic!("{reply}"));
-        rest.split(' ')
-            .map(|w| {
-                let (k, v) = w
-                    .split_once('=')
-                    .unwrap_or_else(|| panic!("{w} in {reply}"));
-                (k.to_string(), v.to_string())
-            })
-            .collect()
+    fn status(&self) -> Stats {
+        self.0.stats()
     }
 
     fn link(&self) -> SocketLink {

@@ -4,7 +4,6 @@
 //! status packets with its scanner and parser.
 #![allow(dead_code, clippy::unwrap_used)]
 
-use std::collections::HashMap;
 use std::ffi::OsString;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -14,6 +13,7 @@ use serialport::{SerialPort, TTYPort};
 use teleop_leap_protocol::packet::{self, FastSyncReply, Scan, Status, MAX_PACKET};
 use teleop_leap_protocol::EncodeError;
 use teleop_sim_kit::testing::SimProcess;
+use teleop_sim_kit::Stats;
 
 /// The LEAP Hand's baud rate.
 pub const BAUD: u32 = 4_000_000;
@@ -56,18 +56,9 @@ impl Sim {
         reply
     }
 
-    /// `stats` as a map.
-    pub fn stats(&self) -> HashMap<String, String> {
-        let reply = self.control("stats");
-        let rest = reply
-            .strip_prefix("ok ")
-            .unwrap_or_else(|| panic!("{reply}"));
-        rest.split(' ')
-            .map(|w| {
-                let (k, v) = w.split_once('=').unwrap_or_else(|| panic!("{w}"));
-                (k.to_string(), v.to_string())
-            })
-            .collect()
+    /// `stats`, read back.
+    pub fn stats(&self) -> Stats {
+        self.0.stats()
     }
 
     /// A counter of `stats`.
