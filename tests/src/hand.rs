@@ -1,12 +1,15 @@
 //! A hand node under test: its executable started on a [`Rig`] with a configuration, and the
 //! test's ports to it (commands out; state, tactile and health in). Each hand's node tests add
 //! their device (a simulator process, or an emulated bus in the test process) and their
-//! commands; starting, waiting, health, logs and stopping are here once.
+//! commands; starting, waiting, health, logs and stopping are here once, with the commands and
+//! readings every hand's tests make (a position command in rad, the joints' positions) and
+//! their turn ([`one_at_a_time`]).
 
 use std::ffi::OsStr;
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{HandCommand, HandState, NodeHealth, Tactile};
+use teleop_msgs::{control_mode, units, HandCommand, HandState, NodeHealth, Tactile};
 use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
 
 use crate::rig::{wait_text, Logs, Process, Rig};
@@ -130,6 +133,24 @@ impl<S> HandNode<S> {
             .unwrap_or_else(|| panic!("no hand state from {}\n{}", self.name, self.log()))
     }
 
+    /// The node's newest health report, waiting up to 3 s for one (a panic with the logs
+    /// after).
+    pub fn latest_health(&self) -> NodeHealth {
+        let start = Instant::now();
+        loop {
+            if let Some(h) = self.node_health().pop() {
+                return h;
+            }
+            assert!(
+                start.elapsed() < Duration::from_secs(3),
+                "no health from {}\n{}",
+                self.name,
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// The node's health reports received since the last call (other nodes' are passed over).
     pub fn node_health(&self) -> Vec<NodeHealth> {
         let mut out = Vec::new();
@@ -139,5 +160,61 @@ impl<S> HandNode<S> {
             }
         });
         out
+    }
+}
+
+/// One hand session at a time in a test binary: a simulated hand and its node at hundreds of
+/// cycles per second over pseudo-terminals; two at once on a two-core machine measure each
+/// other. Hold the guard for the session.
+pub fn one_at_a_time() -> MutexGuard<'static, ()> {
+    static ONE: Mutex<()> = Mutex::new(());
+    ONE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A position command for the hand `hand_model` (a `teleop_msgs::device_model`) in physical
+/// units (rad): one joint per target, in the hand's order.
+pub fn position_command(hand_model: u8, targets: &[f32]) -> HandCommand {
+    let mut c = HandCommand {
+        hand_model,
+        joint_count: u8::try_from(targets.len()).unwrap_or(u8::MAX),
+        control_mode: control_mode::POSITION,
+        units: units::PHYSICAL,
+        ..Default::default()
+    };
+    for (j, t) in c.joints.iter_mut().zip(targets) {
+        j.target = *t;
+    }
+    c
+}
+
+/// The first `N` joints' positions of a hand state.
+pub fn positions<const N: usize>(s: &HandState) -> [f32; N] {
+    let mut p = [0.0; N];
+    for (v, j) in p.iter_mut().zip(&s.joints) {
+        *v = j.position;
+    }
+    p
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_position_command_carries_its_targets_and_positions_read_the_joints() {
+        let c = position_command(teleop_msgs::device_model::LEAP, &[0.5, -0.25, 1.0]);
+        assert_eq!(c.hand_model, teleop_msgs::device_model::LEAP);
+        assert_eq!(c.joint_count, 3);
+        assert_eq!(
+            (c.control_mode, c.units),
+            (control_mode::POSITION, units::PHYSICAL)
+        );
+        let targets: Vec<f32> = c.joints[..4].iter().map(|j| j.target).collect();
+        assert_eq!(targets, [0.5, -0.25, 1.0, 0.0]);
+        let mut s = HandState::default();
+        for (j, p) in s.joints.iter_mut().zip([0.1, 0.2, 0.3]) {
+            j.position = p;
+        }
+        assert_eq!(positions::<2>(&s), [0.1, 0.2]);
     }
 }

@@ -26,6 +26,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 pub use teleop_runtime::IpcSettings;
+/// A simulator's `stats` answer read back ([`sim_stats`]).
+pub use teleop_sim_kit::Stats;
 
 /// Path of a workspace executable in the same target folder as the running test, or in
 /// `TELEOP_TEST_BIN_DIR` when that is set (to run a test against the binaries of another
@@ -323,6 +325,12 @@ pub fn control(path: &Path, command: &str) -> String {
     let mut reply = String::new();
     BufReader::new(stream).read_line(&mut reply).expect("reply");
     reply
+}
+
+/// The `stats` of the simulator whose control socket is at `path`, read back (`stats["key"]`).
+pub fn sim_stats(path: &Path) -> Stats {
+    let reply = control(path, "stats");
+    Stats::parse(reply.trim_end()).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 /// The repository's Revo2 hand profile (the tests' hand where the hand does not matter).

@@ -14,10 +14,10 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::hand::HandNode;
+use teleop_e2e::hand::{one_at_a_time, position_command, positions, HandNode};
 use teleop_e2e::rig::Rig as TestRig;
-use teleop_e2e::{bin, Sandbox};
-use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth};
+use teleop_e2e::{bin, Sandbox, Stats};
+use teleop_msgs::{device_model, HandCommand, HandState};
 
 /// The simulations run one at a time: two 333 Hz hands over pseudo-terminals at once on a small
 /// machine would test the machine.
@@ -60,6 +60,11 @@ impl Sim {
     fn control(&self, command: &str) -> String {
         teleop_e2e::control(&self.control, command)
     }
+
+    /// The simulator's `stats` (per joint: comma-separated lists).
+    fn stats(&self) -> Stats {
+        teleop_e2e::sim_stats(&self.control)
+    }
 }
 
 /// The node against the simulator process; the simulation's turn ends after both stopped.
@@ -75,8 +80,6 @@ trait AllegroRig {
     fn command(&mut self, targets: &[f32; 16], d: Duration) -> HandState;
     /// States received within `d` (draining every 2 ms).
     fn count_states(&self, d: Duration) -> u64;
-    /// The newest health report, waiting up to 3 s for the first.
-    fn latest_health(&self) -> NodeHealth;
     /// Stops the node with SIGINT; its exit status.
     fn stop_node(&mut self) -> std::process::ExitStatus;
 }
@@ -114,76 +117,27 @@ impl AllegroRig for Rig {
         n
     }
 
-    fn latest_health(&self) -> NodeHealth {
-        let start = Instant::now();
-        loop {
-            if let Some(h) = self.health.poll_latest() {
-                return h;
-            }
-            assert!(
-                start.elapsed() < Duration::from_secs(3),
-                "no health\n{}",
-                self.log()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
     fn stop_node(&mut self) -> std::process::ExitStatus {
         self.node().stop()
     }
 }
 
 fn command(targets: &[f32; 16]) -> HandCommand {
-    let mut c = HandCommand {
-        hand_model: device_model::ALLEGRO,
-        joint_count: 16,
-        control_mode: control_mode::POSITION,
-        units: units::PHYSICAL,
-        ..Default::default()
-    };
-    for (j, t) in c.joints.iter_mut().zip(targets) {
-        j.target = *t;
-    }
-    c
-}
-
-/// The value of `key` in the simulator's `status` line.
-fn field<'a>(status: &'a str, key: &str) -> &'a str {
-    status
-        .split_whitespace()
-        .find_map(|w| w.strip_prefix(key).and_then(|v| v.strip_prefix('=')))
-        .unwrap_or_else(|| panic!("no {key} in {status}"))
+    position_command(device_model::ALLEGRO, targets)
 }
 
 /// The simulator's PWM per joint.
-fn sim_pwm(status: &str) -> Vec<i32> {
-    field(status, "pwm")
+fn sim_pwm(status: &Stats) -> Vec<i32> {
+    status["pwm"]
         .split(',')
         .map(|v| v.parse().unwrap())
         .collect()
-}
-
-fn positions(s: &HandState) -> [f32; 16] {
-    let mut p = [0.0; 16];
-    for (v, j) in p.iter_mut().zip(&s.joints) {
-        *v = j.position;
-    }
-    p
 }
 
 /// A pose clear of the ball: fingers slightly flexed and spread, thumb turned in.
 const POSE: [f32; 16] = [
     0.1, 0.3, 0.3, 0.2, 0.0, 0.2, 0.2, 0.2, -0.1, 0.3, 0.3, 0.2, 0.6, 0.2, 0.2, 0.2,
 ];
-
-/// One hand session at a time: each test runs a simulated hand and a node at the hand's 333 Hz
-/// and checks timing the hand shows (states per second, the torque watchdog, the stop); two at
-/// once on a two-core machine measure each other.
-fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    ONE.lock().unwrap_or_else(|e| e.into_inner())
-}
 
 /// Everything the issue asks of one generation, in one simulator session.
 fn generation(generation: &str) {
@@ -200,7 +154,7 @@ fn generation(generation: &str) {
 
     // PD to a commanded pose.
     let s = rig.command(&POSE, Duration::from_millis(2500));
-    let p = positions(&s);
+    let p = positions::<16>(&s);
     let worst = p
         .iter()
         .zip(POSE)
@@ -215,7 +169,7 @@ fn generation(generation: &str) {
     closed[5..8].fill(1.5);
     let early = rig.command(&closed, Duration::from_millis(150));
     let s = rig.command(&closed, Duration::from_millis(2000));
-    let p = positions(&s);
+    let p = positions::<16>(&s);
     let effort: f32 = (5..8).map(|j| s.joints[j].effort).sum();
     let early_effort: f32 = (5..8).map(|j| early.joints[j].effort).sum();
     eprintln!(
@@ -232,8 +186,8 @@ fn generation(generation: &str) {
         s.joints[5].speed
     );
     assert!(effort > 0.3, "{generation}: pressing: {effort} N m");
-    let status = rig.sim.control("stats");
-    let contact: Vec<f64> = field(&status, "contact")
+    let status = rig.sim.stats();
+    let contact: Vec<f64> = status["contact"]
         .split(',')
         .map(|v| v.parse().unwrap())
         .collect();
@@ -255,7 +209,7 @@ fn generation(generation: &str) {
     assert!(rig.sim.control("stop-stream").starts_with("ok"));
     rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
     rig.wait_log(Duration::from_secs(2), "torque stopped, SYSTEM_OFF sent");
-    let status = rig.sim.control("stats");
+    let status = rig.sim.stats();
     assert!(
         sim_pwm(&status).iter().all(|p| *p == 0),
         "{generation}: torque stopped: {status}"
@@ -305,8 +259,8 @@ fn generation(generation: &str) {
         "{}",
         rig.log()
     );
-    let status = rig.sim.control("stats");
-    assert_eq!(field(&status, "system"), "off", "{status}");
+    let status = rig.sim.stats();
+    assert_eq!(status["system"], "off", "{status}");
     assert!(sim_pwm(&status).iter().all(|p| *p == 0), "{status}");
 }
 
@@ -345,7 +299,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     );
     rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
     let s = rig.command(&POSE, Duration::from_millis(2500));
-    let worst = positions(&s)
+    let worst = positions::<16>(&s)
         .iter()
         .zip(POSE)
         .map(|(a, b)| (a - b).abs())
@@ -354,21 +308,20 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     // Stale: the hold keeps sending torque, so the watchdog never trips during it and the pose
     // stays. (Counted from here: a scheduling stall of this loaded test machine longer than the
     // 20 ms watchdog while the hand is followed is not what this checks; it is printed.)
-    let before = rig.sim.control("stats");
+    let before = rig.sim.stats();
     eprintln!(
         "torque timeouts before the hold: {}",
-        field(&before, "torque_timeouts")
+        before["torque_timeouts"]
     );
     rig.wait_state(Duration::from_secs(2), "holding", |s| s.holding == 1);
     std::thread::sleep(Duration::from_millis(500));
-    let status = rig.sim.control("stats");
+    let status = rig.sim.stats();
     assert_eq!(
-        field(&status, "torque_timeouts"),
-        field(&before, "torque_timeouts"),
+        status["torque_timeouts"], before["torque_timeouts"],
         "the watchdog tripped while the hand held: {status}"
     );
     let held = rig.states.poll_latest().unwrap();
-    let worst = positions(&held)
+    let worst = positions::<16>(&held)
         .iter()
         .zip(POSE)
         .map(|(a, b)| (a - b).abs())
@@ -377,7 +330,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     // The node stopped: the watchdog zeroes nothing it had not already zeroed.
     let status = rig.stop_node();
     assert!(status.success(), "{status:?}\n{}", rig.log());
-    let status = rig.sim.control("stats");
+    let status = rig.sim.stats();
     assert!(sim_pwm(&status).iter().all(|p| *p == 0), "{status}");
 }
 
@@ -441,8 +394,8 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    let status = sim.control("stats");
-    let index_1: f64 = field(&status, "position")
+    let status = sim.stats();
+    let index_1: f64 = status["position"]
         .split(',')
         .nth(1)
         .unwrap()
@@ -457,11 +410,11 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
     // asked for the status.
     let mut status = status;
     let deadline = Instant::now() + Duration::from_secs(2);
-    while field(&status, "system") != "off" && Instant::now() < deadline {
+    while status["system"] != "off" && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(10));
-        status = sim.control("stats");
+        status = sim.stats();
     }
-    assert_eq!(field(&status, "system"), "off", "released: {status}");
+    assert_eq!(status["system"], "off", "released: {status}");
     rig.process("sim-allegro").stop();
 
     let missing = rig.path("ttyACM9");
@@ -515,9 +468,9 @@ fn v3_tells_state_answers_from_the_stream_with_either_payload() {
         // Positions from the stream only: every joint near where the hand rests, none at the
         // injected counts' -166 deg.
         assert!(
-            positions(&s).iter().all(|q| q.abs() < 2.0),
+            positions::<16>(&s).iter().all(|q| q.abs() < 2.0),
             "{payload}: {:?}",
-            positions(&s)
+            positions::<16>(&s)
         );
     }
 }

@@ -13,26 +13,16 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
-use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::hand::HandNode;
+use teleop_e2e::hand::{one_at_a_time, position_command, positions, HandNode};
 use teleop_e2e::rig::Rig as TestRig;
-use teleop_e2e::{bin, Sandbox};
+use teleop_e2e::{bin, Sandbox, Stats};
 use teleop_leap::bus::{Bus, SerialLine};
 use teleop_leap::protocol::xc330;
 use teleop_leap::servos::status;
 use teleop_leap::timing::Timing;
-use teleop_msgs::{control_mode, device_model, units, HandCommand, HandState, NodeHealth};
-
-/// One hand session at a time: each test runs the simulated servos and a node at 500 Hz over
-/// pseudo-terminals and checks rates and timing the hand shows; two at once on a two-core
-/// machine measure each other.
-static ONE: Mutex<()> = Mutex::new(());
-
-fn one_at_a_time() -> MutexGuard<'static, ()> {
-    ONE.lock().unwrap_or_else(|e| e.into_inner())
-}
+use teleop_msgs::{device_model, HandCommand, HandState, NodeHealth};
 
 /// The simulator process's handles: its pty link and control socket.
 struct Sim {
@@ -72,20 +62,11 @@ impl Sim {
         assert!(reply.starts_with("ok"), "{command}: {reply}");
         reply
     }
-}
 
-/// The value of `key` in the simulator's `stats` line.
-fn field(stats: &str, key: &str) -> String {
-    stats
-        .split_whitespace()
-        .find_map(|w| w.strip_prefix(key).and_then(|v| v.strip_prefix('=')))
-        .unwrap_or_else(|| panic!("no {key} in {stats}"))
-        .to_string()
-}
-
-/// A comma-separated list field, per servo.
-fn list(stats: &str, key: &str) -> Vec<String> {
-    field(stats, key).split(',').map(str::to_string).collect()
+    /// The simulator's `stats` (per servo: comma-separated lists).
+    fn stats(&self) -> Stats {
+        teleop_e2e::sim_stats(&self.control)
+    }
 }
 
 /// The node against the simulator process.
@@ -103,41 +84,22 @@ fn start(object: &str, extra: &[&str], config: &str) -> Rig {
 }
 
 fn command(targets: &[f32; 16]) -> HandCommand {
-    let mut c = HandCommand {
-        hand_model: device_model::LEAP,
-        joint_count: 16,
-        control_mode: control_mode::POSITION,
-        units: units::PHYSICAL,
-        ..Default::default()
-    };
-    for (j, t) in c.joints.iter_mut().zip(targets) {
-        j.target = *t;
-    }
-    c
+    position_command(device_model::LEAP, targets)
 }
 
-fn positions(s: &HandState) -> [f32; 16] {
-    let mut p = [0.0; 16];
-    for (v, j) in p.iter_mut().zip(&s.joints) {
-        *v = j.position;
-    }
-    p
+/// The hand up with every servo's state fresh.
+fn up_and_fresh(s: &HandState) -> bool {
+    s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
 }
 
-/// The newest health report of the node, waiting up to 3 s for one.
-fn health(rig: &Rig) -> NodeHealth {
-    let start = Instant::now();
-    loop {
-        if let Some(h) = rig.node_health().pop() {
-            return h;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(3),
-            "no health\n{}",
-            rig.log()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+/// Stops the node (SIGINT): it exits cleanly, its log says `said`, and the simulator has every
+/// servo's torque off.
+fn stop_torque_off(rig: &mut Rig, said: &str) {
+    let exit = rig.node().stop();
+    assert!(exit.success(), "{exit:?}\n{}", rig.log());
+    assert!(rig.log().contains(said), "{said:?} in\n{}", rig.log());
+    let stats = rig.sim.stats();
+    assert!(stats["torque"].split(',').all(|t| t == "0"), "{stats}");
 }
 
 /// Waits (up to 3 s) for a health report of the node that satisfies `ok`.
@@ -185,15 +147,15 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     rig.wait_log(Duration::from_secs(2), "LEAP Hand connected");
 
     // Bring-up: every servo in current-based position control (5) with its torque on.
-    let stats = rig.sim.ok("stats");
-    assert!(list(&stats, "mode").iter().all(|m| m == "5"), "{stats}");
-    assert!(list(&stats, "torque").iter().all(|t| t == "1"), "{stats}");
+    let stats = rig.sim.stats();
+    assert!(stats["mode"].split(',').all(|m| m == "5"), "{stats}");
+    assert!(stats["torque"].split(',').all(|t| t == "1"), "{stats}");
 
     // Every cycle answered whole: a state per Fast Sync Read the simulator served, every servo
     // read in it (behaviour, not a rate: the machine may be busy).
     rig.states.drain(|_| {});
-    let served = |stats: &str| -> u64 { field(stats, "fast_sync_read").parse().unwrap() };
-    let before = served(&rig.sim.ok("stats"));
+    let served = |stats: Stats| -> u64 { stats["fast_sync_read"].parse().unwrap() };
+    let before = served(rig.sim.stats());
     let start = Instant::now();
     let (mut n, mut all_fresh, mut seqs) = (0u64, 0u64, (u64::MAX, 0u64));
     while start.elapsed() < Duration::from_secs(1) {
@@ -206,7 +168,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
         });
         std::thread::sleep(Duration::from_millis(2));
     }
-    let reads = served(&rig.sim.ok("stats")) - before;
+    let reads = served(rig.sim.stats()) - before;
     let cycles = seqs.1 + 1 - seqs.0;
     eprintln!(
         "{cycles} cycles ({n} states received, {all_fresh} with every servo read), {reads} Fast \
@@ -221,7 +183,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
 
     // A commanded pose, reached.
     let s = rig.send(&command(&POSE), Duration::from_millis(2500));
-    let p = positions(&s);
+    let p = positions::<16>(&s);
     let worst = p
         .iter()
         .zip(POSE)
@@ -236,7 +198,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     let mut closed = POSE;
     closed[5..8].fill(1.2);
     let s = rig.send(&command(&closed), Duration::from_millis(2500));
-    let p = positions(&s);
+    let p = positions::<16>(&s);
     let closure: f32 = p[5..8].iter().sum();
     let current: f32 = (5..8).map(|j| s.joints[j].current_ma.abs()).sum();
     eprintln!(
@@ -251,9 +213,9 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
         s.joints[6].speed
     );
     assert!(current > free_current + 100.0, "pressing: {current} mA");
-    let stats = rig.sim.ok("stats");
-    let contact: Vec<f64> = list(&stats, "contact")
-        .iter()
+    let stats = rig.sim.stats();
+    let contact: Vec<f64> = stats["contact"]
+        .split(',')
         .map(|v| v.parse().unwrap())
         .collect();
     assert!(
@@ -310,17 +272,17 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     assert!((0..16)
         .filter(|j| *j != 6)
         .all(|j| s.joints[j].status & (status::ALERT | status::SILENT) == 0));
-    let stats = rig.sim.ok("stats");
-    let torque = list(&stats, "torque");
+    let stats = rig.sim.stats();
+    let torque: Vec<&str> = stats["torque"].split(',').collect();
     assert_eq!(torque[6], "0", "{stats}");
-    assert_eq!(torque.iter().filter(|t| *t == "1").count(), 15, "{stats}");
-    assert_eq!(field(&stats, "reboot"), "0", "no automatic reboot: {stats}");
+    assert_eq!(torque.iter().filter(|t| **t == "1").count(), 15, "{stats}");
+    assert_eq!(stats["reboot"], "0", "no automatic reboot: {stats}");
     wait_health(&rig, "one servo in a hardware error", |h| {
         h.detail("hw_error_servos") == Some(1.0)
     });
 
     // Bad bytes and CRC errors: counted, survived.
-    let before = health(&rig);
+    let before = rig.latest_health();
     rig.sim.ok("noise 200");
     rig.sim.ok("crc 0.1");
     std::thread::sleep(Duration::from_millis(500));
@@ -339,21 +301,11 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     // The adapter unplugged and back: the node reopens it without a restart.
     rig.sim.ok("unplug 500");
     rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
-    rig.wait_state(Duration::from_secs(10), "the hand back", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(10), "the hand back", up_and_fresh);
     wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
 
     // Stop: torque off on every servo.
-    let exit = rig.node().stop();
-    assert!(exit.success(), "{exit:?}\n{}", rig.log());
-    assert!(
-        rig.log().contains("stopping: torque off on 16 servos"),
-        "{}",
-        rig.log()
-    );
-    let stats = rig.sim.ok("stats");
-    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+    stop_torque_off(&mut rig, "stopping: torque off on 16 servos");
 }
 
 /// What the servos after a silent one in a Fast Sync Read chain do is not documented: the
@@ -363,9 +315,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
 fn a_silent_servo_that_truncates_the_chain_is_the_only_one_left_out() {
     let _one = one_at_a_time();
     let rig = start("none", &["--fast-sync-missing", "truncate"], "");
-    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.sim.ok("silent 9");
     rig.wait_log(Duration::from_secs(2), "ring_mcp_forward (id 9) silent");
     rig.wait_state(Duration::from_secs(2), "id 9 marked silent", |s| {
@@ -431,29 +381,29 @@ fn teleop_leap_service_commands_against_the_simulator() {
         "2",
     ]);
     assert!(ok, "{text}");
-    let stats = sim.ok("stats");
-    let index_pip: f64 = list(&stats, "joint")[2].parse().unwrap();
+    let stats = sim.stats();
+    let index_pip: f64 = stats["joint"].split(',').nth(2).unwrap().parse().unwrap();
     assert!(
         (index_pip - 40f64.to_radians()).abs() < 0.05,
         "index_pip at {index_pip} rad after `move index_pip 40`: {stats}\n{text}"
     );
-    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+    assert!(stats["torque"].split(',').all(|t| t == "0"), "{stats}");
 
     // `home`: every joint ramped to the profile's open pose (all 0 rad: flat), then torque off.
     let (ok, text) = rig
         .sandbox
         .cli(&["leap", "--port", &port, "home", "--seconds", "3"]);
     assert!(ok, "{text}");
-    let stats = sim.ok("stats");
-    let joints: Vec<f64> = list(&stats, "joint")
-        .iter()
+    let stats = sim.stats();
+    let joints: Vec<f64> = stats["joint"]
+        .split(',')
         .map(|v| v.parse().unwrap())
         .collect();
     assert!(
         joints.iter().all(|q| q.abs() < 0.05),
         "home: {joints:?}\n{text}"
     );
-    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
+    assert!(stats["torque"].split(',').all(|t| t == "0"), "{stats}");
 
     // An overloaded servo is cleared by `reboot --id`.
     sim.ok("overload 3");
@@ -464,8 +414,12 @@ fn teleop_leap_service_commands_against_the_simulator() {
         .cli(&["leap", "--port", &port, "reboot", "--id", "3"]);
     assert!(ok && text.contains("index_dip (id 3): rebooted"), "{text}");
     std::thread::sleep(Duration::from_millis(500));
-    let stats = sim.ok("stats");
-    assert_eq!(list(&stats, "hardware_error")[3], "0", "{stats}");
+    let stats = sim.stats();
+    assert_eq!(
+        stats["hardware_error"].split(',').nth(3),
+        Some("0"),
+        "{stats}"
+    );
     rig.process("sim-leap").stop();
 
     let missing = rig.path("ttyUSB9");
@@ -486,9 +440,7 @@ fn teleop_leap_service_commands_against_the_simulator() {
 fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
     let _one = one_at_a_time();
     let rig = start("none", &[], "failed_cycle_limit = 20\n");
-    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     for id in 0..16 {
         rig.sim.ok(&format!("silent {id}"));
     }
@@ -499,9 +451,7 @@ fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
     rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
     rig.wait_log(Duration::from_secs(5), "no servo answers on");
     rig.sim.ok("clear");
-    rig.wait_state(Duration::from_secs(10), "the hand back", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(10), "the hand back", up_and_fresh);
     wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
 }
 
@@ -511,9 +461,7 @@ fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
 fn a_servo_back_from_silence_ramps_to_the_command() {
     let _one = one_at_a_time();
     let mut rig = start("none", &[], "resume_speed = 0.5\n");
-    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.send(&command(&POSE), Duration::from_millis(2500));
     rig.sim.ok("silent 11");
     rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
@@ -564,9 +512,7 @@ fn follow(rig: &mut Rig, cmd: &HandCommand, d: Duration) -> Vec<HandState> {
 fn after_an_unplug_under_a_moving_command_the_hand_ramps_from_where_it_is() {
     let _one = one_at_a_time();
     let mut rig = start("none", &[], "resume_speed = 0.5\n");
-    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.send(&command(&POSE), Duration::from_millis(2500));
     // The adapter goes; once the node has seen it go (the commands fresh all along), the
     // command moves index_pip 1.2 rad away.
@@ -622,9 +568,7 @@ fn after_an_unplug_under_a_moving_command_the_hand_ramps_from_where_it_is() {
 fn the_stop_turns_off_a_servo_the_node_took_for_silent() {
     let _one = one_at_a_time();
     let mut rig = start("none", &[], "silent_retry_ms = 60000\n");
-    rig.wait_state(Duration::from_secs(20), "the hand up", |s| {
-        s.link_up == 1 && s.joints[..16].iter().all(|j| j.status & status::STALE == 0)
-    });
+    rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.sim.ok("silent 11 300");
     rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
     // It hears again; the node looks for it only in a minute.
@@ -632,17 +576,11 @@ fn the_stop_turns_off_a_servo_the_node_took_for_silent() {
         s.joints[11].status & status::SILENT != 0
     });
     std::thread::sleep(Duration::from_millis(500));
-    assert_eq!(field(&rig.sim.ok("stats"), "silent"), "none");
-    let exit = rig.node().stop();
-    assert!(exit.success(), "{exit:?}\n{}", rig.log());
-    assert!(
-        rig.log()
-            .contains("torque off on 15 servos, 1 silent (the broadcast only)"),
-        "{}",
-        rig.log()
+    assert_eq!(rig.sim.stats()["silent"], "none");
+    stop_torque_off(
+        &mut rig,
+        "torque off on 15 servos, 1 silent (the broadcast only)",
     );
-    let stats = rig.sim.ok("stats");
-    assert!(list(&stats, "torque").iter().all(|t| t == "0"), "{stats}");
 }
 
 /// A servo refusing a step of the bring-up (its Current Limit, lowered by another tool, below
@@ -678,9 +616,9 @@ fn a_servo_refusing_its_bring_up_leaves_every_servo_torque_off() {
     );
     // Looked at again, refused again: never a servo with its torque on.
     for _ in 0..10 {
-        let stats = rig.sim.ok("stats");
+        let stats = rig.sim.stats();
         assert!(
-            list(&stats, "torque").iter().all(|t| t == "0"),
+            stats["torque"].split(',').all(|t| t == "0"),
             "{stats}\n{}",
             rig.log()
         );
