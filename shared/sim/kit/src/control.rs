@@ -99,6 +99,17 @@ impl Stats {
         self.0.iter().find(|(k, _)| k == key).map(|(_, v)| v)
     }
 
+    /// The values of a list field (`key=v1,v2,...`, e.g. one per joint); `Err` says which
+    /// field is missing or which value does not parse.
+    pub fn values<T: std::str::FromStr>(&self, key: &str) -> Result<Vec<T>, String> {
+        let text = self
+            .get(key)
+            .ok_or_else(|| format!("no {key} in the stats {self}"))?;
+        text.split(',')
+            .map(|v| v.parse().map_err(|_| format!("{key}: {v:?} in {text:?}")))
+            .collect()
+    }
+
     /// A `stats` answer read back (`ok key=value ...`, as [`answer`] gives it, e.g. a test's
     /// from a simulator's control socket); `Err` says what it is not.
     pub fn parse(answer: &str) -> Result<Self, String> {
@@ -250,6 +261,10 @@ mod tests {
         ] {
             assert!(Stats::parse(bad).is_err(), "{bad}");
         }
+        let lists = Stats::parse("ok pwm=0,120,-3 joint=0.5,x").expect("an ok answer");
+        assert_eq!(lists.values::<i32>("pwm"), Ok(vec![0, 120, -3]));
+        assert!(lists.values::<f64>("joint").is_err(), "x is no number");
+        assert!(lists.values::<f64>("missing").is_err());
         let missing = std::panic::catch_unwind(|| read["missing"].clone());
         assert!(missing.is_err(), "no such key: a panic, as a map's index");
     }

@@ -6,8 +6,8 @@
 //!   `drop P`, `clear`, `stats`, `object NAME`) are the same on every simulator, and a
 //!   device's own words parse through the same [`command::Args`];
 //! - [`control`]: the [`Simulator`] a control socket drives, the one answer format (`ok ...` or
-//!   `error: ...`, one line) and the one `stats` shape (`ok key=value ...`), served on
-//!   `teleop_runtime::control`'s socket;
+//!   `error: ...`, one line) and the one `stats` shape (`ok key=value ...`, [`Stats`], also
+//!   read back by tests), served on `teleop_runtime::control`'s socket;
 //! - [`process`]: the simulator process's `main` (logging, stop signals, the common
 //!   [`SimArgs`], the control socket, exit status);
 //! - [`ethercat`]: where an emulated EtherCAT device serves (a local socket or an interface);

@@ -128,10 +128,7 @@ fn command(targets: &[f32; 16]) -> HandCommand {
 
 /// The simulator's PWM per joint.
 fn sim_pwm(status: &Stats) -> Vec<i32> {
-    status["pwm"]
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect()
+    status.values("pwm").unwrap()
 }
 
 /// A pose clear of the ball: fingers slightly flexed and spread, thumb turned in.
@@ -187,10 +184,7 @@ fn generation(generation: &str) {
     );
     assert!(effort > 0.3, "{generation}: pressing: {effort} N m");
     let status = rig.sim.stats();
-    let contact: Vec<f64> = status["contact"]
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let contact: Vec<f64> = status.values("contact").unwrap();
     assert!(
         contact[1] > 0.0,
         "{generation}: the middle finger touches the ball: {status}"
@@ -395,12 +389,7 @@ fn teleop_allegro_info_against_the_simulator_and_a_missing_adapter() {
         String::from_utf8_lossy(&out.stderr)
     );
     let status = sim.stats();
-    let index_1: f64 = status["position"]
-        .split(',')
-        .nth(1)
-        .unwrap()
-        .parse()
-        .unwrap();
+    let index_1: f64 = status.values("position").unwrap()[1];
     assert!(
         (index_1 - 30f64.to_radians()).abs() < 0.05,
         "index_1 at {index_1} rad after `move index_1 30`: {status}"

@@ -214,10 +214,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     );
     assert!(current > free_current + 100.0, "pressing: {current} mA");
     let stats = rig.sim.stats();
-    let contact: Vec<f64> = stats["contact"]
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let contact: Vec<f64> = stats.values("contact").unwrap();
     assert!(
         contact[1] > 0.0,
         "the middle finger touches the ball: {stats}"
@@ -382,7 +379,7 @@ fn teleop_leap_service_commands_against_the_simulator() {
     ]);
     assert!(ok, "{text}");
     let stats = sim.stats();
-    let index_pip: f64 = stats["joint"].split(',').nth(2).unwrap().parse().unwrap();
+    let index_pip: f64 = stats.values("joint").unwrap()[2];
     assert!(
         (index_pip - 40f64.to_radians()).abs() < 0.05,
         "index_pip at {index_pip} rad after `move index_pip 40`: {stats}\n{text}"
@@ -395,10 +392,7 @@ fn teleop_leap_service_commands_against_the_simulator() {
         .cli(&["leap", "--port", &port, "home", "--seconds", "3"]);
     assert!(ok, "{text}");
     let stats = sim.stats();
-    let joints: Vec<f64> = stats["joint"]
-        .split(',')
-        .map(|v| v.parse().unwrap())
-        .collect();
+    let joints: Vec<f64> = stats.values("joint").unwrap();
     assert!(
         joints.iter().all(|q| q.abs() < 0.05),
         "home: {joints:?}\n{text}"
