@@ -187,6 +187,16 @@ pub fn position_command(hand_model: u8, targets: &[f32]) -> HandCommand {
     c
 }
 
+/// The largest distance of a hand state's joint positions from `targets` (the first
+/// `targets.len()` joints), in the command's units.
+pub fn largest_error(s: &HandState, targets: &[f32]) -> f32 {
+    s.joints
+        .iter()
+        .zip(targets)
+        .map(|(j, t)| (j.position - t).abs())
+        .fold(0.0f32, f32::max)
+}
+
 /// The first `N` joints' positions of a hand state.
 pub fn positions<const N: usize>(s: &HandState) -> [f32; N] {
     let mut p = [0.0; N];
@@ -216,5 +226,7 @@ mod tests {
             j.position = p;
         }
         assert_eq!(positions::<2>(&s), [0.1, 0.2]);
+        assert!((largest_error(&s, &[0.1, 0.0, 0.35]) - 0.2).abs() < 1e-6);
+        assert_eq!(largest_error(&s, &[0.1]), 0.0, "only the joints given");
     }
 }

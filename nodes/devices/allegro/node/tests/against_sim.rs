@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::hand::{one_at_a_time, position_command, positions, HandNode};
+use teleop_e2e::hand::{largest_error, one_at_a_time, position_command, positions, HandNode};
 use teleop_e2e::rig::Rig as TestRig;
 use teleop_e2e::{bin, Sandbox, Stats};
 use teleop_msgs::{device_model, HandCommand, HandState};
@@ -151,14 +151,13 @@ fn generation(generation: &str) {
 
     // PD to a commanded pose.
     let s = rig.command(&POSE, Duration::from_millis(2500));
-    let p = positions::<16>(&s);
-    let worst = p
-        .iter()
-        .zip(POSE)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = largest_error(&s, &POSE);
     eprintln!("{generation}: PD settle error {worst:.4} rad");
-    assert!(worst < 0.05, "{generation}: {p:?} vs {POSE:?}");
+    assert!(
+        worst < 0.05,
+        "{generation}: {:?} vs {POSE:?}",
+        positions::<16>(&s)
+    );
     assert_eq!(s.holding, 0);
 
     // The middle finger closes on the ball: it stops short of its target, pressing harder.
@@ -293,11 +292,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
     );
     rig.wait_state(Duration::from_secs(20), "the hand up", |s| s.link_up == 1);
     let s = rig.command(&POSE, Duration::from_millis(2500));
-    let worst = positions::<16>(&s)
-        .iter()
-        .zip(POSE)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = largest_error(&s, &POSE);
     assert!(worst < 0.05, "PD settle error {worst} rad");
     // Stale: the hold keeps sending torque, so the watchdog never trips during it and the pose
     // stays. (Counted from here: a scheduling stall of this loaded test machine longer than the
@@ -315,11 +310,7 @@ fn v4_with_a_torque_watchdog_and_streaming_on_set_period() {
         "the watchdog tripped while the hand held: {status}"
     );
     let held = rig.states.poll_latest().unwrap();
-    let worst = positions::<16>(&held)
-        .iter()
-        .zip(POSE)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = largest_error(&held, &POSE);
     assert!(worst < 0.05, "held pose error {worst} rad");
     // The node stopped: the watchdog zeroes nothing it had not already zeroed.
     let status = rig.stop_node();

@@ -15,7 +15,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use teleop_e2e::hand::{one_at_a_time, position_command, positions, HandNode};
+use teleop_e2e::hand::{largest_error, one_at_a_time, position_command, positions, HandNode};
 use teleop_e2e::rig::Rig as TestRig;
 use teleop_e2e::{bin, Sandbox, Stats};
 use teleop_leap::bus::{Bus, SerialLine};
@@ -183,14 +183,9 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
 
     // A commanded pose, reached.
     let s = rig.send(&command(&POSE), Duration::from_millis(2500));
-    let p = positions::<16>(&s);
-    let worst = p
-        .iter()
-        .zip(POSE)
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = largest_error(&s, &POSE);
     eprintln!("pose error {worst:.4} rad");
-    assert!(worst < 0.05, "{p:?} vs {POSE:?}");
+    assert!(worst < 0.05, "{:?} vs {POSE:?}", positions::<16>(&s));
     assert_eq!(s.holding, 0);
     let free_current: f32 = (5..8).map(|j| s.joints[j].current_ma.abs()).sum();
 
