@@ -31,7 +31,8 @@ pub struct RampedMove<const N: usize> {
     limits: [(f64, f64); N],
     lasts: Duration,
     until: Option<Instant>,
-    start: Option<[f64; N]>,
+    /// True once the hand was seen (the start and the goal fixed).
+    seen: bool,
     goal: [f64; N],
 }
 
@@ -57,7 +58,7 @@ impl<const N: usize> RampedMove<N> {
             limits,
             lasts,
             until: None,
-            start: None,
+            seen: false,
             goal: [0.0; N],
         }
     }
@@ -76,10 +77,10 @@ impl<const N: usize> RampedMove<N> {
     /// Where the hand is this cycle, rad: the first time fixes where the ramp starts and the
     /// goal (the aim within the limits, a [`Aim::Joint`]'s other joints where they are).
     pub fn seen(&mut self, at: &[f64; N]) {
-        if self.start.is_some() {
+        if self.seen {
             return;
         }
-        self.start = Some(*at);
+        self.seen = true;
         self.resume.held_at(at);
         self.goal = match self.aim {
             Aim::Pose(p) => p,
@@ -99,7 +100,7 @@ impl<const N: usize> RampedMove<N> {
     /// The target of this cycle: hold until the hand was [`seen`](Self::seen), then one ramp
     /// step further toward the goal.
     pub fn target(&mut self) -> Target<N> {
-        if self.start.is_none() {
+        if !self.seen {
             return Target::Hold;
         }
         let mut target = self.goal;
@@ -109,7 +110,7 @@ impl<const N: usize> RampedMove<N> {
 
     /// Where the move goes (known once the hand was seen).
     pub fn goal(&self) -> Option<&[f64; N]> {
-        self.start.map(|_| &self.goal)
+        self.seen.then_some(&self.goal)
     }
 
     /// The joints the aim names: all for a pose, the one for a joint.
@@ -124,7 +125,7 @@ impl<const N: usize> RampedMove<N> {
     /// before the hand was seen or when every one is there).
     pub fn largest_error(&self, reached: &[f64; N]) -> (usize, f64) {
         let mut worst = (self.aimed().start.min(N.saturating_sub(1)), 0.0f64);
-        if self.start.is_none() {
+        if !self.seen {
             return worst;
         }
         for j in self.aimed() {
