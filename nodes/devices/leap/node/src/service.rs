@@ -130,8 +130,12 @@ fn joint_index(settings: &Settings, profile: &HandProfile, text: &str) -> anyhow
     })
 }
 
+/// The least a service command waits for a reply beyond its wire time and return delay: one
+/// question at a time, nothing to keep up with, so a loaded host's stall is no lost reply.
+const SERVICE_REPLY_SLACK: Duration = Duration::from_millis(100);
+
 /// Opens the port, naming a missing adapter plainly; the bus allows the servos' longest
-/// return delay (they may not have been brought up).
+/// return delay (they may not have been brought up) and at least [`SERVICE_REPLY_SLACK`].
 fn open(settings: &Settings) -> anyhow::Result<Bus<SerialLine>> {
     let line = SerialLine::open(&settings.port, settings.baud).map_err(|e| {
         anyhow::anyhow!(
@@ -139,7 +143,11 @@ fn open(settings: &Settings) -> anyhow::Result<Bus<SerialLine>> {
             settings.port
         )
     })?;
-    let timing = Timing::new(settings.baud, u8::MAX - 1, settings.reply_slack);
+    let timing = Timing::new(
+        settings.baud,
+        u8::MAX - 1,
+        settings.reply_slack.max(SERVICE_REPLY_SLACK),
+    );
     Ok(Bus::new(line, timing))
 }
 
