@@ -31,9 +31,11 @@
 //!    `bench_leap_sdk.py` (next to this file) brings the hand up as the LEAP API does, then loops
 //!    without sleeping over one GroupSyncWrite of Goal Position (`write_desired_pos`) and one
 //!    `GroupSyncRead(126, 10).fastSyncRead()` with the values taken out (`read_pos_vel_cur`);
-//!    timed by the same tap. Skipped, with the reason, without python3 or `dynamixel_sdk`.
+//!    timed by the same tap; twice, with the servos' Return Delay Time at 0 (as the API's
+//!    readme advises, and as the node left it) and at 500 us (as the servos ship: the API never
+//!    writes it). Skipped, with the reason, without python3 or `dynamixel_sdk`.
 //!
-//! 20 s after 2 s warm-up for 1-3.
+//! 20 s after 2 s warm-up for 1-3, 10 s after 2 s for the others.
 //!
 //! Run: `cargo build --release --workspace --bins --examples && cargo run --release -p teleop-e2e --example bench_leap`
 #![allow(clippy::unwrap_used, clippy::print_stdout)]
@@ -100,7 +102,7 @@ fn main() {
         return_delay: SHIPPED_RETURN_DELAY,
         servo: ServoOptions::default(),
         bus: BusOptions {
-            fast_sync_missing: Missing::Omit,
+            fast_sync_missing: Missing::Truncate,
             crc_status: false,
         },
         limits: leap_limits().unwrap(),
@@ -139,8 +141,20 @@ fn main() {
     for rate in [1000, 2000] {
         raised.push((rate, node_alone(&sandbox, rate)));
     }
-    // 4: the shipped API's way.
-    let sdk = sdk_loop(&link);
+    // 4: the shipped API's way, with the Return Delay Time its readme advises (0, as the node
+    // left it) and as the servos ship (the API never writes it).
+    let mut sdk = Vec::new();
+    for delay in [0, SHIPPED_RETURN_DELAY] {
+        sim.with_bus(|bus, _| {
+            for id in 0..SERVOS as u8 {
+                let error = bus
+                    .servo_mut(id)
+                    .map(|s| s.write(xc330::RETURN_DELAY_TIME, &[delay]));
+                assert_eq!(error, Some(0), "Return Delay Time of servo {id}");
+            }
+        });
+        sdk.push((delay, sdk_loop(&link)));
+    }
 
     stop.store(true, Ordering::SeqCst);
     let events = collector.join().unwrap();
@@ -172,14 +186,17 @@ fn main() {
         println!("1. the node alone (no commands), rate_hz {rate}");
         full_state_loop(&events, window, Some(1_000_000_000 / u64::from(rate)));
     }
-    match sdk {
-        Ok(window) => {
-            println!(
-                "4. the shipped API's way: dynamixel_sdk GroupSyncWrite + GroupSyncRead(126, 10).fastSyncRead(), no sleep"
-            );
-            full_state_loop(&events, window, None);
+    for (delay, run) in sdk {
+        let delay_us = wire::return_delay_us(delay);
+        match run {
+            Ok(window) => {
+                println!(
+                    "4. the shipped API's way: dynamixel_sdk GroupSyncWrite + GroupSyncRead(126, 10).fastSyncRead(), no sleep, return delay {delay_us} us"
+                );
+                full_state_loop(&events, window, None);
+            }
+            Err(why) => println!("4. the shipped API's way: skipped: {why}"),
         }
-        Err(why) => println!("4. the shipped API's way: skipped: {why}"),
     }
     println!("  tap events lost (full): {}", tap.overflow());
     println!("  load average (1 min) after: {}", loadavg());
