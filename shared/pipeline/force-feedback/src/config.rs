@@ -114,6 +114,16 @@ pub struct EstimateConfig {
     pub current_threshold_ma: f32,
     /// Glove units per mA above the threshold. Default 1.0.
     pub current_gain_per_ma: f32,
+    /// Current counts only toward the joint's closed angle, as effort does (a hand whose
+    /// current is signed like its joint angle: the servo pushes the finger closed against
+    /// something), and not while the joint is beyond its open angle. Default false: the
+    /// current's magnitude counts.
+    pub current_toward_closing: bool,
+    /// Current counts as contact only while the joint moves slower than this (rad/s), as
+    /// [`EstimateConfig::effort_stall_speed_rad_s`] for effort: the current a servo draws to
+    /// move a finger through free space is not contact. 0 (the default) counts it at any
+    /// speed; a joint whose speed is unknown counts too.
+    pub current_stall_speed_rad_s: f32,
     /// Estimate contact from the magnitude of the joint effort (hands that
     /// measure or command torque). Default true.
     pub use_effort: bool,
@@ -139,6 +149,8 @@ impl Default for EstimateConfig {
             use_current: true,
             current_threshold_ma: 300.0,
             current_gain_per_ma: 1.0,
+            current_toward_closing: false,
+            current_stall_speed_rad_s: 0.0,
             use_effort: true,
             effort_threshold_nm: 0.05,
             effort_gain_per_nm: 2000.0,
@@ -272,6 +284,10 @@ impl FeedbackConfig {
         check_non_negative("estimate.position_gain", e.position_gain)?;
         check_non_negative("estimate.current_threshold_ma", e.current_threshold_ma)?;
         check_non_negative("estimate.current_gain_per_ma", e.current_gain_per_ma)?;
+        check_non_negative(
+            "estimate.current_stall_speed_rad_s",
+            e.current_stall_speed_rad_s,
+        )?;
         check_non_negative("estimate.effort_threshold_nm", e.effort_threshold_nm)?;
         check_non_negative("estimate.effort_gain_per_nm", e.effort_gain_per_nm)?;
         check_non_negative(

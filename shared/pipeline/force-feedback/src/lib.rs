@@ -56,6 +56,8 @@
 //! use_current = true
 //! current_threshold_ma = 300.0     # mA, on |current|
 //! current_gain_per_ma = 1.0        # glove units per mA
+//! current_toward_closing = false   # true: only current toward the closed angle counts
+//! current_stall_speed_rad_s = 0.0  # current counts only below this joint speed (0: always)
 //! use_effort = true
 //! effort_threshold_nm = 0.05       # N m, of the effort toward the closed angle
 //! effort_gain_per_nm = 2000.0      # glove units per N m
@@ -300,25 +302,40 @@ impl ForceFeedback {
                 best = (d, ContactSource::PositionError);
             }
         }
+        let speed = hand.speed_rad_s[joint];
+        // A joint slower than `stall` is stopped by something (0: any speed counts; an unknown
+        // speed counts too).
+        let stalled = |stall: f32| stall <= 0.0 || !speed.is_finite() || speed.abs() < stall;
+        // A joint more open than its open angle is being pulled back from an overshoot or its
+        // stop, not pressed by something in the hand (seen when a starved host let a finger fly
+        // open into its joint limit and its PD then pushed it back).
+        // (Unknown, NaN, counts: nothing says it is beyond.)
+        let not_beyond_open = hand.measured[joint] >= 0.0 || hand.measured[joint].is_nan();
         let current = hand.current_ma[joint];
-        if e.use_current && current.is_finite() {
-            let above = non_negative(current.abs() - e.current_threshold_ma);
+        if e.use_current && current.is_finite() && stalled(e.current_stall_speed_rad_s) {
+            // Toward closing (as effort below), or the magnitude for a hand whose current has
+            // no direction.
+            let pushing = if e.current_toward_closing {
+                if not_beyond_open {
+                    current * self.closing[joint]
+                } else {
+                    0.0
+                }
+            } else {
+                current.abs()
+            };
+            let above = non_negative(pushing - e.current_threshold_ma);
             let d = non_negative(e.current_gain_per_ma * above);
             if d > best.0 {
                 best = (d, ContactSource::Current);
             }
         }
         let effort = hand.effort_nm[joint];
-        let speed = hand.speed_rad_s[joint];
-        let stalled = e.effort_stall_speed_rad_s <= 0.0
-            || !speed.is_finite()
-            || speed.abs() < e.effort_stall_speed_rad_s;
-        // A joint more open than its open angle is being pulled back from an overshoot or its
-        // stop, not pressed by something in the hand (seen when a starved host let a finger fly
-        // open into its joint limit and its PD then pushed it back).
-        // (Unknown, NaN, counts: nothing says it is beyond.)
-        let not_beyond_open = hand.measured[joint] >= 0.0 || hand.measured[joint].is_nan();
-        if e.use_effort && effort.is_finite() && stalled && not_beyond_open {
+        if e.use_effort
+            && effort.is_finite()
+            && stalled(e.effort_stall_speed_rad_s)
+            && not_beyond_open
+        {
             // Only an effort toward the closed angle: something resists the finger closing,
             // which is what the glove renders (it pushes the operator's finger open). The
             // effort of a finger pulled open, or held against a push from outside, is not.

@@ -677,15 +677,21 @@ fn estimate_config() -> BoxedStrategy<EstimateConfig> {
             non_neg(0.0, 10_000.0),
             prop_oneof![Just(0.0_f32), Just(0.07), Just(0.5), Just(f32::MAX)],
         ),
+        (
+            any::<bool>(),
+            prop_oneof![Just(0.0_f32), Just(0.07), Just(0.5), Just(f32::MAX)],
+        ),
     )
         .prop_map(
-            |(up, pt, pg, uc, ct, cg, (ue, et, eg, es))| EstimateConfig {
+            |(up, pt, pg, uc, ct, cg, (ue, et, eg, es), (cc, cs))| EstimateConfig {
                 use_position_error: up,
                 position_error_threshold: pt,
                 position_gain: pg,
                 use_current: uc,
                 current_threshold_ma: ct,
                 current_gain_per_ma: cg,
+                current_toward_closing: cc,
+                current_stall_speed_rad_s: cs,
                 use_effort: ue,
                 effort_threshold_nm: et,
                 effort_gain_per_nm: eg,
@@ -938,6 +944,62 @@ fn effort_counts_as_contact_only_while_the_joint_is_stalled() {
         inputs(t, Tactile::Absent, Some(hand(1.0)))
     });
     assert_eq!(out.source[2], ContactSource::Effort);
+}
+
+#[test]
+fn a_servos_current_counts_only_toward_closing_and_while_stalled() {
+    // The LEAP Hand's glove middle finger feels its middle flexion servos' current (profile).
+    let leap = HandProfile::builtin("leap").expect("shipped profile");
+    let pip = leap.joint_index("middle_pip").expect("joint");
+    let mut config = direct_config();
+    config.estimate = EstimateConfig {
+        use_position_error: false,
+        use_effort: false,
+        current_threshold_ma: 150.0,
+        current_gain_per_ma: 3.0,
+        current_toward_closing: true,
+        current_stall_speed_rad_s: 0.07,
+        ..EstimateConfig::default()
+    };
+    let mut ff = ForceFeedback::new(config, &leap).expect("valid config");
+    let hand = |current: f32, speed: f32, measured: f32| {
+        let mut h = HandInput::default();
+        h.current_ma[pip] = current;
+        h.speed_rad_s[pip] = speed;
+        h.measured[pip] = measured;
+        h
+    };
+    let mut t = 0;
+    // Stopped by the object, pushing closed: (250 - 150) mA x 3 = 300.
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(250.0, 0.0, 0.5)))
+    });
+    assert_eq!((out.force[2], out.source[2]), (300, ContactSource::Current));
+    // The same current while the finger moves through free space is what moving takes.
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(250.0, 1.0, 0.5)))
+    });
+    assert_eq!((out.force[2], out.source[2]), (0, ContactSource::None));
+    // Pulled open (negative current), or past its open angle: nothing in the hand.
+    for (current, measured) in [(-250.0, 0.5), (250.0, -0.1)] {
+        let out = run(&mut ff, &mut t, 3, |t| {
+            inputs(t, Tactile::Absent, Some(hand(current, 0.0, measured)))
+        });
+        assert_eq!(
+            (out.force[2], out.source[2]),
+            (0, ContactSource::None),
+            "{current} mA at {measured}"
+        );
+    }
+    // Without the direction (the default), the magnitude counts.
+    let mut config = direct_config();
+    config.estimate.use_position_error = false;
+    config.estimate.current_threshold_ma = 150.0;
+    let mut ff = ForceFeedback::new(config, &leap).expect("valid config");
+    let out = run(&mut ff, &mut t, 3, |t| {
+        inputs(t, Tactile::Absent, Some(hand(-250.0, 1.0, 0.5)))
+    });
+    assert_eq!(out.source[2], ContactSource::Current);
 }
 
 #[test]

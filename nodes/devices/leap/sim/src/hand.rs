@@ -24,8 +24,10 @@ pub const JOINTS: usize = 16;
 /// Fingers: index, middle, ring, thumb.
 pub const FINGERS: usize = 4;
 
-/// Each finger's flexing joints (whose sum is its closure), motor IDs.
-pub const FLEXING: [[usize; 3]; FINGERS] = [[1, 2, 3], [5, 6, 7], [9, 10, 11], [13, 14, 15]];
+/// Each finger's flexing joints (whose sum is its closure), motor IDs: a long finger's MCP
+/// forward, PIP and DIP; the thumb's 12 (which swings it under the palm) and 14, 15 (which bend
+/// it; 13 turns it about its own length and closes nothing).
+pub const FLEXING: [[usize; 3]; FINGERS] = [[1, 2, 3], [5, 6, 7], [9, 10, 11], [12, 14, 15]];
 
 /// The joint limits of the builtin LEAP profile (`config/hands/leap.toml`: the URDF's, rad,
 /// motor-ID order).
@@ -57,7 +59,7 @@ pub struct VirtualObject {
 
 impl VirtualObject {
     /// A ball in the palm: every finger and the thumb meet it about a third closed (the long
-    /// fingers' flexing joints can close by about 6 rad in all, the thumb's by about 7).
+    /// fingers' flexing joints can close by about 6 rad in all, the thumb's by about 6).
     pub fn ball() -> Self {
         Self {
             contact: [Some(1.5), Some(1.5), Some(1.5), Some(1.2)],
