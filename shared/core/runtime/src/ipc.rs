@@ -265,26 +265,26 @@ impl IpcSettings {
                 value: prefix.to_string(),
                 reason: format!("{e:?}; use letters, digits, '_' or '-'"),
             })?;
-        if let Some(root) = &self.root {
-            let mut root = root.clone();
-            if !root.ends_with('/') {
-                root.push('/');
-            }
-            std::fs::create_dir_all(&root).map_err(|e| RuntimeError::Settings {
-                what: "root path",
-                value: root.clone(),
-                reason: e.to_string(),
-            })?;
-            check_root(std::path::Path::new(&root))?;
+        // The root is made if missing (iceoryx2 would make its default one on first use, and
+        // the session lock and the e-stop latches live in it before that) and checked: the
+        // default root is shared by every user of the machine, a configured one may be too.
+        let mut root = self.root.as_deref().unwrap_or(DEFAULT_ROOT).to_string();
+        if !root.ends_with('/') {
+            root.push('/');
+        }
+        std::fs::create_dir_all(&root).map_err(|e| RuntimeError::Settings {
+            what: "root path",
+            value: root.clone(),
+            reason: e.to_string(),
+        })?;
+        check_root(std::path::Path::new(&root))?;
+        if self.root.is_some() {
             let path = Path::new(root.as_bytes()).map_err(|e| RuntimeError::Settings {
                 what: "root path",
                 value: root.clone(),
                 reason: format!("{e:?}"),
             })?;
             config.global.set_root_path(&path);
-        } else if std::path::Path::new(DEFAULT_ROOT).exists() {
-            // iceoryx2's default root, shared by every user of the machine: checked the same.
-            check_root(std::path::Path::new(DEFAULT_ROOT))?;
         }
         Ok(config)
     }
@@ -796,6 +796,17 @@ mod tests {
         let _again = settings
             .lock_session()
             .expect("free once the holder is gone");
+    }
+
+    #[test]
+    fn a_session_on_a_root_not_made_yet_makes_it() {
+        // As on a machine just booted, where iceoryx2's default /tmp/iceoryx2 is not there
+        // until something makes it (the default root takes this same path).
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("not/there/yet");
+        let settings = IpcSettings::isolated(&root);
+        let _held = settings.lock_session().expect("the root is made");
+        assert!(root.is_dir());
     }
 
     #[test]
