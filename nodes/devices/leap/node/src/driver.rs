@@ -14,7 +14,8 @@
 //! - a reply with a bad CRC, or bytes that are no packet: counted; the blocks of the reply
 //!   whose CRC checks are taken, the others' state is the last one read;
 //! - no reply, or a reply without some servos' blocks (cut short at a silent one): the first
-//!   servo missing is pinged (asked again after a lost reply) and, silent, named and left out
+//!   servo missing [`SILENT_AFTER`] cycles in a row is pinged (asked again after a lost reply)
+//!   and, silent, named and left out
 //!   of the reads and goals (its state marked stale); each is looked for again every
 //!   `silent_retry_ms` and brought back when it answers (its goal set where it is; brought up
 //!   again if it lost its torque), ramping to the commands at `resume_speed`;
@@ -75,6 +76,9 @@ pub struct Counters {
 
 /// Cycles over which the exchange time's 99th percentile is taken.
 pub const P99_WINDOW: u32 = 500;
+
+/// Cycles in a row a servo's block must be missing before it is pinged and, silent, left out.
+pub const SILENT_AFTER: u8 = 3;
 
 /// One cycle, as the host sees it.
 #[derive(Debug, Clone, Copy)]
@@ -194,6 +198,8 @@ pub struct Up<L> {
     /// Servos brought up again while the hand runs: the ramp from where each held to the
     /// commands (the core's `Resume`, one joint each), until it has caught up.
     rejoin: [Option<Resume>; SERVOS],
+    /// Cycles in a row each servo's block was missing from a reply that came.
+    misses: [u8; SERVOS],
 }
 
 impl<H: Host, L: Line> Poll<'_, '_, H, L> {
@@ -254,14 +260,27 @@ impl<H: Host, L: Line> Poll<'_, '_, H, L> {
         }
     }
 
-    /// Servos asked sent no block: the first of them is pinged (asked again after a lost
-    /// reply) and, silent, named and left out. Only the first: a chain cut short at a silent
-    /// servo loses the blocks after it too, and those are asked again next cycle (a ping costs
-    /// a reply's timeout, and sixteen would stall the loop).
+    /// Servos asked sent no block: once the first of them has been missing [`SILENT_AFTER`]
+    /// cycles in a row (one late reply on a loaded host, or one burst of noise, is no silent
+    /// servo), it is pinged (asked again after a lost reply) and, silent, named and left out.
+    /// Only the first: a chain cut short at a silent servo loses the blocks after it too, and
+    /// those are asked again next cycle (a ping costs a reply's timeout, and sixteen would
+    /// stall the loop).
     fn find_silent(&mut self, up: &mut Up<L>, missing: Mask) -> Result<(), BusError> {
+        for (j, m) in up.misses.iter_mut().enumerate() {
+            *m = if missing & bit(j) != 0 {
+                m.saturating_add(1)
+            } else {
+                0
+            };
+        }
         let Some(j) = joints(missing).next() else {
             return Ok(());
         };
+        if up.misses[j] < SILENT_AFTER {
+            return Ok(());
+        }
+        up.misses[j] = 0;
         match bringup::ping(&mut up.bus, self.settings.ids[j]) {
             Ok(_) => Ok(()),
             Err(e @ BusError::Io(_)) => Err(e),
@@ -449,6 +468,7 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             read: FastRead::EMPTY,
             p99: P99::new(P99_WINDOW),
             rejoin: [None; SERVOS],
+            misses: [0; SERVOS],
         };
         for j in alerts {
             self.report_alert(&mut up, j);
@@ -544,10 +564,10 @@ impl<H: Host, L: Line> Transport for Poll<'_, '_, H, L> {
             // short or damaged).
             let applied = up.servos.apply(&ask[..n], &up.read);
             bad = read.is_err() || applied.missing != 0;
-            if applied.missing != 0 && !matches!(read, Err(BusError::Corrupt(_))) {
+            if !matches!(read, Err(BusError::Corrupt(_))) {
                 // Which is silent: a chain may end its reply at a silent servo, leaving out
                 // the ones after it (not documented: docs/devices/leap.md, "Unknown"). Noise
-                // (a reply that does not check) names nobody.
+                // (a reply that does not check) names nobody and counts no miss.
                 self.find_silent(up, applied.missing)
                     .map_err(|e| lost(&settings.port, e))?;
             }

@@ -425,3 +425,69 @@ fn a_servo_back_from_silence_with_its_torque_on_only_gets_its_goal_set() {
         )]
     );
 }
+
+/// Makes servo 9 deaf from the third cycle for `deaf_for` cycles; records the cycles in which
+/// it was taken for silent.
+struct Briefly {
+    deaf: Arc<Mutex<Option<u8>>>,
+    deaf_for: u32,
+    cycles: u32,
+    silent_at: Vec<u32>,
+}
+
+impl Host for Briefly {
+    fn stop_requested(&self) -> bool {
+        self.cycles >= 20
+    }
+    fn target(&mut self) -> Target {
+        Target::Hold
+    }
+    fn connected(&mut self, _: &Connected<'_>) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn cycle(&mut self, cycle: &Cycle<'_>) -> anyhow::Result<()> {
+        self.cycles += 1;
+        if cycle.servos.silent() != 0 {
+            self.silent_at.push(self.cycles);
+        }
+        if self.cycles == 2 {
+            *self.deaf.lock().unwrap() = Some(9);
+        }
+        if self.cycles == 2 + self.deaf_for {
+            *self.deaf.lock().unwrap() = None;
+        }
+        Ok(())
+    }
+    fn link_down(&mut self, down: &Down<'_>) -> anyhow::Result<()> {
+        anyhow::bail!("down: {}", down.why)
+    }
+}
+
+#[test]
+fn a_servo_is_silent_only_after_missing_several_cycles_in_a_row() {
+    let settings = LeapConfig::default().validate().unwrap();
+    let profile = HandProfile::builtin("leap").unwrap();
+    let run = |deaf_for: u32| {
+        let servos = Servos::new(Arc::new(Mutex::new(Vec::new())));
+        let mut host = Briefly {
+            deaf: servos.deaf.clone(),
+            deaf_for,
+            cycles: 0,
+            silent_at: Vec::new(),
+        };
+        let mut line = Some(servos);
+        let mut open = move || line.take().ok_or_else(|| "opened twice".to_string());
+        driver::run_on(&settings, &profile, &mut host, &mut open).unwrap();
+        host.silent_at
+    };
+    // Missing fewer cycles than SILENT_AFTER (a late reply, a burst of noise): never left out.
+    let brief = run(u32::from(driver::SILENT_AFTER) - 1);
+    assert!(brief.is_empty(), "taken for silent at cycles {brief:?}");
+    // Missing longer: left out from the cycle its SILENT_AFTER-th miss is found.
+    let long = run(10);
+    assert_eq!(
+        long.first(),
+        Some(&(2 + u32::from(driver::SILENT_AFTER))),
+        "{long:?}"
+    );
+}
