@@ -225,6 +225,76 @@ impl Admission {
     }
 }
 
+/// A hand profile given to a hand node that it does not fit (checked once, at start, before
+/// anything moves).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ProfileMismatch {
+    /// Another joint count than the hand's.
+    #[error("hand profile {profile:?} has {got} joints; the {hand} has {want} ({layout})")]
+    Joints {
+        /// The profile's name.
+        profile: String,
+        /// The hand.
+        hand: &'static str,
+        /// The profile's joint count.
+        got: usize,
+        /// The hand's.
+        want: usize,
+        /// The hand's joint order, in words.
+        layout: &'static str,
+    },
+    /// A profile for another device model.
+    #[error("hand profile {profile:?} is for device model {got}, not the {hand} ({want})")]
+    Model {
+        /// The profile's name.
+        profile: String,
+        /// The hand.
+        hand: &'static str,
+        /// The profile's model id.
+        got: u8,
+        /// The hand's.
+        want: u8,
+    },
+}
+
+/// What a hand node checks of its profile before it starts: the hand's device model and joint
+/// count (`layout` names the joint order in the error).
+#[derive(Debug, Clone, Copy)]
+pub struct HandKind {
+    /// The hand, in words ("the Allegro Hand" reads "the {hand}").
+    pub hand: &'static str,
+    /// Its `teleop_msgs::device_model`.
+    pub model: u8,
+    /// Its joint count.
+    pub joints: usize,
+    /// Its joint order, in words.
+    pub layout: &'static str,
+}
+
+impl HandKind {
+    /// Refuses a profile that is not for this hand.
+    pub fn check(&self, profile: &HandProfile) -> Result<(), ProfileMismatch> {
+        if profile.joints.len() != self.joints {
+            return Err(ProfileMismatch::Joints {
+                profile: profile.name.clone(),
+                hand: self.hand,
+                got: profile.joints.len(),
+                want: self.joints,
+                layout: self.layout,
+            });
+        }
+        if profile.model_id != self.model {
+            return Err(ProfileMismatch::Model {
+                profile: profile.name.clone(),
+                hand: self.hand,
+                got: profile.model_id,
+                want: self.model,
+            });
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -254,6 +324,34 @@ mod tests {
             j.target = target;
         }
         c
+    }
+
+    #[test]
+    fn a_profile_for_another_hand_is_refused_by_count_then_model() {
+        let allegro = HandKind {
+            hand: "Allegro Hand",
+            model: device_model::ALLEGRO,
+            joints: 16,
+            layout: "index 0-3, middle 4-7, ring 8-11, thumb 12-15",
+        };
+        allegro
+            .check(&HandProfile::builtin("allegro").unwrap())
+            .unwrap();
+        let e = allegro
+            .check(&HandProfile::builtin("revo2").unwrap())
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "hand profile \"revo2\" has 6 joints; the Allegro Hand has 16 (index 0-3, middle \
+             4-7, ring 8-11, thumb 12-15)"
+        );
+        let e = allegro
+            .check(&HandProfile::builtin("leap").unwrap())
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "hand profile \"leap\" is for device model 5, not the Allegro Hand (2)"
+        );
     }
 
     #[test]

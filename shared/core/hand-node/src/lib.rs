@@ -4,7 +4,8 @@
 //!
 //! - [`admission`]: the one rule by which a hand takes or refuses a `hand/command` (model,
 //!   units, mode, joint count, finiteness, then the hand profile's joint limits in every mode),
-//!   set up from the hand's profile, the only source of joint limits;
+//!   set up from the hand's profile, the only source of joint limits; and [`HandKind`], the
+//!   check a hand node makes of its profile before it starts (model, joint count);
 //! - [`HandPorts`] ([`ports`]): the hand node's ports and policy around it: commands followed
 //!   only while fresh by their stamp and while the latched e-stop is released, stale -> hold
 //!   (counted once per loss), refusals and clamps counted once per command sample and logged
@@ -36,7 +37,7 @@ pub mod ports;
 pub mod resume;
 pub mod session;
 
-pub use admission::{Admission, Modes, Refusal};
+pub use admission::{Admission, HandKind, Modes, ProfileMismatch, Refusal};
 pub use moves::{Aim, RampedMove};
 pub use ports::{HandPorts, Target, Timing, REFUSAL_LOG_PERIOD};
 pub use resume::Resume;

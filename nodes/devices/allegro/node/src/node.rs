@@ -5,7 +5,7 @@
 
 use teleop_allegro_protocol::{v4, Generation, JOINTS};
 use teleop_can_link::{Bitrate, BusState};
-use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
+use teleop_hand_node::{Admission, HandKind, HandPorts, Modes, Timing};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{bus_state, device_model, fixed_text, link_kind, units, DeviceInfo, HandState};
 use teleop_runtime::NodeRuntime;
@@ -178,6 +178,14 @@ pub fn admission(profile: &HandProfile) -> Admission {
     Admission::new(profile, Modes::POSITION)
 }
 
+/// The Allegro Hand, as a profile must describe it.
+const ALLEGRO: HandKind = HandKind {
+    hand: "Allegro Hand",
+    model: device_model::ALLEGRO,
+    joints: JOINTS,
+    layout: "index 0-3, middle 4-7, ring 8-11, thumb 12-15",
+};
+
 /// Runs until SIGINT/SIGTERM, on this thread (which takes the launch file's real-time
 /// scheduling).
 pub fn run(
@@ -185,22 +193,7 @@ pub fn run(
     settings: &Settings,
     profile: &HandProfile,
 ) -> anyhow::Result<()> {
-    if profile.joints.len() != JOINTS {
-        anyhow::bail!(
-            "hand profile {:?} has {} joints; the Allegro has {JOINTS} (index 0-3, middle 4-7, \
-             ring 8-11, thumb 12-15)",
-            profile.name,
-            profile.joints.len()
-        );
-    }
-    if profile.model_id != device_model::ALLEGRO {
-        anyhow::bail!(
-            "hand profile {:?} is for device model {}, not the Allegro Hand ({})",
-            profile.name,
-            profile.model_id,
-            device_model::ALLEGRO
-        );
-    }
+    ALLEGRO.check(profile)?;
     teleop_runtime::install_stop_handlers();
     let mut ports = Ports {
         hand: HandPorts::new(

@@ -9,7 +9,7 @@
 //! error, now), `reconnects`, `exchange_us_p99` (goal write to state read, 99th percentile),
 //! `overruns` (deadlines missed by more than a period).
 
-use teleop_hand_node::{Admission, HandPorts, Modes, Timing};
+use teleop_hand_node::{Admission, HandKind, HandPorts, Modes, Timing};
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{device_model, fixed_text, link_kind, units, DeviceInfo, HandState};
 use teleop_runtime::NodeRuntime;
@@ -214,25 +214,17 @@ pub fn admission(profile: &HandProfile) -> Admission {
     Admission::new(profile, Modes::POSITION)
 }
 
+/// The LEAP Hand, as a profile must describe it.
+const LEAP: HandKind = HandKind {
+    hand: "LEAP Hand",
+    model: device_model::LEAP,
+    joints: SERVOS,
+    layout: "index 0-3, middle 4-7, ring 8-11, thumb 12-15",
+};
+
 /// Checks that `profile` is a LEAP Hand's: 16 joints, the LEAP's model.
 pub fn check_profile(profile: &HandProfile) -> anyhow::Result<()> {
-    if profile.joints.len() != SERVOS {
-        anyhow::bail!(
-            "hand profile {:?} has {} joints; the LEAP Hand has {SERVOS} (index 0-3, middle \
-             4-7, ring 8-11, thumb 12-15)",
-            profile.name,
-            profile.joints.len()
-        );
-    }
-    if profile.model_id != device_model::LEAP {
-        anyhow::bail!(
-            "hand profile {:?} is for device model {}, not the LEAP Hand ({})",
-            profile.name,
-            profile.model_id,
-            device_model::LEAP
-        );
-    }
-    Ok(())
+    Ok(LEAP.check(profile)?)
 }
 
 /// Runs until SIGINT/SIGTERM, on this thread (which takes the launch file's real-time
