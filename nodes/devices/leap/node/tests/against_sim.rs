@@ -102,11 +102,15 @@ fn stop_torque_off(rig: &mut Rig, said: &str) {
     assert!(stats["torque"].split(',').all(|t| t == "0"), "{stats}");
 }
 
-/// Waits (up to 3 s) for a health report of the node that satisfies `ok`.
+/// How long a wait for something that should happen within a few cycles may take before it
+/// fails: generous, since a wait ends as soon as its condition holds and the machine may be busy.
+const PATIENCE: Duration = Duration::from_secs(10);
+
+/// Waits (up to [`PATIENCE`]) for a health report of the node that satisfies `ok`.
 fn wait_health(rig: &Rig, what: &str, ok: impl Fn(&NodeHealth) -> bool) -> NodeHealth {
     let start = Instant::now();
     let mut last = None;
-    while start.elapsed() < Duration::from_secs(3) {
+    while start.elapsed() < PATIENCE {
         for h in rig.node_health() {
             if ok(&h) {
                 return h;
@@ -124,6 +128,37 @@ fn wait_health(rig: &Rig, what: &str, ok: impl Fn(&NodeHealth) -> bool) -> NodeH
         "no health report with {what}: last {details:?}\n{}",
         rig.log()
     );
+}
+
+/// Publishes `cmd` every 10 ms until a state satisfies `ok` (returned) or [`PATIENCE`] has
+/// passed (the newest state returned: the caller's assertions then say what is wrong).
+fn follow_until(
+    rig: &mut Rig,
+    cmd: &HandCommand,
+    mut ok: impl FnMut(&HandState) -> bool,
+) -> HandState {
+    let start = Instant::now();
+    let mut last = None;
+    while start.elapsed() < PATIENCE {
+        rig.commands.publish(cmd).unwrap();
+        std::thread::sleep(Duration::from_millis(10));
+        let mut hit = None;
+        rig.states.drain(|s| {
+            if hit.is_none() && ok(s) {
+                hit = Some(*s);
+            }
+            last = Some(*s);
+        });
+        if let Some(s) = hit {
+            return s;
+        }
+    }
+    last.unwrap_or_else(|| panic!("no hand state\n{}", rig.log()))
+}
+
+/// Follows `targets` until the hand is within 0.05 rad of them (or [`PATIENCE`] passes).
+fn reach(rig: &mut Rig, targets: &[f32; 16]) -> HandState {
+    follow_until(rig, &command(targets), |s| largest_error(s, targets) < 0.05)
 }
 
 /// A pose clear of the ball: every finger's closure (its three flexing joints) under 1 rad.
@@ -144,7 +179,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     });
     assert_eq!((up.joint_count, up.hand_model), (16, device_model::LEAP));
     assert_eq!(up.holding, 1, "no command yet: holding where the hand is");
-    rig.wait_log(Duration::from_secs(2), "LEAP Hand connected");
+    rig.wait_log(PATIENCE, "LEAP Hand connected");
 
     // Bring-up: every servo in current-based position control (5) with its torque on.
     let stats = rig.sim.stats();
@@ -182,7 +217,7 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     );
 
     // A commanded pose, reached.
-    let s = rig.send(&command(&POSE), Duration::from_millis(2500));
+    let s = reach(&mut rig, &POSE);
     let worst = largest_error(&s, &POSE);
     eprintln!("pose error {worst:.4} rad");
     assert!(worst < 0.05, "{:?} vs {POSE:?}", positions::<16>(&s));
@@ -192,7 +227,17 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     // The middle finger closes on the ball: it stops short of its target, its current rising.
     let mut closed = POSE;
     closed[5..8].fill(1.2);
-    let s = rig.send(&command(&closed), Duration::from_millis(2500));
+    // Followed until the simulator has the finger on the ball, then until it rests there,
+    // pressing (on a deadline: the assertions below say which part failed).
+    let start = Instant::now();
+    while rig.sim.stats().values::<f64>("contact").unwrap()[1] <= 0.0 && start.elapsed() < PATIENCE
+    {
+        follow(&mut rig, &command(&closed), Duration::from_millis(50));
+    }
+    let s = follow_until(&mut rig, &command(&closed), |s| {
+        let current: f32 = (5..8).map(|j| s.joints[j].current_ma.abs()).sum();
+        s.joints[6].speed.abs() < 0.2 && current > free_current + 100.0
+    });
     let p = positions::<16>(&s);
     let closure: f32 = p[5..8].iter().sum();
     let current: f32 = (5..8).map(|j| s.joints[j].current_ma.abs()).sum();
@@ -225,12 +270,12 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
 
     // A silent servo: named, left out, the others keep working; back when it answers again.
     rig.sim.ok("silent 11");
-    rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
-    let s = rig.wait_state(Duration::from_secs(2), "id 11 marked silent", |s| {
+    rig.wait_log(PATIENCE, "ring_dip (id 11) silent");
+    let s = rig.wait_state(PATIENCE, "id 11 marked silent", |s| {
         s.joints[11].status & status::SILENT != 0
     });
     assert_eq!(s.link_up, 1);
-    let fresh = rig.wait_state(Duration::from_secs(1), "the others read", |s| {
+    let fresh = rig.wait_state(PATIENCE, "the others read", |s| {
         (0..16)
             .filter(|j| *j != 11)
             .all(|j| s.joints[j].status & status::STALE == 0)
@@ -240,20 +285,20 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
         h.detail("silent_servos") == Some(1.0)
     });
     rig.sim.ok("clear");
-    rig.wait_log(Duration::from_secs(3), "ring_dip (id 11): answers again");
-    rig.wait_state(Duration::from_secs(2), "id 11 back", |s| {
+    rig.wait_log(PATIENCE, "ring_dip (id 11): answers again");
+    rig.wait_state(PATIENCE, "id 11 back", |s| {
         s.joints[11].status & (status::SILENT | status::STALE) == 0
     });
 
     // An overloaded servo: its torque off, named, the others keep working, no reboot.
     rig.sim.ok("overload 6");
-    rig.wait_log(Duration::from_secs(2), "middle_pip (id 6): overload");
+    rig.wait_log(PATIENCE, "middle_pip (id 6): overload");
     rig.wait_log(
-        Duration::from_secs(1),
+        PATIENCE,
         "power-cycle the hand, or stop this node (it holds the port) and run `teleop leap \
          reboot --id 6`",
     );
-    let s = rig.wait_state(Duration::from_secs(2), "id 6 in alert", |s| {
+    let s = rig.wait_state(PATIENCE, "id 6 in alert", |s| {
         s.joints[6].status & status::ALERT != 0
     });
     assert_eq!(
@@ -277,22 +322,21 @@ fn the_node_drives_the_simulated_hand_and_rides_out_its_faults() {
     let before = rig.latest_health();
     rig.sim.ok("noise 200");
     rig.sim.ok("crc 0.1");
-    std::thread::sleep(Duration::from_millis(500));
-    rig.sim.ok("crc 0");
     let grew =
         |h: &NodeHealth, k: &str| h.detail(k).unwrap_or(0.0) > before.detail(k).unwrap_or(0.0);
     let h = wait_health(&rig, "more CRC errors and garbage", |h| {
         grew(h, "crc_errors") && grew(h, "garbage_bytes") && h.errors > before.errors
     });
+    rig.sim.ok("crc 0");
     eprintln!(
         "after noise and CRC errors: {:?}",
         h.details().collect::<Vec<_>>()
     );
-    rig.wait_state(Duration::from_secs(1), "still up", |s| s.link_up == 1);
+    rig.wait_state(PATIENCE, "still up", |s| s.link_up == 1);
 
     // The adapter unplugged and back: the node reopens it without a restart.
     rig.sim.ok("unplug 500");
-    rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
+    rig.wait_state(PATIENCE, "the link down", |s| s.link_up == 0);
     rig.wait_state(Duration::from_secs(10), "the hand back", up_and_fresh);
     wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
 
@@ -309,11 +353,11 @@ fn a_silent_servo_that_truncates_the_chain_is_the_only_one_left_out() {
     let rig = start("none", &["--fast-sync-missing", "truncate"], "");
     rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.sim.ok("silent 9");
-    rig.wait_log(Duration::from_secs(2), "ring_mcp_forward (id 9) silent");
-    rig.wait_state(Duration::from_secs(2), "id 9 marked silent", |s| {
+    rig.wait_log(PATIENCE, "ring_mcp_forward (id 9) silent");
+    rig.wait_state(PATIENCE, "id 9 marked silent", |s| {
         s.joints[9].status & status::SILENT != 0
     });
-    let s = rig.wait_state(Duration::from_secs(2), "all but id 9 read", |s| {
+    let s = rig.wait_state(PATIENCE, "all but id 9 read", |s| {
         (0..16)
             .filter(|j| *j != 9)
             .all(|j| s.joints[j].status & (status::STALE | status::SILENT) == 0)
@@ -339,13 +383,14 @@ fn teleop_leap_service_commands_against_the_simulator() {
     let port = sim.link.display().to_string();
     // The servos boot when the adapter is first opened: give them their boot time.
     let info = |rig: &TestRig| rig.sandbox.cli(&["leap", "--port", &port, "info"]);
-    let (ok, text) = info(&rig);
-    assert!(ok, "{text}");
-    let (ok, text) = if text.contains("16 of 16 servos answer") {
-        (ok, text)
-    } else {
-        std::thread::sleep(Duration::from_millis(500));
-        info(&rig)
+    let start = Instant::now();
+    let (ok, text) = loop {
+        let (ok, text) = info(&rig);
+        assert!(ok, "{text}");
+        if text.contains("16 of 16 servos answer") || start.elapsed() > PATIENCE {
+            break (ok, text);
+        }
+        std::thread::sleep(Duration::from_millis(100));
     };
     eprintln!("{text}");
     assert!(ok, "{text}");
@@ -402,8 +447,13 @@ fn teleop_leap_service_commands_against_the_simulator() {
         .sandbox
         .cli(&["leap", "--port", &port, "reboot", "--id", "3"]);
     assert!(ok && text.contains("index_dip (id 3): rebooted"), "{text}");
-    std::thread::sleep(Duration::from_millis(500));
-    let stats = sim.stats();
+    // The servo reboots (its boot time): its Hardware Error Status cleared once it is back.
+    let start = Instant::now();
+    let mut stats = sim.stats();
+    while stats["hardware_error"].split(',').nth(3) != Some("0") && start.elapsed() < PATIENCE {
+        std::thread::sleep(Duration::from_millis(50));
+        stats = sim.stats();
+    }
     assert_eq!(
         stats["hardware_error"].split(',').nth(3),
         Some("0"),
@@ -433,12 +483,9 @@ fn a_run_of_cycles_without_any_state_loses_the_hand_until_it_answers_again() {
     for id in 0..16 {
         rig.sim.ok(&format!("silent {id}"));
     }
-    rig.wait_log(
-        Duration::from_secs(5),
-        "20 cycles in a row without any servo's state",
-    );
-    rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
-    rig.wait_log(Duration::from_secs(5), "no servo answers on");
+    rig.wait_log(PATIENCE, "20 cycles in a row without any servo's state");
+    rig.wait_state(PATIENCE, "the link down", |s| s.link_up == 0);
+    rig.wait_log(PATIENCE, "no servo answers on");
     rig.sim.ok("clear");
     rig.wait_state(Duration::from_secs(10), "the hand back", up_and_fresh);
     wait_health(&rig, "a reconnect", |h| h.detail("reconnects") >= Some(1.0));
@@ -451,23 +498,32 @@ fn a_servo_back_from_silence_ramps_to_the_command() {
     let _one = one_at_a_time();
     let mut rig = start("none", &[], "resume_speed = 0.5\n");
     rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
-    rig.send(&command(&POSE), Duration::from_millis(2500));
+    reach(&mut rig, &POSE);
     rig.sim.ok("silent 11");
-    rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
+    rig.wait_log(PATIENCE, "ring_dip (id 11) silent");
     // The command moves the silent joint: it does not hear it.
     let mut far = POSE;
     far[11] = 1.2;
     rig.send(&command(&far), Duration::from_millis(300));
     rig.sim.ok("clear");
+    // Watched from when it is read again for 1.5 s (the ramp's first 0.75 rad at most).
     let start = Instant::now();
     let mut seen = Vec::new();
-    while start.elapsed() < Duration::from_millis(2500) {
-        let s = rig.send(&command(&far), Duration::from_millis(20));
-        if s.joints[11].status & status::STALE == 0 {
-            seen.push((start.elapsed().as_secs_f32(), s.joints[11].position));
+    while start.elapsed() < PATIENCE + Duration::from_secs(2) {
+        for s in follow(&mut rig, &command(&far), Duration::from_millis(20)) {
+            if s.joints[11].status & status::STALE == 0 {
+                seen.push((start.elapsed().as_secs_f32(), s.joints[11].position));
+            }
+        }
+        if seen
+            .first()
+            .is_some_and(|(t0, _)| start.elapsed().as_secs_f32() > t0 + 1.5)
+        {
+            break;
         }
     }
-    rig.wait_log(Duration::from_secs(1), "ring_dip (id 11): answers again");
+    assert!(!seen.is_empty(), "ring_dip read again\n{}", rig.log());
+    rig.wait_log(PATIENCE, "ring_dip (id 11): answers again");
     eprintln!("ring_dip after it came back: {seen:?}");
     ramps_at_half_a_radian_per_second(&seen);
 }
@@ -507,7 +563,7 @@ fn after_an_unplug_under_a_moving_command_the_hand_ramps_from_where_it_is() {
     let _one = one_at_a_time();
     let mut rig = start("none", &[], "resume_speed = 0.5\n");
     rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
-    rig.send(&command(&POSE), Duration::from_millis(2500));
+    reach(&mut rig, &POSE);
     // The adapter goes; once the node has seen it go (the commands fresh all along), the
     // command moves index_pip 1.2 rad away.
     rig.sim.ok("unplug 500");
@@ -516,17 +572,13 @@ fn after_an_unplug_under_a_moving_command_the_hand_ramps_from_where_it_is() {
         .iter()
         .any(|s| s.link_up == 0)
     {
-        assert!(
-            start.elapsed() < Duration::from_secs(3),
-            "the link down\n{}",
-            rig.log()
-        );
+        assert!(start.elapsed() < PATIENCE, "the link down\n{}", rig.log());
     }
     let mut far = POSE;
     far[2] = 1.5;
     let start = Instant::now();
     let mut seen = Vec::new();
-    while start.elapsed() < Duration::from_secs(10) {
+    while start.elapsed() < PATIENCE + Duration::from_secs(2) {
         for s in follow(&mut rig, &command(&far), Duration::from_millis(20)) {
             // Back: the first state is the one read at bring-up.
             if s.link_up == 1 && s.joints[2].status & status::UNKNOWN == 0 {
@@ -557,12 +609,15 @@ fn the_stop_turns_off_a_servo_the_node_took_for_silent() {
     let mut rig = start("none", &[], "silent_retry_ms = 60000\n");
     rig.wait_state(Duration::from_secs(20), "the hand up", up_and_fresh);
     rig.sim.ok("silent 11 300");
-    rig.wait_log(Duration::from_secs(2), "ring_dip (id 11) silent");
+    rig.wait_log(PATIENCE, "ring_dip (id 11) silent");
     // It hears again; the node looks for it only in a minute.
-    rig.wait_state(Duration::from_secs(3), "id 11 still marked silent", |s| {
+    rig.wait_state(PATIENCE, "id 11 still marked silent", |s| {
         s.joints[11].status & status::SILENT != 0
     });
-    std::thread::sleep(Duration::from_millis(500));
+    let start = Instant::now();
+    while rig.sim.stats()["silent"] != "none" && start.elapsed() < PATIENCE {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     assert_eq!(rig.sim.stats()["silent"], "none");
     stop_torque_off(
         &mut rig,
@@ -611,5 +666,5 @@ fn a_servo_refusing_its_bring_up_leaves_every_servo_torque_off() {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-    rig.wait_state(Duration::from_secs(3), "the link down", |s| s.link_up == 0);
+    rig.wait_state(PATIENCE, "the link down", |s| s.link_up == 0);
 }
