@@ -349,10 +349,12 @@ impl Line for Recorded {
 }
 
 /// Makes servo 9 deaf at the third cycle and hears again at the tenth; stops once it is back
-/// in the reads.
+/// in the reads after having been taken for silent.
 struct Deaf {
     deaf: Arc<Mutex<Option<u8>>>,
     cycles: u32,
+    /// Servo 9 was taken for silent (so `back` means it came back, not that it never left).
+    was_silent: bool,
     back: bool,
 }
 
@@ -368,10 +370,11 @@ impl Host for Deaf {
     }
     fn cycle(&mut self, cycle: &Cycle<'_>) -> anyhow::Result<()> {
         self.cycles += 1;
+        self.was_silent |= cycle.servos.silent() & (1 << 9) != 0;
         match self.cycles {
             3 => *self.deaf.lock().unwrap() = Some(9),
             10 => *self.deaf.lock().unwrap() = None,
-            n if n > 10 => self.back = cycle.servos.silent() == 0,
+            n if n > 10 => self.back = self.was_silent && cycle.servos.silent() == 0,
             _ => {}
         }
         Ok(())
@@ -394,11 +397,13 @@ fn a_servo_back_from_silence_with_its_torque_on_only_gets_its_goal_set() {
     let mut host = Deaf {
         deaf: servos.deaf.clone(),
         cycles: 0,
+        was_silent: false,
         back: false,
     };
     let mut line = Some(servos);
     let mut open = move || line.take().ok_or_else(|| "opened twice".to_string());
     driver::run_on(&settings, &profile, &mut host, &mut open).unwrap();
+    assert!(host.was_silent, "servo 9 taken for silent");
     assert!(host.back, "servo 9 back in the reads");
     let log = log.lock().unwrap().clone();
     let first_cycle = log
