@@ -161,33 +161,43 @@ impl Grasp for ShadowGrasp {
 /// The LEAP Hand's middle finger (flexion servos 5, 6, 7 in the profile's and the motor-ID
 /// order) is stopped by the ball short of its target while the servos' current-based position
 /// loop pushes: the finger's closure (the three joints' sum) short of the command's, and the
-/// largest present current among them (mA).
+/// largest present current among them (mA), both in the same state: a finger lagging its
+/// target on the way, or a current spike while it swings, is not the ball stopping it.
 #[derive(Default)]
 struct LeapGrasp {
+    /// The newest command's closure of the finger (none before the first command).
+    target: Option<f32>,
     max_current: f32,
+    /// The largest shortfall of the closure among the states with the finger pushing.
     max_gap: f32,
 }
+
+/// The present current (mA) over which a LEAP middle-finger servo counts as pushing.
+const LEAP_PUSHING_MA: f32 = 200.0;
 
 /// The LEAP Hand's middle-finger flexion servos.
 const LEAP_MIDDLE: [usize; 3] = [5, 6, 7];
 
 impl Grasp for LeapGrasp {
     fn observe(&mut self, w: &Watcher) {
-        let mut target = f32::NAN;
+        let mut target = self.target;
         w.cmd
-            .drain(|c| target = LEAP_MIDDLE.iter().map(|&j| c.joints[j].target).sum());
+            .drain(|c| target = Some(LEAP_MIDDLE.iter().map(|&j| c.joints[j].target).sum()));
+        self.target = target;
         w.state.drain(|s| {
-            for j in LEAP_MIDDLE {
-                self.max_current = self.max_current.max(s.joints[j].current_ma.abs());
-            }
+            let current = LEAP_MIDDLE
+                .iter()
+                .map(|&j| s.joints[j].current_ma.abs())
+                .fold(0.0, f32::max);
+            self.max_current = self.max_current.max(current);
             let closure: f32 = LEAP_MIDDLE.iter().map(|&j| s.joints[j].position).sum();
-            if target.is_finite() {
+            if let Some(target) = target.filter(|_| current > LEAP_PUSHING_MA) {
                 self.max_gap = self.max_gap.max(target - closure);
             }
         });
     }
     fn shown(&self) -> bool {
-        self.max_current > 200.0 && self.max_gap > 0.15
+        self.max_current > LEAP_PUSHING_MA && self.max_gap > 0.15
     }
     fn check(&self, hand: &str, sandbox: &Sandbox, session: &Session) {
         let status = sandbox.control("teleop-sim-leap.ctl", "stats");
