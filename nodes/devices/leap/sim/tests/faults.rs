@@ -97,7 +97,7 @@ fn a_silent_servo_is_left_out_of_sync_read_and_of_the_fast_sync_chain() {
     sim.control_ok("silent 5");
     host.send(|out| packet::sync_read(xc330::PRESENT_POSITION, 4, &ALL, out));
     let ids: Vec<u8> = host
-        .statuses_within(16, Duration::from_millis(300))
+        .statuses_within(16, common::WAIT)
         .iter()
         .map(|r| r.id)
         .collect();
@@ -160,6 +160,12 @@ fn corrupted_and_dropped_statuses_are_counted() {
     sim.control_ok("drop 1");
     host.send(|out| packet::ping(2, out));
     host.silence(Duration::from_millis(100));
+    // Counted when the simulator gets to the status: waited for, then exactly once.
+    wait_for(
+        Duration::from_secs(10),
+        "the dropped status counted",
+        || (sim.counter("dropped") >= 1).then_some(()),
+    );
     assert_eq!(sim.counter("dropped"), 1);
     sim.control_ok("drop 0");
     host.send(|out| packet::ping(2, out));

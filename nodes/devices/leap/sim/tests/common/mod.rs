@@ -127,13 +127,15 @@ impl Host {
         self.port.write_all(bytes).unwrap();
     }
 
-    /// Every byte received until nothing more came for `quiet` (or `WAIT` passed).
+    /// Every byte received until nothing more came for `quiet` after the last one (or `WAIT`
+    /// passed): the first byte is waited for up to `WAIT`, a busy simulator's late answer is not
+    /// taken for none.
     pub fn raw(&mut self, quiet: Duration) -> Vec<u8> {
         let mut got = Vec::new();
         let end = Instant::now() + WAIT;
         let mut last = Instant::now();
         let mut buf = [0u8; 1024];
-        while Instant::now() < end && last.elapsed() < quiet {
+        while Instant::now() < end && (got.is_empty() || last.elapsed() < quiet) {
             if let Ok(n) = self.port.read(&mut buf) {
                 if n > 0 {
                     got.extend_from_slice(&buf[..n]);
