@@ -5,8 +5,9 @@
 //! The [`HandProfile`] loaded from `config/hands/<hand>.toml`: the hand's joints in its own
 //! order (name, finger, [`Role`], limits in radians, the open and closed angles that normalised
 //! commands span, the linear map to device units, couplings such as the Shadow Hand's J1 that
-//! follows J2), its fingers (which carry a fingertip sensor and of which kind, and a kinematic
-//! chain for drawing the hand), the default glove → joint map, and per glove finger the
+//! follows J2), its fingers (which carry a fingertip sensor and of which kind, a kinematic
+//! chain, the pad where the fingertip touches things and the operator's finger it follows), the
+//! default glove → joint map, the fingertip-retargeting defaults, and per glove finger the
 //! force-feedback source (a fingertip's tactile force and/or the effort / position error of named
 //! joints). Retargeting, force feedback, the hand nodes, reprocessing and the viewer all read
 //! the hand from here, so a new hand is a new file, not a new code path.
@@ -213,6 +214,57 @@ pub struct Finger {
     pub links: Vec<Link>,
     /// The fingertip in the last link's frame, metres.
     pub tip: [f32; 3],
+    /// Centre of the fingertip's contact surface (its pad) in the last link's frame, metres
+    /// (`tip` unless the profile says otherwise).
+    pub pad: [f32; 3],
+    /// Radius of the pad about [`pad`](Self::pad), metres: two pads touch when their centres are
+    /// the sum of their radii apart.
+    pub pad_radius: f32,
+    /// The operator's finger it follows in fingertip retargeting ([`GLOVE_FINGERS`] index);
+    /// `None` for a chain no operator finger drives (the Shadow Hand's wrist).
+    pub operator: Option<usize>,
+}
+
+/// How glove motion becomes joint targets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RetargetMode {
+    /// Each joint from the profile's glove map (per-joint, no kinematics).
+    Joint,
+    /// Fingertip optimisation: the robot's fingertip vectors (wrist to tip, tip to tip) follow the
+    /// operator model's, scaled.
+    Vector,
+    /// As `vector`, with a pinch switch: a thumb-finger pair the operator closes is brought
+    /// together until the robot's pads touch.
+    Pinch,
+}
+
+impl RetargetMode {
+    /// Every mode, in the order above.
+    pub const ALL: [RetargetMode; 3] = [Self::Joint, Self::Vector, Self::Pinch];
+
+    /// The name used in files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Joint => "joint",
+            Self::Vector => "vector",
+            Self::Pinch => "pinch",
+        }
+    }
+
+    /// The mode called `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// The hand's fingertip-retargeting defaults (`[retarget]` in the profile).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RetargetDefaults {
+    /// The mode a session uses unless its retargeting configuration says otherwise.
+    pub mode: RetargetMode,
+    /// Robot vector length per operator vector length (the hand's size over a human hand's).
+    pub scaling: f32,
 }
 
 /// Where one glove finger's force feedback comes from.
@@ -249,6 +301,8 @@ pub struct HandProfile {
     pub fingers: Vec<Finger>,
     /// Per glove finger ([`GLOVE_FINGERS`] order).
     pub feedback: [FeedbackSource; 5],
+    /// Fingertip-retargeting defaults.
+    pub retarget: RetargetDefaults,
 }
 
 /// The metadata record in which the recorder embeds the hand profile of a session

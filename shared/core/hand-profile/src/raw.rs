@@ -6,7 +6,8 @@ use toml::Spanned;
 
 use crate::{
     CommandUnits, Coupling, DeviceMap, FeedbackSource, Finger, GloveMap, HandProfile, Joint, Link,
-    ProfileError, Role, TipSensor, GLOVE_CHANNELS, GLOVE_FINGERS, MAX_FINGERTIPS, MAX_JOINTS,
+    ProfileError, RetargetDefaults, RetargetMode, Role, TipSensor, GLOVE_CHANNELS, GLOVE_FINGERS,
+    MAX_FINGERTIPS, MAX_JOINTS,
 };
 
 #[derive(Deserialize)]
@@ -19,6 +20,16 @@ struct RawProfile {
     finger: Vec<Spanned<RawFinger>>,
     #[serde(default)]
     feedback: Vec<Spanned<RawFeedback>>,
+    retarget: Option<Spanned<RawRetarget>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRetarget {
+    #[serde(default = "joint_mode")]
+    mode: RetargetMode,
+    #[serde(default = "one")]
+    scaling: f32,
 }
 
 #[derive(Deserialize)]
@@ -84,6 +95,10 @@ struct RawFinger {
     #[serde(default)]
     link: Vec<Spanned<RawLink>>,
     tip: [f32; 3],
+    pad: Option<[f32; 3]>,
+    #[serde(default)]
+    pad_radius: f32,
+    operator: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -107,6 +122,10 @@ struct RawFeedback {
 
 fn one() -> f32 {
     1.0
+}
+
+fn joint_mode() -> RetargetMode {
+    RetargetMode::Joint
 }
 
 fn no_sensor() -> TipSensor {
@@ -162,6 +181,7 @@ pub(crate) fn parse(text: &str, origin: &str) -> Result<HandProfile, ProfileErro
     let joints = joints_of(&c, &raw.joint, &fingers)?;
     let fingers = link_fingers(&c, &raw.finger, fingers, &joints)?;
     let feedback = feedback_of(&c, &raw.feedback, &fingers, &joints)?;
+    let retarget = retarget_of(&c, raw.retarget.as_ref())?;
     Ok(HandProfile {
         name: raw.hand.name.into_inner(),
         model: raw.hand.model,
@@ -170,6 +190,31 @@ pub(crate) fn parse(text: &str, origin: &str) -> Result<HandProfile, ProfileErro
         joints,
         fingers,
         feedback,
+        retarget,
+    })
+}
+
+fn retarget_of(
+    c: &Checker,
+    raw: Option<&Spanned<RawRetarget>>,
+) -> Result<RetargetDefaults, ProfileError> {
+    let Some(raw) = raw else {
+        return Ok(RetargetDefaults {
+            mode: RetargetMode::Joint,
+            scaling: 1.0,
+        });
+    };
+    let r = raw.get_ref();
+    if !(r.scaling.is_finite() && r.scaling > 0.0) {
+        return c.err(
+            raw.span(),
+            "retarget.scaling",
+            format!("{} must be a positive number", r.scaling),
+        );
+    }
+    Ok(RetargetDefaults {
+        mode: r.mode,
+        scaling: r.scaling,
     })
 }
 
@@ -197,6 +242,39 @@ fn fingers_of(c: &Checker, raw: &[Spanned<RawFinger>]) -> Result<Vec<Finger>, Pr
         c.finite(&span, &field, &f.base)?;
         c.finite(&span, &field, &f.base_rpy)?;
         c.finite(&span, &field, &f.tip)?;
+        let pad = f.pad.unwrap_or(f.tip);
+        c.finite(&span, &format!("{field}.pad"), &pad)?;
+        if !(f.pad_radius.is_finite() && (0.0..0.05).contains(&f.pad_radius)) {
+            return c.err(
+                span,
+                format!("{field}.pad_radius"),
+                format!("{} m is not a pad radius (0 to 0.05 m)", f.pad_radius),
+            );
+        }
+        let operator = match &f.operator {
+            None => None,
+            Some(o) => {
+                let Some(g) = GLOVE_FINGERS.iter().position(|n| n == o.get_ref()) else {
+                    return c.err(
+                        o.span(),
+                        format!("{field}.operator"),
+                        format!(
+                            "`{}` is not an operator finger (fingers: {})",
+                            o.get_ref(),
+                            names(GLOVE_FINGERS.iter().copied())
+                        ),
+                    );
+                };
+                if fingers.iter().any(|other| other.operator == Some(g)) {
+                    return c.err(
+                        o.span(),
+                        format!("{field}.operator"),
+                        format!("another finger follows the operator's `{}` already", o.get_ref()),
+                    );
+                }
+                Some(g)
+            }
+        };
         fingers.push(Finger {
             name: name.clone(),
             tip_sensor: f.tip_sensor,
@@ -204,6 +282,9 @@ fn fingers_of(c: &Checker, raw: &[Spanned<RawFinger>]) -> Result<Vec<Finger>, Pr
             base_rpy: f.base_rpy,
             links: Vec::new(),
             tip: f.tip,
+            pad,
+            pad_radius: f.pad_radius,
+            operator,
         });
     }
     let tips = fingers

@@ -340,3 +340,50 @@ fn builtins_by_model_and_profiles_embedded_in_recordings() {
         .to_string();
     assert!(e.contains("no `text` field"), "{e}");
 }
+
+#[test]
+fn every_shipped_finger_but_the_shadow_wrist_follows_an_operator_finger_with_a_pad() {
+    for name in HandProfile::builtin_names() {
+        let p = HandProfile::builtin(name).unwrap();
+        for f in &p.fingers {
+            if f.name == "wrist" {
+                assert_eq!(f.operator, None, "{name}");
+                continue;
+            }
+            assert!(f.operator.is_some(), "{name}.{}", f.name);
+            assert!(f.pad_radius > 0.0, "{name}.{}", f.name);
+        }
+        assert!(p.retarget.scaling > 0.0, "{name}");
+    }
+}
+
+#[test]
+fn pads_operators_and_retarget_defaults_are_checked() {
+    let text = include_str!("../../../../config/hands/revo2.toml");
+    let cases = [
+        (
+            text.replace("operator = \"index\"", "operator = \"thumb\""),
+            "follows the operator's `thumb` already",
+        ),
+        (
+            text.replacen("operator = \"index\"", "operator = \"elbow\"", 1),
+            "`elbow` is not an operator finger",
+        ),
+        (
+            text.replacen("pad_radius = 0.008", "pad_radius = 0.5", 1),
+            "is not a pad radius",
+        ),
+        (
+            text.replace("scaling = 1.0", "scaling = -1.0"),
+            "retarget.scaling",
+        ),
+        (
+            text.replace("mode = \"joint\"", "mode = \"magic\""),
+            "magic",
+        ),
+    ];
+    for (bad, expect) in cases {
+        let e = HandProfile::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
+        assert!(e.contains(expect), "{e}");
+    }
+}
