@@ -2,9 +2,9 @@
 //! it starts, or an `.rrd` file).
 //!
 //! Three layers, so that the content is tested without rerun and rerun stays in this crate:
-//! - content ([`kinematics`], [`sample`], [`content`]): pure. Hand models with `glam` (the
-//!   operator's hand posed from the glove; the robot hand from its profile, `teleop-hand-profile`,
-//!   and its joint state) and the conversion of each sample into entity paths and plain values
+//! - content ([`kinematics`], [`sample`], [`content`]): pure. The hand models of
+//!   `teleop-kinematics` (the operator's hand posed from the glove, the same model fingertip
+//!   retargeting solves for; the robot hand from its profile and its joint state) and the conversion of each sample into entity paths and plain values
 //!   ([`content::Frame`]), with decimation.
 //! - rerun ([`logger`], [`layout`]): logs frames as rerun archetypes on two timelines
 //!   (`recording_time`, `sample_time`) and sends the default layout (blueprint) for the robot
@@ -18,12 +18,13 @@
 //! affects the pipeline.
 
 pub mod content;
-pub mod kinematics;
 pub mod layout;
 pub mod live;
 pub mod logger;
 pub mod recording;
 pub mod sample;
 
+/// The hand models (`teleop-kinematics`), under the name this crate's modules use.
+pub use teleop_kinematics as kinematics;
 /// The rerun SDK this crate was built with (viewers of the same version read its data).
 pub use rerun;
