@@ -36,6 +36,7 @@
 
 mod error;
 mod raw;
+pub mod urdf;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -226,7 +227,7 @@ pub struct Finger {
 }
 
 /// How glove motion becomes joint targets.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum RetargetMode {
     /// Each joint from the profile's glove map (per-joint, no kinematics).
