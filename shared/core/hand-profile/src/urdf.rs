@@ -33,8 +33,9 @@
 //!
 //! Generated names that would collide with another name get `_2`, `_3`, ... appended; the
 //! profile's joint names and `wrist` are never changed. Names are XML-escaped as they are.
-//! Numbers are printed with 9 decimals (nanometres, nanoradians), enough to reproduce the
-//! profile to well under 1e-6 m.
+//! Numbers are printed as the profile wrote them where they are its own, and computed ones
+//! (the first joint's position, scaled limits and multipliers) with 9 decimals (nanometres,
+//! nanoradians): enough to reproduce the profile to well under 1e-6 m.
 //!
 //! # What the profile does not say
 //!
@@ -426,10 +427,21 @@ fn triple(v: [f64; 3]) -> String {
     format!("{} {} {}", num(v[0]), num(v[1]), num(v[2]))
 }
 
-/// `v` with 9 decimals, without trailing zeros (`0.0435`, `-1.570796`, `0`).
+/// `v` as the profile wrote it when it is one of its (f32) numbers (`0.028`, not
+/// `0.028000001`), else with 9 decimals, without trailing zeros (`0.0435`, `1.256637115`, `0`).
 fn num(v: f64) -> String {
-    let s = format!("{v:.9}");
-    let s = s.trim_end_matches('0').trim_end_matches('.');
+    // f32's Display is the shortest text that reads back as the same f32.
+    let narrow = v as f32;
+    let s = if f64::from(narrow) == v {
+        narrow.to_string()
+    } else {
+        format!("{v:.9}")
+    };
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        &s
+    };
     if s == "-0" {
         "0".to_string()
     } else {
@@ -481,8 +493,12 @@ mod tests {
         assert_eq!(num(-1e-12), "0");
         assert_eq!(num(1.0), "1");
         assert_eq!(num(0.0435), "0.0435");
-        assert_eq!(num(-1.5707963705062866), "-1.570796371");
+        assert_eq!(num(-1.5707963705062866), "-1.5707964");
+        assert_eq!(num(f64::from(0.028f32)), "0.028");
         assert_eq!(num(1e-6), "0.000001");
+        assert_eq!(num(0.9 * 1.5707963705062866), "1.413716733");
+        assert_eq!(num(-1e-30), "0");
+        assert_eq!(num(1000.0), "1000");
     }
 
     #[test]

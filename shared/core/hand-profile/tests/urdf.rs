@@ -333,6 +333,12 @@ fn urdf_fk(urdf: &Urdf, angles: &BTreeMap<String, f64>) -> BTreeMap<String, (Vec
     poses
 }
 
+/// Equal within the precision of the profile's numbers (f32, which the URDF may print as the
+/// profile's text: `1.5707964`, not `1.570796371`).
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 2.0 * f64::from(f32::EPSILON) * b.abs().max(1.0)
+}
+
 fn distance(a: Vec3, b: Vec3) -> f64 {
     (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
 }
@@ -360,16 +366,13 @@ fn check(profile: &HandProfile, fractions: &[f64]) -> Result<(), String> {
             .map(|c| (profile.joints[c.to].name.as_str(), f64::from(c.ratio)));
         let same = match (mimic, want) {
             (None, None) => true,
-            // Printed to 1e-9: compare within that.
-            (Some((a, m)), Some((b, n))) => a == b && (m - n).abs() < 1e-9,
+            (Some((a, m)), Some((b, n))) => a == b && close(m, n),
             _ => false,
         };
         if !same {
             return Err(at(format!("`{}` mimics {mimic:?}, not {want:?}", j.name)));
         }
-        if (u.lower - f64::from(j.lower)).abs() > 1e-9
-            || (u.upper - f64::from(j.upper)).abs() > 1e-9
-        {
+        if !close(u.lower, f64::from(j.lower)) || !close(u.upper, f64::from(j.upper)) {
             return Err(at(format!(
                 "`{}` limits [{}, {}]",
                 j.name, u.lower, u.upper
@@ -380,7 +383,7 @@ fn check(profile: &HandProfile, fractions: &[f64]) -> Result<(), String> {
     let angles = urdf_angles(&urdf, profile, &q);
     for j in urdf.joints.iter().filter(|j| j.revolute) {
         let a = angles[&j.name];
-        if !(j.lower - 1e-9..=j.upper + 1e-9).contains(&a) {
+        if !(a >= j.lower || close(a, j.lower)) || !(a <= j.upper || close(a, j.upper)) {
             return Err(at(format!(
                 "`{}` at {a} outside [{}, {}]",
                 j.name, j.lower, j.upper
@@ -403,7 +406,7 @@ fn check(profile: &HandProfile, fractions: &[f64]) -> Result<(), String> {
         }
         let pad = format!("{}_pad", f.name);
         let radius = urdf.spheres.get(&pad).copied().unwrap_or(0.0);
-        if (radius - f64::from(f.pad_radius)).abs() > 1e-9 {
+        if !close(radius, f64::from(f.pad_radius)) {
             return Err(at(format!("`{pad}` sphere {radius}, not {}", f.pad_radius)));
         }
     }
@@ -488,7 +491,7 @@ fn mimics(joint: &UrdfJoint, to: &str, multiplier: f64) -> bool {
     joint
         .mimic
         .as_ref()
-        .is_some_and(|(t, m, o)| t == to && (m - multiplier).abs() < 1e-7 && *o == 0.0)
+        .is_some_and(|(t, m, o)| t == to && close(*m, multiplier) && *o == 0.0)
 }
 
 fn odd() -> HandProfile {
@@ -513,10 +516,7 @@ fn odd_profile_exports_a_checked_tree() {
     let g1 = urdf.joint("lonely_1").unwrap();
     assert!(mimics(g1, "lonely", 0.5), "{g1:?}");
     // Half of [-0.3, 0.4] (as f32).
-    assert!(
-        (g1.lower + 0.15).abs() < 1e-7 && (g1.upper - 0.2).abs() < 1e-7,
-        "{g1:?}"
-    );
+    assert!(close(g1.lower, -0.15) && close(g1.upper, 0.2), "{g1:?}");
     let negative = urdf.joint("a\"1_3").unwrap();
     assert!(mimics(negative, "a\"1", -1.3), "{negative:?}");
     assert!(negative.lower < negative.upper);
