@@ -28,6 +28,7 @@ mod calibrate;
 mod certs;
 mod inspect;
 mod launch;
+mod profile;
 mod recordings;
 
 use std::path::PathBuf;
@@ -218,6 +219,11 @@ enum Command {
         #[arg(long)]
         allow_live: bool,
     },
+    /// Hand profiles for other tools: `list` the builtin ones, or export one as `urdf`.
+    Profile {
+        #[command(subcommand)]
+        command: profile::ProfileCommand,
+    },
     /// Inspect or repair recordings.
     Recordings {
         #[command(subcommand)]
@@ -368,6 +374,7 @@ fn main() -> ExitCode {
                 recordings::repair_cmd(&file, out, force)
             }
         },
+        Command::Profile { command } => profile::run(&command),
         Command::Reprocess {
             file,
             out,
