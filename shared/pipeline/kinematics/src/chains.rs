@@ -119,12 +119,7 @@ impl Chains {
     /// (zero for the joints that do not move it; joints past [`MAX_JOINTS`] are ignored).
     /// Analytic: a link turning about the world axis `a` at `p` by `ratio ×` the joint's angle
     /// moves the pad by `ratio × a × (pad − p)` per radian.
-    pub fn pad_jacobian(
-        &self,
-        f: usize,
-        q: &[f64],
-        jacobian: &mut [DVec3; MAX_JOINTS],
-    ) -> DVec3 {
+    pub fn pad_jacobian(&self, f: usize, q: &[f64], jacobian: &mut [DVec3; MAX_JOINTS]) -> DVec3 {
         *jacobian = [DVec3::ZERO; MAX_JOINTS];
         let pad = self.pad(f, q);
         self.walk(f, q, |p, axis, joint, ratio| {

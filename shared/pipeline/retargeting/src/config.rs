@@ -1,9 +1,10 @@
-//! Retargeting parameters: filter, deadband, slew limit, per-joint curves and limits.
+//! Retargeting parameters: mode, fingertip objective, filter, deadband, slew limit, per-joint curves
+//! and limits.
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
-use teleop_hand_profile::HandProfile;
+use teleop_hand_profile::{HandProfile, RetargetMode};
 
 use crate::error::{ConfigError, RETARGET_ORIGIN};
 
@@ -205,6 +206,100 @@ impl Default for JointConfig {
     }
 }
 
+/// Fingertip retargeting (modes `vector` and `pinch`): the objective's parameters, defaults after
+/// dex-retargeting's `DexPilotOptimizer` (0.4.6, `optimizer.py`): Huber loss on each vector's
+/// error, a smoothness term towards the previous solution, and the pinch switch's distances.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FingertipConfig {
+    /// Robot vector length per operator vector length; default: the hand profile's
+    /// `[retarget] scaling`.
+    pub scaling: Option<f32>,
+    /// Huber loss: quadratic below this vector error, linear above, metres. Default 0.03.
+    pub huber_delta: f32,
+    /// Weight of the squared change from the previous solution, per rad². Default 0.004.
+    pub smoothness: f32,
+    /// A thumb-finger pair is pinched when the operator's pads' centres come closer than this,
+    /// metres. Default 0.03.
+    pub pinch_engage: f32,
+    /// ... and released when they are farther apart than this (hysteresis), metres. Default
+    /// 0.05.
+    pub pinch_release: f32,
+    /// While pinched, the robot's pads are driven this far apart (surface to surface, or centre
+    /// to centre without `pad_contact`), metres. Default 0.0001.
+    pub pinch_gap: f32,
+    /// Two fingers both pinched with the thumb and closer than 3 cm are kept this far apart
+    /// (centre to centre), metres. Default 0.03.
+    pub finger_gap: f32,
+    /// Weight of a pinched thumb-finger vector (1 otherwise). Default 200.
+    pub pinch_weight: f32,
+    /// Weight of a kept-apart finger pair (1 otherwise). Default 400.
+    pub finger_gap_weight: f32,
+    /// `pinch_gap` is measured between the pads' surfaces (their radii from the hand profile),
+    /// not their centres. Default true (dex-retargeting measures between link origins: false).
+    pub pad_contact: bool,
+    /// Most Gauss-Newton iterations per descent. Default 20.
+    pub max_iterations: u32,
+    /// A descent from the previous solution that ends with the objective's vector part above
+    /// this is tried again from the middle of the joints' ranges. Default 0.00001 (about a
+    /// 0.8 mm error on one wrist vector).
+    pub restart_above: f32,
+}
+
+impl Default for FingertipConfig {
+    fn default() -> Self {
+        Self {
+            scaling: None,
+            huber_delta: 0.03,
+            smoothness: 0.004,
+            pinch_engage: 0.03,
+            pinch_release: 0.05,
+            pinch_gap: 0.0001,
+            finger_gap: 0.03,
+            pinch_weight: 200.0,
+            finger_gap_weight: 400.0,
+            pad_contact: true,
+            max_iterations: 20,
+            restart_above: 0.00001,
+        }
+    }
+}
+
+impl FingertipConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        if let Some(s) = self.scaling {
+            positive("fingertip.scaling", s)?;
+        }
+        positive("fingertip.huber_delta", self.huber_delta)?;
+        non_negative("fingertip.smoothness", self.smoothness)?;
+        positive("fingertip.pinch_engage", self.pinch_engage)?;
+        positive("fingertip.pinch_release", self.pinch_release)?;
+        if self.pinch_release < self.pinch_engage {
+            return Err(ConfigError::invalid(
+                RETARGET_ORIGIN,
+                "fingertip.pinch_release",
+                format!(
+                    "{} must not be below pinch_engage ({}): the switch needs hysteresis",
+                    self.pinch_release, self.pinch_engage
+                ),
+            ));
+        }
+        non_negative("fingertip.pinch_gap", self.pinch_gap)?;
+        non_negative("fingertip.finger_gap", self.finger_gap)?;
+        non_negative("fingertip.pinch_weight", self.pinch_weight)?;
+        non_negative("fingertip.finger_gap_weight", self.finger_gap_weight)?;
+        non_negative("fingertip.restart_above", self.restart_above)?;
+        if self.max_iterations == 0 || self.max_iterations > 1000 {
+            return Err(ConfigError::invalid(
+                RETARGET_ORIGIN,
+                "fingertip.max_iterations",
+                format!("{} must be in 1..=1000", self.max_iterations),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Retargeting parameters (a TOML table; every field has a sensible default;
 /// unknown keys are rejected).
 ///
@@ -214,6 +309,10 @@ impl Default for JointConfig {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RetargetConfig {
+    /// `joint`, `vector` or `pinch`; default: the hand profile's `[retarget] mode`.
+    pub mode: Option<RetargetMode>,
+    /// Fingertip retargeting's parameters (modes `vector` and `pinch`).
+    pub fingertip: FingertipConfig,
     /// One Euro filter parameters (shared by all joints).
     pub filter: OneEuroParams,
     /// Normalised; the output does not change for filtered-input changes
@@ -228,6 +327,8 @@ pub struct RetargetConfig {
 impl Default for RetargetConfig {
     fn default() -> Self {
         RetargetConfig {
+            mode: None,
+            fingertip: FingertipConfig::default(),
             filter: OneEuroParams::default(),
             deadband: 0.005,
             max_speed: 3.0,
@@ -244,6 +345,18 @@ fn positive(field: &str, v: f32) -> Result<(), ConfigError> {
             RETARGET_ORIGIN,
             field,
             format!("{v} must be finite and > 0"),
+        ))
+    }
+}
+
+fn non_negative(field: &str, v: f32) -> Result<(), ConfigError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(
+            RETARGET_ORIGIN,
+            field,
+            format!("{v} must be finite and >= 0"),
         ))
     }
 }
@@ -284,6 +397,7 @@ impl RetargetConfig {
             ));
         }
         positive("max_speed", self.max_speed)?;
+        self.fingertip.validate()?;
         for (name, j) in &self.joints {
             let field = format!("joints.{name}");
             for (what, v) in [("min", j.min), ("max", j.max)] {

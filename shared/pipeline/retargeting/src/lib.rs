@@ -132,15 +132,19 @@ mod config;
 mod error;
 mod filter;
 mod retargeter;
+mod solver;
 
 pub use calibration::{
     Calibration, FingerCalibration, RotationCalibration, GLOVE_CHANNEL_NAMES, GLOVE_RAW_MAX,
     MIN_CALIBRATION_SPAN,
 };
-pub use config::{Curve, JointConfig, OneEuroParams, RetargetConfig, MAX_DEADBAND};
+pub use config::{
+    Curve, FingertipConfig, JointConfig, OneEuroParams, RetargetConfig, MAX_DEADBAND,
+};
 pub use error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN, RETARGET_ORIGIN};
 pub use retargeter::{GloveInput, JointTargets, Retargeter, MAX_STEP_DT_S};
-pub use teleop_hand_profile::{HandProfile, MAX_JOINTS};
+pub use solver::{SolveReport, Solver};
+pub use teleop_hand_profile::{HandProfile, RetargetMode, MAX_JOINTS};
 
 /// Number of glove channels (little, ring, middle, index, thumb, thumb_rotation).
 pub const GLOVE_CHANNELS: usize = 6;

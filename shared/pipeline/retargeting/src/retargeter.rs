@@ -1,11 +1,13 @@
 //! The per-sample retargeting pipeline.
 
-use teleop_hand_profile::{HandProfile, MAX_JOINTS};
+use teleop_hand_profile::{HandProfile, RetargetMode, MAX_JOINTS};
+use teleop_kinematics::{OperatorHand, OperatorPose};
 
 use crate::calibration::Calibration;
 use crate::config::{JointConfig, RetargetConfig};
-use crate::error::ConfigError;
+use crate::error::{ConfigError, RETARGET_ORIGIN};
 use crate::filter::OneEuro;
+use crate::solver::{SolveReport, Solver};
 use crate::GLOVE_CHANNELS;
 
 /// Longest time step (seconds) a single [`Retargeter::step`] accounts for.
@@ -108,6 +110,11 @@ impl JointPlan {
 pub struct Retargeter {
     config: RetargetConfig,
     calibration: Calibration,
+    mode: RetargetMode,
+    /// The operator's hand model (the calibration's fit, or the default).
+    operator: OperatorHand,
+    /// Fingertip retargeting (modes `vector` and `pinch`).
+    solver: Option<Solver>,
     plans: Vec<JointPlan>,
     filters: [OneEuro; MAX_JOINTS],
     /// Last filtered value accepted through the deadband, per joint.
@@ -129,6 +136,36 @@ impl Retargeter {
         config.validate()?;
         config.check_joints(profile)?;
         calibration.validate()?;
+        let mode = config.mode.unwrap_or(profile.retarget.mode);
+        let joint_configs: Vec<JointConfig> = profile
+            .joints
+            .iter()
+            .map(|j| config.joint(&j.name))
+            .collect();
+        let solver = match mode {
+            RetargetMode::Joint => None,
+            RetargetMode::Vector | RetargetMode::Pinch => Some(
+                Solver::new(
+                    profile,
+                    config.fingertip,
+                    mode == RetargetMode::Pinch,
+                    &joint_configs,
+                )
+                .ok_or_else(|| {
+                    ConfigError::invalid(
+                        RETARGET_ORIGIN,
+                        "mode",
+                        format!(
+                            "`{}` needs fingers that follow operator fingers (`operator` in \
+                             the hand profile); `{}` has none: use mode `joint`",
+                            mode.name(),
+                            profile.name
+                        ),
+                    )
+                })?,
+            ),
+        };
+        let operator = OperatorHand::default();
         let plans = profile
             .joints
             .iter()
@@ -163,6 +200,9 @@ impl Retargeter {
         Ok(Retargeter {
             config,
             calibration,
+            mode,
+            operator,
+            solver,
             plans,
             filters: [OneEuro::default(); MAX_JOINTS],
             anchor: [0.0; MAX_JOINTS],
@@ -179,6 +219,27 @@ impl Retargeter {
     /// The calibration in use.
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
+    }
+
+    /// The mode in use (the configuration's, else the hand profile's).
+    pub fn mode(&self) -> RetargetMode {
+        self.mode
+    }
+
+    /// The operator's hand model fingertip retargeting follows.
+    pub fn operator(&self) -> &OperatorHand {
+        &self.operator
+    }
+
+    /// What the last fingertip solve did (`None` in mode `joint`).
+    pub fn solve_report(&self) -> Option<SolveReport> {
+        self.solver.as_ref().map(Solver::report)
+    }
+
+    /// The operator's pose for glove closures (0 = open .. 1 = closed; thumb rotation 0 =
+    /// outermost .. 1 = innermost).
+    pub fn operator_pose(closure: &[f32; GLOVE_CHANNELS]) -> OperatorPose {
+        OperatorPose::from_glove(&closure.map(|c| 1.0 - c))
     }
 
     /// Processes one glove sample. Allocates nothing.
@@ -215,6 +276,10 @@ impl Retargeter {
         };
 
         let closure = self.calibration.closure(&input.raw);
+        if let Some(solver) = self.solver.as_mut() {
+            let pads = self.operator.pads(&Self::operator_pose(&closure));
+            solver.solve(&pads);
+        }
         let max_step = self.config.max_speed * dt;
         let mut position = [0.0_f32; MAX_JOINTS];
         let mut clamped = 0_u8;
@@ -229,12 +294,21 @@ impl Retargeter {
             else {
                 continue;
             };
-            let mut raw = *offset;
-            for &(ch, gain) in &channels[..*used] {
-                raw += gain * closure[ch];
-            }
             let jc = &plan.config;
-            let shaped = jc.curve.apply(raw);
+            let shaped = match self.solver.as_ref().filter(|s| s.drives(j)) {
+                // The fingertip solution, normalised (its curve shapes glove channels only).
+                Some(solver) => {
+                    let angle = solver.solution()[j] as f32;
+                    ((angle - plan.open) / (plan.closed - plan.open)).clamp(0.0, 1.0)
+                }
+                None => {
+                    let mut raw = *offset;
+                    for &(ch, gain) in &channels[..*used] {
+                        raw += gain * closure[ch];
+                    }
+                    jc.curve.apply(raw)
+                }
+            };
             let filtered = self.filters[j].filter(shaped, dt, &self.config.filter);
             let out = &mut position[j];
 
@@ -311,6 +385,9 @@ impl Retargeter {
     /// bounds the physical motion). [`hold`](Self::hold) keeps returning the
     /// last output until then.
     pub fn reset(&mut self) {
+        if let Some(solver) = self.solver.as_mut() {
+            solver.reset_switch();
+        }
         self.filters = [OneEuro::default(); MAX_JOINTS];
         self.last_t_ns = None;
     }

@@ -73,6 +73,7 @@ fn config() -> impl Strategy<Value = (HandProfile, RetargetConfig)> {
                     deadband,
                     max_speed,
                     joints,
+                    ..RetargetConfig::default()
                 };
                 (profile, cfg)
             },

@@ -1,0 +1,758 @@
+//! Fingertip retargeting: the robot's joint angles whose fingertip vectors best match the
+//! operator's, DexPilot's objective (Handa et al. 2020, as dex-retargeting's `DexPilotOptimizer`
+//! 0.4.6 implements it) solved by projected Gauss-Newton in Rust.
+//!
+//! # The objective
+//!
+//! The fingertips are the pads of the profile's fingers that follow an operator finger, thumb
+//! first, then index, middle, ring, little (the operator's order). The vectors are, in
+//! DexPilot's order, every finger pair (from the later finger to the earlier; the first
+//! `n - 1` are finger-to-thumb) and then the wrist (the hand frame's origin) to each fingertip.
+//! Each vector's target is the operator model's same vector times `scaling`, and its error
+//! costs `weight × huber(|robot − target|)` (quadratic below `huber_delta`, linear above),
+//! averaged over the vectors; wrist vectors weigh `pairs + fingers`, pairs 1. Moving away from
+//! the previous solution costs `smoothness × |Δq|²`.
+//!
+//! In `pinch` mode a thumb-finger pair whose operator pads come closer than `pinch_engage`
+//! switches to a pinch (until they part beyond `pinch_release`): its target becomes the
+//! operator's direction at length `pinch_gap` between the robot's pad surfaces (their radii
+//! added; centres with `pad_contact = false`, as DexPilot), weight `pinch_weight`. Two fingers
+//! both pinched and closer than 3 cm are held `finger_gap` apart, weight `finger_gap_weight`.
+//!
+//! # The solver
+//!
+//! Variables: the joints of the retargeted fingers that no other joint drives (a coupled joint
+//! follows its leader, and the leader's Jacobian column carries it); wrist joints are not
+//! solved. Each iteration linearises the vectors with the chains' analytic Jacobians, weighs
+//! each vector by the Huber loss's curvature (iteratively reweighted least squares), adds the
+//! smoothness term and a Levenberg damping, and solves the normal equations by Cholesky with the
+//! joints held at a limit they push against removed (an active set), then clamps to the limits.
+//! A step is kept only when the objective falls. It starts from the previous solution (warm
+//! start) and stops when a step moves no joint by more than 1e-7 rad or after `max_iterations`.
+//! Fixed-size arrays throughout: a solve allocates nothing and, for the same inputs in the same
+//! order, gives bit-identical results.
+
+use glam::{DVec3, Vec3};
+use teleop_hand_profile::{HandProfile, Role, MAX_JOINTS};
+use teleop_kinematics::Chains;
+
+use crate::config::{FingertipConfig, JointConfig};
+
+/// Most retargeted fingertips.
+const MAX_TIPS: usize = 5;
+/// Most vectors: every pair of five fingertips and the wrist to each.
+const MAX_VECTORS: usize = MAX_TIPS * (MAX_TIPS - 1) / 2 + MAX_TIPS;
+/// DexPilot keeps two pinched fingers apart only when the operator's are closer than this.
+const FINGER_GAP_BELOW_M: f64 = 0.03;
+/// A step that moves no joint by more than this (radians) ends the solve.
+const STEP_TOLERANCE_RAD: f64 = 1e-7;
+
+/// What the last solve did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SolveReport {
+    /// Gauss-Newton iterations (tried steps).
+    pub iterations: u32,
+    /// The objective's vector part (the weighted Huber sum, without the smoothness term), as
+    /// dex-retargeting's optimizer reports it.
+    pub objective: f64,
+    /// Per fingertip after the thumb (index, middle, ...): the pinch switch is on.
+    pub pinched: [bool; MAX_TIPS - 1],
+}
+
+/// One vector: from `origin` (a fingertip slot, or the wrist) to `task` (a fingertip slot).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct VectorDef {
+    origin: Option<usize>,
+    task: usize,
+}
+
+/// The fingertip solver of one hand profile (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Solver {
+    chains: Chains,
+    params: FingertipConfig,
+    scaling: f64,
+    pinch: bool,
+    /// Per fingertip slot: the chain (profile finger) and the operator finger (`FINGERS`
+    /// index: thumb 0 .. little 4).
+    tip_chain: [usize; MAX_TIPS],
+    tip_operator: [usize; MAX_TIPS],
+    /// Pad radius per slot, metres.
+    tip_radius: [f64; MAX_TIPS],
+    tips: usize,
+    /// Thumb-finger pairs (the first vectors) when slot 0 is a thumb, else 0.
+    thumb_pairs: usize,
+    /// All pairs.
+    pairs: usize,
+    vectors: [VectorDef; MAX_VECTORS],
+    n_vectors: usize,
+    /// Solved joints.
+    vars: [usize; MAX_JOINTS],
+    n_vars: usize,
+    /// Per joint: the variable it moves with and by how much (1 for the variable itself, the
+    /// coupling ratio for a follower); `None` for a joint the solver leaves alone.
+    moves_with: [Option<(usize, f64)>; MAX_JOINTS],
+    lower: [f64; MAX_JOINTS],
+    upper: [f64; MAX_JOINTS],
+    joints: usize,
+    /// The current solution (radians, every joint; unsolved joints at their `open` angle).
+    q: [f64; MAX_JOINTS],
+    /// The pinch switch per vector.
+    projected: [bool; MAX_VECTORS],
+    report: SolveReport,
+}
+
+/// Per-solve data: the vectors' targets and weights.
+struct Targets {
+    reference: [DVec3; MAX_VECTORS],
+    weight: [f64; MAX_VECTORS],
+}
+
+impl Solver {
+    /// The solver for `profile`: `pinch` turns the pinch switch on (mode `pinch`), `joints`
+    /// are the per-joint limits (normalised, as configured), intersected with the profile's.
+    /// `None` when no finger of the profile follows an operator finger.
+    pub fn new(
+        profile: &HandProfile,
+        params: FingertipConfig,
+        pinch: bool,
+        joints: &[JointConfig],
+    ) -> Option<Self> {
+        let chains = Chains::new(profile);
+        // Fingertip slots in the operator's order (thumb first).
+        let mut slots: Vec<(usize, usize)> = profile
+            .fingers
+            .iter()
+            .enumerate()
+            .filter_map(|(f, finger)| {
+                // GLOVE_FINGERS runs little .. thumb; the operator model thumb .. little.
+                finger.operator.map(|g| (4 - g.min(4), f))
+            })
+            .take(MAX_TIPS)
+            .collect();
+        slots.sort_unstable();
+        if slots.is_empty() {
+            return None;
+        }
+        let mut tip_chain = [0; MAX_TIPS];
+        let mut tip_operator = [0; MAX_TIPS];
+        let mut tip_radius = [0.0; MAX_TIPS];
+        for (s, &(operator, f)) in slots.iter().enumerate() {
+            tip_chain[s] = f;
+            tip_operator[s] = operator;
+            tip_radius[s] = chains.chains()[f].pad_radius;
+        }
+        let tips = slots.len();
+        // DexPilot's order (generate_link_indices): pairs (later -> earlier), then the wrist.
+        let mut vectors = [VectorDef::default(); MAX_VECTORS];
+        let mut n = 0;
+        for task in 0..tips.saturating_sub(1) {
+            for origin in task + 1..tips {
+                vectors[n] = VectorDef {
+                    origin: Some(origin),
+                    task,
+                };
+                n += 1;
+            }
+        }
+        let pairs = n;
+        for task in 0..tips {
+            vectors[n] = VectorDef { origin: None, task };
+            n += 1;
+        }
+        let thumb_pairs = if tip_operator[0] == 0 { tips - 1 } else { 0 };
+
+        let count = profile.joints.len().min(MAX_JOINTS);
+        let mut lower = [0.0; MAX_JOINTS];
+        let mut upper = [0.0; MAX_JOINTS];
+        let mut q = [0.0; MAX_JOINTS];
+        for (j, joint) in profile.joints.iter().take(count).enumerate() {
+            let config = joints.get(j).cloned().unwrap_or_default();
+            let (a, b) = (joint.radians(config.min), joint.radians(config.max));
+            lower[j] = f64::from(a.min(b).max(joint.lower));
+            upper[j] = f64::from(a.max(b).min(joint.upper));
+            q[j] = f64::from(joint.open).clamp(lower[j], upper[j]);
+        }
+        let retargeted = |f: usize| slots.iter().any(|&(_, g)| g == f);
+        let mut vars = [0; MAX_JOINTS];
+        let mut n_vars = 0;
+        let mut moves_with = [None; MAX_JOINTS];
+        for (j, joint) in profile.joints.iter().take(count).enumerate() {
+            if joint.coupling.is_none() && joint.role != Role::Wrist && retargeted(joint.finger) {
+                moves_with[j] = Some((n_vars, 1.0));
+                vars[n_vars] = j;
+                n_vars += 1;
+            }
+        }
+        for (j, joint) in profile.joints.iter().take(count).enumerate() {
+            if let Some(c) = joint.coupling {
+                if let Some(Some((v, _))) = moves_with.get(c.to) {
+                    moves_with[j] = Some((*v, f64::from(c.ratio)));
+                }
+            }
+        }
+        let scaling = f64::from(params.scaling.unwrap_or(profile.retarget.scaling));
+        Some(Self {
+            chains,
+            params,
+            scaling,
+            pinch,
+            tip_chain,
+            tip_operator,
+            tip_radius,
+            tips,
+            thumb_pairs,
+            pairs,
+            vectors,
+            n_vectors: n,
+            vars,
+            n_vars,
+            moves_with,
+            lower,
+            upper,
+            joints: count,
+            q,
+            projected: [false; MAX_VECTORS],
+            report: SolveReport::default(),
+        })
+    }
+
+    /// Whether joint `j` is the solver's (solved, or following a solved joint).
+    pub fn drives(&self, j: usize) -> bool {
+        self.moves_with.get(j).is_some_and(Option::is_some)
+    }
+
+    /// The current solution, radians, in the profile's joint order.
+    pub fn solution(&self) -> &[f64] {
+        &self.q[..self.joints]
+    }
+
+    /// What the last solve did.
+    pub fn report(&self) -> SolveReport {
+        self.report
+    }
+
+    /// Forgets the pinch switch and starts the next solve from the previous solution.
+    pub fn reset_switch(&mut self) {
+        self.projected = [false; MAX_VECTORS];
+    }
+
+    /// The operator's pad for slot `s` (from `pads`, in the operator's finger order).
+    fn operator_pad(&self, pads: &[Vec3; 5], s: usize) -> DVec3 {
+        pads[self.tip_operator[s]].as_dvec3()
+    }
+
+    /// Sets the pinch switch from the operator's pads and builds this solve's targets.
+    fn targets(&mut self, pads: &[Vec3; 5]) -> Targets {
+        let p = &self.params;
+        let mut human = [DVec3::ZERO; MAX_VECTORS];
+        for (k, v) in self.vectors[..self.n_vectors].iter().enumerate() {
+            let origin = v.origin.map_or(DVec3::ZERO, |o| self.operator_pad(pads, o));
+            human[k] = self.operator_pad(pads, v.task) - origin;
+        }
+        if self.pinch && self.thumb_pairs > 0 {
+            for k in 0..self.thumb_pairs {
+                let d = human[k].length();
+                if d < f64::from(p.pinch_engage) {
+                    self.projected[k] = true;
+                } else if d > f64::from(p.pinch_release) {
+                    self.projected[k] = false;
+                }
+            }
+            for k in self.thumb_pairs..self.pairs {
+                // A pair of two non-thumb fingers: both pinched with the thumb (the thumb
+                // pair of slot s is vector s - 1) and close together.
+                let v = self.vectors[k];
+                let both =
+                    v.origin.is_some_and(|o| self.projected[o - 1]) && self.projected[v.task - 1];
+                self.projected[k] = both && human[k].length() <= FINGER_GAP_BELOW_M;
+            }
+        }
+        let mut t = Targets {
+            reference: [DVec3::ZERO; MAX_VECTORS],
+            weight: [0.0; MAX_VECTORS],
+        };
+        let wrist_weight = (self.pairs + self.tips) as f64;
+        for k in 0..self.n_vectors {
+            let v = self.vectors[k];
+            let direction = human[k] / (human[k].length() + 1e-6);
+            let (reference, weight) = match (k < self.pairs, self.projected[k]) {
+                (false, _) => (human[k] * self.scaling, wrist_weight),
+                (true, false) => (human[k] * self.scaling, 1.0),
+                (true, true) if k < self.thumb_pairs => {
+                    let radii = if p.pad_contact {
+                        self.tip_radius[v.task] + v.origin.map_or(0.0, |o| self.tip_radius[o])
+                    } else {
+                        0.0
+                    };
+                    (
+                        direction * (f64::from(p.pinch_gap) + radii),
+                        f64::from(p.pinch_weight),
+                    )
+                }
+                (true, true) => (
+                    direction * f64::from(p.finger_gap),
+                    f64::from(p.finger_gap_weight),
+                ),
+            };
+            t.reference[k] = reference;
+            t.weight[k] = weight;
+        }
+        t
+    }
+
+    /// Huber loss of an error length.
+    fn huber(&self, e: f64) -> f64 {
+        let delta = f64::from(self.params.huber_delta);
+        if e < delta {
+            0.5 * e * e / delta
+        } else {
+            e - 0.5 * delta
+        }
+    }
+
+    /// Every joint's angle from the variables `x` (followers from their leaders, clamped).
+    fn expand(&self, x: &[f64; MAX_JOINTS], q: &mut [f64; MAX_JOINTS]) {
+        *q = self.q;
+        for j in 0..self.joints {
+            if let Some((v, ratio)) = self.moves_with[j] {
+                let leader = self.vars[v];
+                q[j] = if leader == j {
+                    x[v]
+                } else {
+                    (ratio * x[v]).clamp(self.lower[j], self.upper[j])
+                };
+            }
+        }
+    }
+
+    /// The vector part of the objective at `q`, and the smoothness part against `previous`.
+    fn objective(
+        &self,
+        targets: &Targets,
+        q: &[f64; MAX_JOINTS],
+        x: &[f64; MAX_JOINTS],
+        previous: &[f64; MAX_JOINTS],
+    ) -> (f64, f64) {
+        let mut pads = [DVec3::ZERO; MAX_TIPS];
+        for (s, pad) in pads.iter_mut().enumerate().take(self.tips) {
+            *pad = self.chains.pad(self.tip_chain[s], &q[..self.joints]);
+        }
+        let mut sum = 0.0;
+        for k in 0..self.n_vectors {
+            let v = self.vectors[k];
+            let robot = pads[v.task] - v.origin.map_or(DVec3::ZERO, |o| pads[o]);
+            sum += targets.weight[k] * self.huber((robot - targets.reference[k]).length());
+        }
+        let vector_part = sum / self.n_vectors as f64;
+        let mut smooth = 0.0;
+        for v in 0..self.n_vars {
+            smooth += (x[v] - previous[v]).powi(2);
+        }
+        (vector_part, f64::from(self.params.smoothness) * smooth)
+    }
+
+    /// Solves for the operator's pad centres `pads` (operator model, hand frame, thumb ..
+    /// little) and returns the solution (radians, every joint of the profile).
+    ///
+    /// From the previous solution first; when that ends with the vector part above
+    /// `restart_above`, again from the middle of every joint's range, whose result is kept when
+    /// its vector part is at least a fifth lower (a jump the downstream slew limit paces). The
+    /// restart is what gets a redundant thumb out of a branch that hit its limits.
+    pub fn solve(&mut self, pads: &[Vec3; 5]) -> &[f64] {
+        if pads.iter().any(|p| !p.is_finite()) {
+            // Nothing to follow: keep the previous solution.
+            self.report.iterations = 0;
+            return self.solution();
+        }
+        let targets = self.targets(pads);
+        let mut previous = [0.0; MAX_JOINTS];
+        let mut middle = [0.0; MAX_JOINTS];
+        for v in 0..self.n_vars {
+            let j = self.vars[v];
+            previous[v] = self.q[j];
+            middle[v] = 0.5 * (self.lower[j] + self.upper[j]);
+        }
+        let mut best = self.descend(&targets, &previous, &previous);
+        let mut iterations = best.iterations;
+        if best.vector_part > f64::from(self.params.restart_above) {
+            let restart = self.descend(&targets, &middle, &previous);
+            iterations += restart.iterations;
+            if restart.vector_part < 0.8 * best.vector_part {
+                best = restart;
+            }
+        }
+        if best.q.iter().all(|v| v.is_finite()) {
+            self.q = best.q;
+        }
+        let mut pinched = [false; MAX_TIPS - 1];
+        pinched[..self.thumb_pairs].copy_from_slice(&self.projected[..self.thumb_pairs]);
+        self.report = SolveReport {
+            iterations,
+            objective: best.vector_part,
+            pinched,
+        };
+        self.solution()
+    }
+
+    /// Projected, damped Gauss-Newton from the variables `start`, the smoothness term measured
+    /// from `previous`.
+    fn descend(
+        &self,
+        targets: &Targets,
+        start: &[f64; MAX_JOINTS],
+        previous: &[f64; MAX_JOINTS],
+    ) -> Descent {
+        let n = self.n_vars;
+        let mut x = *start;
+        let mut q = self.q;
+        self.expand(&x, &mut q);
+        let (mut vector_part, smooth) = self.objective(targets, &q, &x, previous);
+        let mut cost = vector_part + smooth;
+        let mut damping = 1e-3;
+        let mut iterations = 0;
+        let smoothness = f64::from(self.params.smoothness);
+        let delta = f64::from(self.params.huber_delta);
+        let mut full = [DVec3::ZERO; MAX_JOINTS];
+        while iterations < self.params.max_iterations {
+            // Pads and their Jacobians by variable.
+            let mut pads = [DVec3::ZERO; MAX_TIPS];
+            let mut jac = [[DVec3::ZERO; MAX_JOINTS]; MAX_TIPS];
+            for s in 0..self.tips {
+                pads[s] = self
+                    .chains
+                    .pad_jacobian(self.tip_chain[s], &q[..self.joints], &mut full);
+                for (j, column) in full.iter().enumerate().take(self.joints) {
+                    if let Some((v, ratio)) = self.moves_with[j] {
+                        jac[s][v] += ratio * *column;
+                    }
+                }
+            }
+            // Normal equations of the reweighted, linearised objective.
+            let mut h = [[0.0; MAX_JOINTS]; MAX_JOINTS];
+            let mut g = [0.0; MAX_JOINTS];
+            for k in 0..self.n_vectors {
+                let vd = self.vectors[k];
+                let robot = pads[vd.task] - vd.origin.map_or(DVec3::ZERO, |o| pads[o]);
+                let e = robot - targets.reference[k];
+                let length = e.length();
+                let curvature = if length < delta {
+                    1.0 / delta
+                } else {
+                    1.0 / length
+                };
+                let a = targets.weight[k] * curvature / self.n_vectors as f64;
+                let mut column = [DVec3::ZERO; MAX_JOINTS];
+                for (v, c) in column.iter_mut().enumerate().take(n) {
+                    *c = jac[vd.task][v] - vd.origin.map_or(DVec3::ZERO, |o| jac[o][v]);
+                }
+                for r in 0..n {
+                    g[r] += a * column[r].dot(e);
+                    for c in 0..=r {
+                        h[r][c] += a * column[r].dot(column[c]);
+                    }
+                }
+            }
+            for v in 0..n {
+                g[v] += 2.0 * smoothness * (x[v] - previous[v]);
+                h[v][v] += 2.0 * smoothness;
+            }
+            // Joints at a limit they push against stay there this iteration.
+            let mut free = [true; MAX_JOINTS];
+            for v in 0..n {
+                let j = self.vars[v];
+                let at_lower = x[v] <= self.lower[j] + 1e-12 && g[v] > 0.0;
+                let at_upper = x[v] >= self.upper[j] - 1e-12 && g[v] < 0.0;
+                free[v] = !(at_lower || at_upper);
+            }
+            // Damped steps until one lowers the objective.
+            let mut accepted = false;
+            while iterations < self.params.max_iterations {
+                iterations += 1;
+                let Some(step) = damped_step(&h, &g, &free, n, damping) else {
+                    damping *= 10.0;
+                    continue;
+                };
+                let mut trial = x;
+                let mut largest: f64 = 0.0;
+                for v in 0..n {
+                    let j = self.vars[v];
+                    trial[v] = (x[v] + step[v]).clamp(self.lower[j], self.upper[j]);
+                    largest = largest.max((trial[v] - x[v]).abs());
+                }
+                let mut trial_q = q;
+                self.expand(&trial, &mut trial_q);
+                let (trial_vectors, trial_smooth) =
+                    self.objective(targets, &trial_q, &trial, previous);
+                let trial_cost = trial_vectors + trial_smooth;
+                if trial_cost.is_finite() && trial_cost <= cost {
+                    x = trial;
+                    q = trial_q;
+                    cost = trial_cost;
+                    vector_part = trial_vectors;
+                    damping = (damping / 3.0).max(1e-9);
+                    accepted = largest > STEP_TOLERANCE_RAD;
+                    break;
+                }
+                damping *= 4.0;
+                if largest <= STEP_TOLERANCE_RAD || damping > 1e9 {
+                    break;
+                }
+            }
+            if !accepted {
+                break;
+            }
+        }
+        Descent {
+            q,
+            vector_part,
+            iterations,
+        }
+    }
+}
+
+/// Where one descent ended.
+struct Descent {
+    q: [f64; MAX_JOINTS],
+    vector_part: f64,
+    iterations: u32,
+}
+
+/// Solves `(H + damping × diag(H)) Δ = −g` over the free variables (a fixed variable's step is
+/// 0) by Cholesky; `None` when the matrix is not positive definite. `h` holds the lower
+/// triangle.
+fn damped_step(
+    h: &[[f64; MAX_JOINTS]; MAX_JOINTS],
+    g: &[f64; MAX_JOINTS],
+    free: &[bool; MAX_JOINTS],
+    n: usize,
+    damping: f64,
+) -> Option<[f64; MAX_JOINTS]> {
+    let mut l = [[0.0; MAX_JOINTS]; MAX_JOINTS];
+    let mut b = [0.0; MAX_JOINTS];
+    for r in 0..n {
+        for c in 0..=r {
+            l[r][c] = if free[r] && free[c] { h[r][c] } else { 0.0 };
+        }
+        if free[r] {
+            l[r][r] += damping * h[r][r].max(1e-12);
+            b[r] = -g[r];
+        } else {
+            l[r][r] = 1.0;
+        }
+    }
+    // In-place Cholesky: l = L Lᵀ.
+    for c in 0..n {
+        let mut d = l[c][c];
+        for k in 0..c {
+            d -= l[c][k] * l[c][k];
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return None;
+        }
+        let d = d.sqrt();
+        l[c][c] = d;
+        for r in c + 1..n {
+            let mut s = l[r][c];
+            for k in 0..c {
+                s -= l[r][k] * l[c][k];
+            }
+            l[r][c] = s / d;
+        }
+    }
+    // Forward then back substitution.
+    let mut y = [0.0; MAX_JOINTS];
+    for r in 0..n {
+        let mut s = b[r];
+        for k in 0..r {
+            s -= l[r][k] * y[k];
+        }
+        y[r] = s / l[r][r];
+    }
+    let mut x = [0.0; MAX_JOINTS];
+    for r in (0..n).rev() {
+        let mut s = y[r];
+        for k in r + 1..n {
+            s -= l[k][r] * x[k];
+        }
+        x[r] = s / l[r][r];
+    }
+    for (v, step) in x.iter_mut().enumerate().take(n) {
+        if !free[v] {
+            *step = 0.0;
+        }
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use teleop_kinematics::{OperatorHand, OperatorPose};
+
+    fn solver(hand: &str, pinch: bool) -> (HandProfile, Solver) {
+        solver_with(hand, pinch, FingertipConfig::default())
+    }
+
+    fn solver_with(hand: &str, pinch: bool, params: FingertipConfig) -> (HandProfile, Solver) {
+        let profile = HandProfile::builtin(hand).unwrap();
+        let s = Solver::new(&profile, params, pinch, &[]).unwrap();
+        (profile, s)
+    }
+
+    /// The operator pads that make `q`'s robot pads the exact targets: the robot's pads over
+    /// the scaling.
+    fn pads_for(s: &Solver, q: &[f64]) -> [Vec3; 5] {
+        let mut pads = [Vec3::ZERO; 5];
+        for slot in 0..s.tips {
+            let pad = s.chains.pad(s.tip_chain[slot], q) / s.scaling;
+            pads[s.tip_operator[slot]] = pad.as_vec3();
+        }
+        pads
+    }
+
+    /// Solved joints at `u` (0 = lower limit .. 1 = upper) of their range, followers where
+    /// their leaders put them, the rest where the solver keeps them.
+    fn pose_at(profile: &HandProfile, s: &Solver, u: &[f64]) -> Vec<f64> {
+        let mut q: Vec<f64> = (0..profile.joints.len())
+            .map(|j| match s.moves_with[j] {
+                Some((v, _)) if s.vars[v] == j => {
+                    s.lower[j] + u[j % u.len()] * (s.upper[j] - s.lower[j])
+                }
+                _ => s.q[j],
+            })
+            .collect();
+        for j in 0..q.len() {
+            if let (Some(c), true) = (profile.joints[j].coupling, s.drives(j)) {
+                q[j] = (f64::from(c.ratio) * q[c.to]).clamp(s.lower[j], s.upper[j]);
+            }
+        }
+        q
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// A pose the hand can reach is reached: pose -> pads -> solve -> pads within 1 mm,
+        /// tracking the pads there from the open hand as a glove would move them. Without the
+        /// smoothness term, which trails on purpose (see the next test).
+        #[test]
+        fn reachable_fingertips_are_reached(
+            hand in prop::sample::select(vec!["revo2", "allegro", "shadow", "leap"]),
+            u in prop::collection::vec(0.1f64..0.9, 24),
+        ) {
+            let no_smoothing = FingertipConfig { smoothness: 0.0, ..FingertipConfig::default() };
+            let (profile, mut s) = solver_with(hand, false, no_smoothing);
+            // Tracked as a glove would move: from the start pose to the target in 20 steps.
+            let start = s.solution().to_vec();
+            let q = pose_at(&profile, &s, &u);
+            for k in 1..=20 {
+                let t = f64::from(k) / 20.0;
+                let between: Vec<f64> =
+                    start.iter().zip(&q).map(|(a, b)| a + t * (b - a)).collect();
+                s.solve(&pads_for(&s, &between));
+            }
+            let pads = pads_for(&s, &q);
+            for _ in 0..10 {
+                s.solve(&pads);
+            }
+            let got = s.solution().to_vec();
+            for slot in 0..s.tips {
+                let f = s.tip_chain[slot];
+                let error = s.chains.pad(f, &got).distance(s.chains.pad(f, &q));
+                prop_assert!(error < 1e-3, "{hand} finger {f}: {} mm off", error * 1e3);
+            }
+        }
+
+        /// Limits and couplings hold for any operator input, finite or not.
+        #[test]
+        fn limits_and_couplings_hold_for_any_input(
+            hand in prop::sample::select(vec!["revo2", "allegro", "shadow", "leap"]),
+            raw in prop::collection::vec(prop::num::f32::ANY, 15),
+        ) {
+            let (profile, mut s) = solver(hand, true);
+            let pads: [Vec3; 5] = core::array::from_fn(|i| Vec3::new(raw[3 * i], raw[3 * i + 1], raw[3 * i + 2]));
+            for _ in 0..3 {
+                let q = s.solve(&pads).to_vec();
+                for (j, joint) in profile.joints.iter().enumerate() {
+                    prop_assert!(q[j].is_finite());
+                    prop_assert!(q[j] >= s.lower[j] - 1e-12 && q[j] <= s.upper[j] + 1e-12, "{}", joint.name);
+                    if let Some(c) = joint.coupling {
+                        let expect = (f64::from(c.ratio) * q[c.to]).clamp(s.lower[j], s.upper[j]);
+                        prop_assert!((q[j] - expect).abs() < 1e-12, "{}", joint.name);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn with_the_smoothness_term_the_solution_trails_and_then_arrives() {
+        // A case where the Shadow thumb's five joints leave a long valley: the default
+        // smoothness makes each solve a short step along it.
+        let (profile, mut s) = solver("shadow", false);
+        let mut u = [0.1; 24];
+        u[20] = 0.30;
+        u[21] = 0.51;
+        let q = pose_at(&profile, &s, &u);
+        let pads = pads_for(&s, &q);
+        let thumb = s.tip_chain[0];
+        let error = |s: &Solver| {
+            s.chains
+                .pad(thumb, s.solution())
+                .distance(s.chains.pad(thumb, &q))
+        };
+        s.solve(&pads);
+        let first = error(&s);
+        for _ in 0..300 {
+            s.solve(&pads);
+        }
+        assert!(first > 1e-3, "the first step trails: {} mm", first * 1e3);
+        assert!(error(&s) < 1e-3, "then arrives: {} mm", error(&s) * 1e3);
+    }
+
+    #[test]
+    fn the_pinch_switch_engages_below_3_cm_and_releases_above_5_cm() {
+        let (_, mut s) = solver("allegro", true);
+        let operator = OperatorHand::default();
+        let open = operator.pads(&OperatorPose::default());
+        let at = |d: f32| {
+            // The index pad `d` from the thumb's, the rest of the hand open.
+            let mut pads = open;
+            pads[1] = pads[0] + Vec3::new(0.0, d, 0.0);
+            pads
+        };
+        let mut pinched = |d: f32| {
+            s.solve(&at(d));
+            s.report().pinched[0]
+        };
+        assert!(!pinched(0.04));
+        assert!(pinched(0.029));
+        assert!(
+            pinched(0.04),
+            "hysteresis: still pinched between 3 and 5 cm"
+        );
+        assert!(pinched(0.049));
+        assert!(!pinched(0.051));
+        assert!(!pinched(0.04));
+    }
+
+    #[test]
+    fn the_same_inputs_give_the_same_solution_bit_for_bit() {
+        let operator = OperatorHand::default();
+        let run = || {
+            let (_, mut s) = solver("shadow", true);
+            let mut out = Vec::new();
+            for k in 0..50 {
+                let mut pose = OperatorPose::default();
+                pose.flexion = [k as f32 / 50.0; 5];
+                pose.thumb_opposition = 0.6;
+                out.extend_from_slice(s.solve(&operator.pads(&pose)));
+            }
+            out
+        };
+        assert_eq!(run(), run());
+    }
+}
