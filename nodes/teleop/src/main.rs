@@ -30,6 +30,7 @@ mod inspect;
 mod launch;
 mod profile;
 mod recordings;
+mod retarget_eval;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -224,6 +225,11 @@ enum Command {
         #[command(subcommand)]
         command: profile::ProfileCommand,
     },
+    /// Retargeting tools: `eval` measures modes on recorded glove trajectories.
+    Retarget {
+        #[command(subcommand)]
+        command: RetargetCommand,
+    },
     /// Inspect or repair recordings.
     Recordings {
         #[command(subcommand)]
@@ -279,6 +285,33 @@ enum Command {
         /// Seconds of glove samples averaged per pose.
         #[arg(long, default_value = "1", value_parser = parse_seconds, allow_hyphen_values = true)]
         capture: Duration,
+    },
+}
+
+#[derive(Subcommand)]
+enum RetargetCommand {
+    /// Run retargeting modes over recorded glove trajectories and print, side by side, the
+    /// fingertip error, the pinch gap where the operator pinches, joint-limit saturation, jerk
+    /// and step time (e.g. `teleop retarget eval recordings/trajectories/*.mcap --hand allegro`).
+    Eval {
+        /// Recordings with `glove/state` samples.
+        #[arg(required = true)]
+        recordings: Vec<PathBuf>,
+        /// The robot hand: a shipped name (revo2, allegro, shadow, leap) or a profile file.
+        #[arg(long)]
+        hand: String,
+        /// Modes to compare: comma-separated joint, vector, pinch, or all.
+        #[arg(long, default_value = "all", value_parser = retarget_eval::parse_modes)]
+        mode: std::vec::Vec<teleop_hand_profile::RetargetMode>,
+        /// The retarget node's configuration (its `[retarget]` table; default: the defaults).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// The operator's calibration profile (default: the glove's full range, default model).
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// The side to read in a recording of several (`NS/glove/state`).
+        #[arg(long, value_name = "NS")]
+        namespace: Option<Namespace>,
     },
 }
 
@@ -375,6 +408,24 @@ fn main() -> ExitCode {
             }
         },
         Command::Profile { command } => profile::run(&command),
+        Command::Retarget {
+            command:
+                RetargetCommand::Eval {
+                    recordings,
+                    hand,
+                    mode,
+                    config,
+                    calibration,
+                    namespace,
+                },
+        } => retarget_eval::eval_cmd(&retarget_eval::EvalOptions {
+            recordings,
+            hand,
+            modes: mode,
+            config,
+            calibration,
+            namespace,
+        }),
         Command::Reprocess {
             file,
             out,

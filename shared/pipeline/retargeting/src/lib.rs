@@ -50,8 +50,14 @@
 //!
 //! # Calibration profile (TOML)
 //!
-//! One table per glove finger plus `[thumb_rotation]`; all are required and
-//! unknown keys are rejected:
+//! One table per glove finger plus `[thumb_rotation]`, all required, and an
+//! optional `[operator]` table: the operator's thumb as `teleop calibrate`'s
+//! pinch step fitted it ([`Calibration::with_pinches`]), in millimetres and
+//! degrees in the hand frame of `teleop_kinematics` (the scales multiply the
+//! default hand's thumb joint range and lengths). Without it the operator is
+//! the default hand ([`Calibration::operator_hand`]). Every key of a table is
+//! required, unknown keys are rejected and the operator's values must lie in
+//! the human range ([`teleop_kinematics::ThumbParams::check`]):
 //!
 //! ```
 //! let text = r#"
@@ -78,10 +84,18 @@
 //! [thumb_rotation]
 //! inner = 30
 //! outer = 970
+//!
+//! [operator]
+//! thumb_base_mm = [-24.1, 27.3, -10.6]  # the thumb's CMC joint, hand frame
+//! thumb_direction_deg = 38.2            # the relaxed thumb, from the fingers towards the thumb side
+//! opposition_deg = 84.5                 # its turn under the palm at full opposition
+//! thumb_flexion_scale = 1.04
+//! thumb_length_scale = 1.02
 //! "#;
 //! let cal = teleop_retargeting::Calibration::from_toml_str(text, "calibration.toml")?;
 //! assert_eq!(cal.fingers[1].closed, 60);
 //! assert_eq!(teleop_retargeting::Calibration::from_toml_str(&cal.to_toml_string(), "x")?, cal);
+//! assert!((cal.operator_hand().opposition_rad - 84.5f32.to_radians()).abs() < 1e-6);
 //! # Ok::<(), teleop_retargeting::ConfigError>(())
 //! ```
 //!
@@ -130,6 +144,7 @@
 mod calibration;
 mod config;
 mod error;
+pub mod eval;
 mod filter;
 mod retargeter;
 mod solver;
@@ -143,7 +158,7 @@ pub use config::{
 };
 pub use error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN, RETARGET_ORIGIN};
 pub use retargeter::{GloveInput, JointTargets, Retargeter, MAX_STEP_DT_S};
-pub use solver::{SolveReport, Solver};
+pub use solver::{SolveReport, Solver, MAX_VECTORS};
 pub use teleop_hand_profile::{HandProfile, RetargetMode, MAX_JOINTS};
 
 /// Number of glove channels (little, ring, middle, index, thumb, thumb_rotation).

@@ -41,7 +41,7 @@ use crate::config::{FingertipConfig, JointConfig};
 /// Most retargeted fingertips.
 const MAX_TIPS: usize = 5;
 /// Most vectors: every pair of five fingertips and the wrist to each.
-const MAX_VECTORS: usize = MAX_TIPS * (MAX_TIPS - 1) / 2 + MAX_TIPS;
+pub const MAX_VECTORS: usize = MAX_TIPS * (MAX_TIPS - 1) / 2 + MAX_TIPS;
 /// DexPilot keeps two pinched fingers apart only when the operator's are closer than this.
 const FINGER_GAP_BELOW_M: f64 = 0.03;
 /// A step that moves no joint by more than this (radians) ends the solve.
@@ -100,9 +100,12 @@ pub struct Solver {
     /// The pinch switch per vector.
     projected: [bool; MAX_VECTORS],
     report: SolveReport,
+    /// The last solve's targets.
+    last_targets: Targets,
 }
 
 /// Per-solve data: the vectors' targets and weights.
+#[derive(Debug, Clone)]
 struct Targets {
     reference: [DVec3; MAX_VECTORS],
     weight: [f64; MAX_VECTORS],
@@ -214,6 +217,10 @@ impl Solver {
             q,
             projected: [false; MAX_VECTORS],
             report: SolveReport::default(),
+            last_targets: Targets {
+                reference: [DVec3::ZERO; MAX_VECTORS],
+                weight: [0.0; MAX_VECTORS],
+            },
         })
     }
 
@@ -237,6 +244,38 @@ impl Solver {
         self.projected = [false; MAX_VECTORS];
     }
 
+    /// The retargeted fingers (profile finger indices), thumb first: the order of the vectors'
+    /// fingertips.
+    pub fn fingertips(&self) -> &[usize] {
+        &self.tip_chain[..self.tips]
+    }
+
+    /// The joints the solver moves (leaders; their followers move with them), profile order.
+    pub fn variables(&self) -> &[usize] {
+        &self.vars[..self.n_vars]
+    }
+
+    /// The operator's vectors for `pads`, in the solver's (DexPilot's) order: the fingertip
+    /// pairs, then the wrist to each fingertip (unscaled, metres); returns how many.
+    pub fn operator_vectors(&self, pads: &[Vec3; 5], out: &mut [DVec3; MAX_VECTORS]) -> usize {
+        for (k, v) in self.vectors[..self.n_vectors].iter().enumerate() {
+            let origin = v.origin.map_or(DVec3::ZERO, |o| self.operator_pad(pads, o));
+            out[k] = self.operator_pad(pads, v.task) - origin;
+        }
+        self.n_vectors
+    }
+
+    /// The objective's vector part at joint angles `q` (radians, every joint) against the last
+    /// solve's targets: how another solver's answer to the same frame scores.
+    pub fn objective_at(&self, q: &[f64]) -> f64 {
+        let mut full = self.q;
+        for (slot, v) in full.iter_mut().zip(q) {
+            *slot = *v;
+        }
+        let x = [0.0; MAX_JOINTS];
+        self.objective(&self.last_targets, &full, &x, &x).0
+    }
+
     /// The operator's pad for slot `s` (from `pads`, in the operator's finger order).
     fn operator_pad(&self, pads: &[Vec3; 5], s: usize) -> DVec3 {
         pads[self.tip_operator[s]].as_dvec3()
@@ -246,10 +285,7 @@ impl Solver {
     fn targets(&mut self, pads: &[Vec3; 5]) -> Targets {
         let p = &self.params;
         let mut human = [DVec3::ZERO; MAX_VECTORS];
-        for (k, v) in self.vectors[..self.n_vectors].iter().enumerate() {
-            let origin = v.origin.map_or(DVec3::ZERO, |o| self.operator_pad(pads, o));
-            human[k] = self.operator_pad(pads, v.task) - origin;
-        }
+        self.operator_vectors(pads, &mut human);
         if self.pinch && self.thumb_pairs > 0 {
             for k in 0..self.thumb_pairs {
                 let d = human[k].length();
@@ -366,6 +402,7 @@ impl Solver {
             return self.solution();
         }
         let targets = self.targets(pads);
+        self.last_targets = targets.clone();
         let mut previous = [0.0; MAX_JOINTS];
         let mut middle = [0.0; MAX_JOINTS];
         for v in 0..self.n_vars {
