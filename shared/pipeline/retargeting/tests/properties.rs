@@ -96,6 +96,7 @@ fn calibration(forward: bool) -> impl Strategy<Value = Calibration> {
     (prop::array::uniform5(pair()), pair()).prop_map(|(f, (outer, inner))| Calibration {
         fingers: f.map(|(open, closed)| FingerCalibration { open, closed }),
         thumb_rotation: RotationCalibration { inner, outer },
+        operator: None,
     })
 }
 
