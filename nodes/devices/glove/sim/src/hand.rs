@@ -29,8 +29,11 @@ pub enum Script {
         /// Seconds per open-close cycle.
         period_s: f32,
     },
-    /// Thumb and index pinch together and release, other fingers relaxed open.
+    /// The thumb pinches one finger and releases, the other fingers relaxed open: a quarter of
+    /// the period closing, three eighths holding the pinch, a quarter opening, an eighth open.
     Pinch {
+        /// The finger the thumb meets.
+        finger: PinchFinger,
         /// Seconds per pinch cycle.
         period_s: f32,
     },
@@ -39,24 +42,87 @@ pub enum Script {
         /// Seconds per grasp cycle.
         period_s: f32,
     },
+    /// A slow free motion: each channel swings smoothly over most of its range at its own
+    /// frequency, the six frequencies incommensurate so that the pose never repeats; no pinch
+    /// is intended.
+    Free,
     /// Linear interpolation through `(t_s, positions)` points, looped.
     Trajectory(Vec<(f32, [f32; CHANNELS])>),
 }
+
+/// The long finger a [`Script::Pinch`] brings the thumb to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PinchFinger {
+    /// Thumb to index.
+    Index,
+    /// Thumb to middle.
+    Middle,
+    /// Thumb to ring.
+    Ring,
+}
+
+impl PinchFinger {
+    /// The raw positions of the held pinch.
+    pub const fn positions(self) -> [f32; CHANNELS] {
+        match self {
+            PinchFinger::Index => PINCH_INDEX,
+            PinchFinger::Middle => PINCH_MIDDLE,
+            PinchFinger::Ring => PINCH_RING,
+        }
+    }
+}
+
+/// The script names [`Script::parse`] knows (besides a trajectory file), for help and errors.
+pub const SCRIPT_NAMES: &str =
+    "hold, open-close, grasp, pinch-index (or pinch), pinch-middle, pinch-ring, free";
 
 /// Positions of an open, relaxed hand.
 const OPEN: [f32; CHANNELS] = [950.0, 950.0, 950.0, 950.0, 900.0, 700.0];
 /// Positions of a fist.
 const FIST: [f32; CHANNELS] = [80.0, 80.0, 80.0, 80.0, 150.0, 300.0];
 
+// The held pinches. In the operator model posed from the glove node's positions (`raw / 1000`,
+// `teleop_kinematics::OperatorHand::default()`), the thumb's and the finger's fingertip pads
+// touch (gap under 0.1 mm), pulp to pulp; the other fingers stay as in `OPEN`. Found once by a
+// grid search over the three moving channels (raw 0..950 in steps of 10, the finger's value
+// bisected to the gap's zero): of the poses whose pads touch, one close to those whose pads
+// face each other most squarely (the larger the lesser of the two cosines between the line
+// joining the pad centres and each distal segment's palm-side normal), off the glove's ends.
+// Poses closing further also touch (e.g. flexions of 0.275 thumb, 0.625 rotation, 0.675 index),
+// but with a pad on the back or the side of the other finger. The unit tests check these
+// against the model, so a change to the model that moves the pinches fails there.
+/// The thumb pinches the index finger: a nearly straight thumb rotated in, the index half bent.
+const PINCH_INDEX: [f32; CHANNELS] = [950.0, 950.0, 950.0, 483.0, 920.0, 150.0];
+/// The thumb pinches the middle finger.
+const PINCH_MIDDLE: [f32; CHANNELS] = [950.0, 950.0, 427.0, 950.0, 800.0, 60.0];
+/// The thumb pinches the ring finger, rotated in almost fully and reaching across the palm.
+const PINCH_RING: [f32; CHANNELS] = [950.0, 415.0, 950.0, 950.0, 610.0, 30.0];
+
+/// Frequencies of the free motion's channels, Hz: 0.05 times the square roots of the primes 3
+/// to 17, pairwise incommensurate (square roots of distinct primes are linearly independent
+/// over the rationals); periods from 4.8 to 11.5 s.
+const FREE_HZ: [f32; CHANNELS] = [0.0866, 0.1118, 0.1323, 0.1658, 0.1803, 0.2062];
+/// The middle of the free motion's swing (raw): each channel swings between 100 and 900.
+const FREE_MID: f32 = 500.0;
+/// The free motion's amplitude (raw), see [`FREE_MID`].
+const FREE_AMPLITUDE: f32 = 400.0;
+
 impl Script {
-    /// Parses a script name (`hold`, `open-close`, `pinch`, `grasp`) or loads a trajectory CSV
-    /// file (`t_s,little,ring,middle,index,thumb,thumb_rotation` per line; `#` comments).
+    /// Parses a script name ([`SCRIPT_NAMES`]) or loads a trajectory CSV file
+    /// (`t_s,little,ring,middle,index,thumb,thumb_rotation` per line; `#` comments).
     pub fn parse(spec: &str) -> Result<Self, String> {
+        let pinch = |finger| Script::Pinch {
+            finger,
+            period_s: 4.0,
+        };
         Ok(match spec {
             "hold" => Script::Hold(OPEN),
             "open-close" => Script::OpenClose { period_s: 4.0 },
-            "pinch" => Script::Pinch { period_s: 3.0 },
+            "pinch" | "pinch-index" => pinch(PinchFinger::Index),
+            "pinch-middle" => pinch(PinchFinger::Middle),
+            "pinch-ring" => pinch(PinchFinger::Ring),
             "grasp" => Script::Grasp { period_s: 6.0 },
+            "free" => Script::Free,
             path => Script::Trajectory(load_trajectory(Path::new(path))?),
         })
     }
@@ -72,12 +138,19 @@ impl Script {
         match self {
             Script::Hold(p) => *p,
             Script::OpenClose { period_s } => blend(&OPEN, &FIST, wave(*period_s)),
-            Script::Pinch { period_s } => {
-                let mut pinch = OPEN;
-                pinch[3] = 420.0; // index bends
-                pinch[4] = 380.0; // thumb bends
-                pinch[5] = 250.0; // and rotates in to meet it
-                blend(&OPEN, &pinch, wave(*period_s))
+            Script::Pinch { finger, period_s } => {
+                let pinch = finger.positions();
+                // Each move starts and stops smoothly (smoothstep).
+                let ease = |s: f32| {
+                    let s = s.clamp(0.0, 1.0);
+                    s * s * (3.0 - 2.0 * s)
+                };
+                match (t / period_s.max(0.1)).rem_euclid(1.0) {
+                    p if p < 0.25 => blend(&OPEN, &pinch, ease(p / 0.25)),
+                    p if p < 0.625 => pinch,
+                    p if p < 0.875 => blend(&pinch, &OPEN, ease((p - 0.625) / 0.25)),
+                    _ => OPEN,
+                }
             }
             Script::Grasp { period_s } => {
                 // 0-20 % reach (open), 20-45 % close around the object, 45-80 % squeeze and
@@ -99,6 +172,9 @@ impl Script {
                     p => blend(&squeeze, &OPEN, (p - 0.8) / 0.2),
                 }
             }
+            // Each channel starts open (at the top of its swing).
+            Script::Free => FREE_HZ
+                .map(|hz| FREE_MID + FREE_AMPLITUDE * (core::f32::consts::TAU * hz * t).cos()),
             Script::Trajectory(points) => trajectory_at(points, t),
         }
     }
@@ -129,8 +205,12 @@ fn trajectory_at(points: &[(f32, [f32; CHANNELS])], t: f32) -> [f32; CHANNELS] {
 }
 
 fn load_trajectory(path: &Path) -> Result<Vec<(f32, [f32; CHANNELS])>, String> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: not a script name (hold, open-close, pinch, grasp) and not a readable trajectory file: {e}", path.display()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        format!(
+            "{}: not a script name ({SCRIPT_NAMES}) and not a readable trajectory file: {e}",
+            path.display()
+        )
+    })?;
     let mut points = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -367,6 +447,8 @@ impl Hand {
 
 #[cfg(test)]
 mod tests {
+    use teleop_kinematics::{OperatorHand, OperatorPose};
+
     use super::*;
 
     fn still(p: f32) -> Hand {
@@ -438,6 +520,111 @@ mod tests {
         assert!(s.at(1.0)[3] > 900.0);
         assert!(s.at(6.0)[3] < s.at(4.0)[3]);
         assert!(s.at(9.99)[3] > 850.0);
+    }
+
+    /// The operator model's pose for raw glove positions, normalised as the glove node does.
+    fn operator(raw: &[f32; CHANNELS]) -> OperatorPose {
+        OperatorPose::from_glove(&raw.map(|p| p / 1000.0))
+    }
+
+    /// The pinched finger's index in the operator model's finger order (thumb first).
+    fn model_finger(finger: PinchFinger) -> usize {
+        match finger {
+            PinchFinger::Index => 1,
+            PinchFinger::Middle => 2,
+            PinchFinger::Ring => 3,
+        }
+    }
+
+    const PINCHES: [PinchFinger; 3] = [PinchFinger::Index, PinchFinger::Middle, PinchFinger::Ring];
+
+    #[test]
+    fn pinches_touch_pad_to_pad_in_the_operator_model() {
+        let model = OperatorHand::default();
+        for finger in PINCHES {
+            let pose = operator(&finger.positions());
+            let f = model_finger(finger);
+            let gap = model.pad_gap(&pose, 0, f);
+            assert!(gap.abs() < 0.001, "{finger:?}: pads {gap} m apart");
+            // Pulp to pulp: each pad lies on the palm side of the other's distal segment.
+            let skeleton = model.pose(&pose);
+            // The distal segment turned a right angle further in the plane the finger bends
+            // in (`first x last` is the bending axis).
+            let palm_side = |i: usize| {
+                let chain = &skeleton.fingers[i];
+                let (first, last) = (chain[1] - chain[0], chain[3] - chain[2]);
+                first.cross(last).cross(last).normalize()
+            };
+            let pads = model.pads(&pose);
+            let to_finger = (pads[f] - pads[0]).normalize();
+            let thumb = to_finger.dot(palm_side(0));
+            let other = -to_finger.dot(palm_side(f));
+            assert!(
+                thumb > 0.2 && other > 0.2,
+                "{finger:?}: the pads do not face each other ({thumb}, {other})"
+            );
+            // The simulator reports whole raw units: one unit off on any channel still pinches.
+            for ch in 0..CHANNELS {
+                for d in [-1.0, 1.0] {
+                    let mut raw = finger.positions();
+                    raw[ch] += d;
+                    let gap = model.pad_gap(&operator(&raw), 0, f);
+                    assert!(gap.abs() < 0.002, "{finger:?} channel {ch} {d:+}: {gap} m");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pinch_closes_holds_and_opens_without_passing_through() {
+        let model = OperatorHand::default();
+        assert_eq!(Script::parse("pinch"), Script::parse("pinch-index"));
+        for (name, finger) in ["pinch-index", "pinch-middle", "pinch-ring"]
+            .into_iter()
+            .zip(PINCHES)
+        {
+            let s = Script::parse(name).unwrap();
+            assert_eq!(s.at(0.0), OPEN, "{name}");
+            assert_eq!(s.at(1.0), finger.positions(), "{name}");
+            assert_eq!(s.at(2.4), finger.positions(), "{name}");
+            assert_eq!(s.at(3.6), OPEN, "{name}");
+            let f = model_finger(finger);
+            for k in 0..=400 {
+                let t = k as f32 * 0.01;
+                let gap = model.pad_gap(&operator(&s.at(t)), 0, f);
+                assert!(gap > -0.002, "{name} at {t} s: pads overlap by {gap} m");
+            }
+            // The simulated finger settles on the pinch while it is held.
+            let mut h = Hand::new(s, HandModel::default());
+            h.advance_to(2.0);
+            let raw = h.positions().map(f32::from);
+            let gap = model.pad_gap(&operator(&raw), 0, f);
+            assert!(gap.abs() < 0.002, "{name}: the held pinch is {gap} m apart");
+        }
+    }
+
+    #[test]
+    fn free_motion_is_slow_and_covers_most_of_the_range() {
+        let s = Script::parse("free").unwrap();
+        assert_eq!(s.at(0.0), [900.0; CHANNELS], "starts open");
+        let (mut low, mut high) = ([f32::MAX; CHANNELS], [f32::MIN; CHANNELS]);
+        let mut before = s.at(0.0);
+        for k in 1..=6000 {
+            let now = s.at(k as f32 * 0.01);
+            for ch in 0..CHANNELS {
+                low[ch] = low[ch].min(now[ch]);
+                high[ch] = high[ch].max(now[ch]);
+                let speed = (now[ch] - before[ch]).abs() / 0.01;
+                assert!(speed < 600.0, "channel {ch}: {speed} raw/s");
+            }
+            before = now;
+        }
+        for ch in 0..CHANNELS {
+            assert!(
+                low[ch] < 120.0 && high[ch] > 880.0,
+                "channel {ch}: {low:?} {high:?}"
+            );
+        }
     }
 
     #[test]

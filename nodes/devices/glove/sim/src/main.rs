@@ -17,7 +17,7 @@ use std::time::Duration;
 
 use clap::Parser;
 use teleop_glove_protocol::BaudRate;
-use teleop_sim_glove::hand::{Hand, HandModel, Script};
+use teleop_sim_glove::hand::{Hand, HandModel, Script, SCRIPT_NAMES};
 use teleop_sim_glove::{Faults, SimGlove, SimOptions};
 use teleop_sim_kit::process::{self, SimArgs};
 
@@ -36,8 +36,8 @@ struct Args {
     /// Line speed at power-on: 115200, 57600 or 19200.
     #[arg(long, default_value_t = 115200)]
     baud: u32,
-    /// Operator motion: hold, open-close, pinch, grasp, or a trajectory CSV file.
-    #[arg(long, default_value = "grasp")]
+    #[arg(long, default_value = "grasp",
+          help = format!("Operator motion: {SCRIPT_NAMES}, or a trajectory CSV file"))]
     script: String,
     /// Device processing time per request, microseconds.
     #[arg(long, default_value_t = 200)]
