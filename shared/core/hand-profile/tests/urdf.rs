@@ -3,10 +3,16 @@
 //! existing driven joints, every profile joint by name), whose `<finger>_tip` and `<finger>_pad`
 //! frames, posed from the URDF alone, are where the profile's own forward kinematics puts them
 //! (to 1e-6 m, for random joint vectors within the limits).
+//!
+//! The same frames are also checked in pinocchio (pip `pin`, the library dex-retargeting loads
+//! robots with), mimic joints as pinocchio reads them; without `import pinocchio` that test
+//! prints why and passes, unless `TELEOP_REQUIRE_CHECKS` (set by `.ci/run` as root) is set.
 
 #![allow(clippy::unwrap_used)]
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::io::Write;
+use std::process::{Command, Stdio};
 
 use proptest::prelude::*;
 use teleop_hand_profile::{HandProfile, MAX_JOINTS};
@@ -586,6 +592,144 @@ fn every_builtin_profile_exports_at_its_limits() {
             check(&profile, &[u; MAX_JOINTS]).unwrap();
         }
     }
+}
+
+/// Reads lines `case<TAB>urdf file<TAB>joint=angle...` (the profile's driven joints) on standard
+/// input; prints per case its configuration size (`case<TAB>#nq<TAB>n`) and every tip and pad
+/// frame (`case<TAB>frame<TAB>x<TAB>y<TAB>z`), posed by pinocchio with its mimic joints.
+const PINOCCHIO: &str = r#"
+import sys
+import pinocchio as pin
+models = {}
+for line in sys.stdin:
+    case, path, *angles = line.rstrip("\n").split("\t")
+    if path not in models:
+        models[path] = pin.buildModelFromUrdf(path, mimic=True)
+    model = models[path]
+    data = model.createData()
+    q = pin.neutral(model)
+    for item in angles:
+        name, value = item.rsplit("=", 1)
+        q[model.joints[model.getJointId(name)].idx_q] = float(value)
+    pin.framesForwardKinematics(model, data, q)
+    print(f"{case}\t#nq\t{model.nq}")
+    for i, frame in enumerate(model.frames):
+        if frame.name.endswith(("_tip", "_pad")):
+            x, y, z = map(float, data.oMf[i].translation)
+            print(f"{case}\t{frame.name}\t{x!r}\t{y!r}\t{z!r}")
+"#;
+
+#[test]
+fn pinocchio_puts_tips_and_pads_where_the_profile_does() {
+    let ready = Command::new("python3")
+        .args(["-c", "import pinocchio"])
+        .output()
+        .map_err(|e| e.to_string())
+        .and_then(|o| {
+            o.status
+                .success()
+                .then_some(())
+                .ok_or_else(|| String::from_utf8_lossy(&o.stderr).trim().to_string())
+        });
+    if let Err(reason) = ready {
+        assert!(
+            std::env::var_os("TELEOP_REQUIRE_CHECKS").is_none(),
+            "pinocchio required but missing: {reason}"
+        );
+        println!("SKIPPED: python3 cannot import pinocchio ({reason}); pip install pin==4.1.0");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // Per case: the profile, and its angles at spread fractions of each joint's range.
+    let mut cases = Vec::new();
+    let mut input = String::new();
+    for name in HandProfile::builtin_names() {
+        let profile = HandProfile::builtin(name).unwrap();
+        let path = dir.path().join(format!("{name}.urdf"));
+        std::fs::write(&path, profile.to_urdf()).unwrap();
+        for k in 0..8 {
+            let fractions: Vec<f64> = (0..MAX_JOINTS)
+                .map(|i| ((k * 7 + i * 13) % 11) as f64 / 10.0)
+                .collect();
+            let q = profile_angles(&profile, &fractions);
+            input.push_str(&format!("{}\t{}", cases.len(), path.display()));
+            for (j, angle) in profile.joints.iter().zip(&q) {
+                if j.coupling.is_none() {
+                    input.push_str(&format!("\t{}={angle:e}", j.name));
+                }
+            }
+            input.push('\n');
+            cases.push((profile.clone(), q));
+        }
+    }
+    let mut child = Command::new("python3")
+        .args(["-c", PINOCCHIO])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(input.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut seen = BTreeMap::new();
+    let mut worst = 0.0f64;
+    for line in String::from_utf8(out.stdout).unwrap().lines() {
+        let fields: Vec<&str> = line.split('\t').collect();
+        let (profile, q) = &cases[fields[0].parse::<usize>().unwrap()];
+        if fields[1] == "#nq" {
+            // One configuration entry per driven joint: the coupled ones are mimics.
+            let driven = profile
+                .joints
+                .iter()
+                .filter(|j| j.coupling.is_none())
+                .count();
+            assert_eq!(fields[2], driven.to_string(), "{}", profile.name);
+            continue;
+        }
+        let got: Vec<f64> = fields[2..].iter().map(|v| v.parse().unwrap()).collect();
+        let fk = profile_fk(profile, q);
+        let (f, frame) = profile
+            .fingers
+            .iter()
+            .enumerate()
+            .find_map(|(f, finger)| {
+                let frame = fields[1].strip_prefix(finger.name.as_str())?;
+                matches!(frame, "_tip" | "_pad").then_some((f, frame))
+            })
+            .unwrap_or_else(|| panic!("{}: frame {} of no finger", profile.name, fields[1]));
+        let want = if frame == "_tip" { fk[f].0 } else { fk[f].1 };
+        let error = distance([got[0], got[1], got[2]], want);
+        assert!(
+            error < 1e-6,
+            "{}: {} {error:e} m off",
+            profile.name,
+            fields[1]
+        );
+        worst = worst.max(error);
+        *seen.entry(profile.name.clone()).or_insert(0) += 1;
+    }
+    for (profile, _) in cases.iter().step_by(8) {
+        assert_eq!(
+            seen.get(&profile.name),
+            Some(&(8 * 2 * profile.fingers.len())),
+            "{}: every tip and pad of every case",
+            profile.name
+        );
+    }
+    println!(
+        "pinocchio: every tip and pad of {} cases within {worst:e} m",
+        cases.len()
+    );
 }
 
 proptest! {
