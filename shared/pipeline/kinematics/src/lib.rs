@@ -22,6 +22,7 @@
 //! viewer draws is the operator the retargeting solves for.
 
 mod chains;
+mod fit;
 mod operator;
 mod robot;
 #[cfg(test)]
@@ -30,6 +31,7 @@ mod tests;
 use glam::Vec3;
 
 pub use chains::{Chain, Chains};
+pub use fit::{fit_pinches, FitError, PinchFit, PinchGap, PinchSample, ThumbParams};
 pub use operator::{
     FingerGeometry, OperatorHand, OperatorPose, ThumbGeometry, FINGERS, GLOVE_CHANNEL_OF_FINGER,
     GLOVE_THUMB_ROTATION,
@@ -82,4 +84,3 @@ impl Skeleton {
         self.palm.iter().chain(&self.fingers).cloned().collect()
     }
 }
-

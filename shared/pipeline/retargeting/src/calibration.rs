@@ -1,6 +1,10 @@
-//! Operator calibration profile: raw glove values at the extreme poses.
+//! Operator calibration profile: raw glove values at the extreme poses, and the operator's
+//! thumb as the pinch step fitted it.
 
 use serde::{Deserialize, Serialize};
+use teleop_kinematics::{
+    fit_pinches, OperatorHand, PinchFit, PinchSample, ThumbParams, GLOVE_CHANNEL_OF_FINGER,
+};
 
 use crate::error::{ConfigError, CALIBRATION_ORIGIN, POSES_ORIGIN};
 use crate::GLOVE_CHANNELS;
@@ -45,20 +49,26 @@ pub struct RotationCalibration {
 /// In TOML each finger is a table named after it (`[little]`, `[ring]`,
 /// `[middle]`, `[index]`, `[thumb]`) with `open` and `closed`, and the thumb
 /// rotation is `[thumb_rotation]` with `inner` and `outer`. All six tables
-/// are required and unknown keys are rejected. Serde (de)serialisation uses
-/// that same shape; note that plain serde deserialisation does not
-/// [`validate`](Self::validate) (use [`from_toml_str`](Self::from_toml_str)).
+/// are required; an `[operator]` table (the fitted thumb, see
+/// [`operator`](Self::operator)) is optional, with all its keys. Unknown keys
+/// are rejected. Serde (de)serialisation uses that same shape; note that plain
+/// serde deserialisation does not [`validate`](Self::validate) (use
+/// [`from_toml_str`](Self::from_toml_str)).
 ///
 /// Either direction is accepted for each channel (`open` may be above or
 /// below `closed`), as long as the two values are at least
 /// [`MIN_CALIBRATION_SPAN`] apart.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(from = "CalibrationToml", into = "CalibrationToml")]
 pub struct Calibration {
     /// Flexion channels in glove order: little, ring, middle, index, thumb.
     pub fingers: [FingerCalibration; 5],
     /// Thumb rotation channel.
     pub thumb_rotation: RotationCalibration,
+    /// The operator's thumb as `teleop calibrate`'s pinch step fitted it
+    /// ([`with_pinches`](Self::with_pinches)), relative to the default
+    /// [`OperatorHand`]; `None`: the default hand ([`operator_hand`](Self::operator_hand)).
+    pub operator: Option<ThumbParams>,
 }
 
 /// Human-friendly TOML mirror of [`Calibration`].
@@ -71,6 +81,43 @@ struct CalibrationToml {
     index: FingerCalibration,
     thumb: FingerCalibration,
     thumb_rotation: RotationCalibration,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    operator: Option<OperatorToml>,
+}
+
+/// The `[operator]` table: [`ThumbParams`] under names that carry their units.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OperatorToml {
+    thumb_base_mm: [f32; 3],
+    thumb_direction_deg: f32,
+    opposition_deg: f32,
+    thumb_flexion_scale: f32,
+    thumb_length_scale: f32,
+}
+
+impl From<OperatorToml> for ThumbParams {
+    fn from(t: OperatorToml) -> Self {
+        ThumbParams {
+            base_mm: t.thumb_base_mm,
+            direction_deg: t.thumb_direction_deg,
+            opposition_deg: t.opposition_deg,
+            flexion_scale: t.thumb_flexion_scale,
+            length_scale: t.thumb_length_scale,
+        }
+    }
+}
+
+impl From<ThumbParams> for OperatorToml {
+    fn from(p: ThumbParams) -> Self {
+        OperatorToml {
+            thumb_base_mm: p.base_mm,
+            thumb_direction_deg: p.direction_deg,
+            opposition_deg: p.opposition_deg,
+            thumb_flexion_scale: p.flexion_scale,
+            thumb_length_scale: p.length_scale,
+        }
+    }
 }
 
 impl From<CalibrationToml> for Calibration {
@@ -78,6 +125,7 @@ impl From<CalibrationToml> for Calibration {
         Calibration {
             fingers: [t.little, t.ring, t.middle, t.index, t.thumb],
             thumb_rotation: t.thumb_rotation,
+            operator: t.operator.map(ThumbParams::from),
         }
     }
 }
@@ -92,6 +140,7 @@ impl From<Calibration> for CalibrationToml {
             index,
             thumb,
             thumb_rotation: c.thumb_rotation,
+            operator: c.operator.map(OperatorToml::from),
         }
     }
 }
@@ -115,11 +164,13 @@ impl Default for RotationCalibration {
 }
 
 impl Default for Calibration {
-    /// The glove's nominal range: open 1000, closed 0, inner 0, outer 1000.
+    /// The glove's nominal range: open 1000, closed 0, inner 0, outer 1000;
+    /// the default operator hand.
     fn default() -> Self {
         Calibration {
             fingers: [FingerCalibration::default(); 5],
             thumb_rotation: RotationCalibration::default(),
+            operator: None,
         }
     }
 }
@@ -190,13 +241,29 @@ impl Calibration {
             self.thumb_rotation.inner,
             self.thumb_rotation.outer
         ));
+        if let Some(p) = &self.operator {
+            // f32's Display is the shortest text that reads back as the same value.
+            let [x, y, z] = p.base_mm;
+            out.push_str(&format!(
+                "\n[operator]\nthumb_base_mm = [{x}, {y}, {z}]\nthumb_direction_deg = {}\n\
+                 opposition_deg = {}\nthumb_flexion_scale = {}\nthumb_length_scale = {}\n",
+                p.direction_deg, p.opposition_deg, p.flexion_scale, p.length_scale
+            ));
+        }
         out
     }
 
-    /// Checks every value is at most [`GLOVE_RAW_MAX`] and each channel's two
-    /// values are at least [`MIN_CALIBRATION_SPAN`] apart. The error names the
-    /// finger (e.g. `[ring]`) and field; its origin is `"calibration"`.
+    /// Checks every value is at most [`GLOVE_RAW_MAX`], each channel's two
+    /// values are at least [`MIN_CALIBRATION_SPAN`] apart and the operator's
+    /// thumb is within the human range ([`ThumbParams::check`]). The error
+    /// names the finger (e.g. `[ring]`) and field, or `[operator]` and the
+    /// parameter; its origin is `"calibration"`.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        if let Some(p) = &self.operator {
+            p.check().map_err(|e| {
+                ConfigError::invalid(CALIBRATION_ORIGIN, "[operator]", e.to_string())
+            })?;
+        }
         for (name, f) in GLOVE_CHANNEL_NAMES.iter().zip(&self.fingers) {
             check_pair(
                 CALIBRATION_ORIGIN,
@@ -238,6 +305,7 @@ impl Calibration {
                 inner: c(thumb_in[THUMB_ROTATION]),
                 outer: c(thumb_out[THUMB_ROTATION]),
             },
+            operator: None,
         };
         cal.validate().map_err(|e| e.with_origin(POSES_ORIGIN))?;
         Ok(cal)
@@ -257,6 +325,65 @@ impl Calibration {
                 fraction(raw[ch], f.open, f.closed)
             }
         })
+    }
+
+    /// The glove's calibrated positions (glove order, any raw `u16`) in the
+    /// operator model's sense ([`teleop_kinematics::OperatorPose::from_glove`]):
+    /// `1 - closure`, so 0 = bent / thumb in and 1 = open / thumb out.
+    pub fn position(&self, raw: &[u16; GLOVE_CHANNELS]) -> [f32; GLOVE_CHANNELS] {
+        self.closure(raw).map(|c| 1.0 - c)
+    }
+
+    /// The operator's hand: the default [`OperatorHand`] with the fitted
+    /// [`operator`](Self::operator) thumb applied, or the default hand without
+    /// one (or with one out of the human range, which only a profile built
+    /// without [`validate`](Self::validate) can hold).
+    pub fn operator_hand(&self) -> OperatorHand {
+        let default = OperatorHand::default();
+        match self.operator {
+            Some(p) if p.check().is_ok() => p.apply(&default),
+            _ => default,
+        }
+    }
+
+    /// This profile with the operator's thumb fitted to pinches recorded with
+    /// it ([`teleop_kinematics::fit_pinches`], from the default hand), and the
+    /// fit's report (per pinch, in the order given: the thumb-finger pad gap
+    /// before and after, millimetres).
+    ///
+    /// Each pinch is the glove channel of the finger the thumb pinches
+    /// ([`GLOVE_CHANNEL_NAMES`] index: 0 little, 1 ring, 2 middle, 3 index) and
+    /// the raw glove vector recorded while pinching. Errors (origin
+    /// `"calibration poses"`, field `[operator]`): no pinch, or a channel that
+    /// is not a long finger's.
+    pub fn with_pinches(
+        &self,
+        pinches: &[(usize, [u16; GLOVE_CHANNELS])],
+    ) -> Result<(Self, PinchFit), ConfigError> {
+        let invalid = |reason: String| ConfigError::invalid(POSES_ORIGIN, "[operator]", reason);
+        let samples = pinches
+            .iter()
+            .enumerate()
+            .map(|(i, (channel, raw))| {
+                // The thumb (index 0) pinches; the long fingers are the rest.
+                match GLOVE_CHANNEL_OF_FINGER.iter().skip(1).position(|c| c == channel) {
+                    Some(k) => Ok(PinchSample {
+                        finger: k + 1,
+                        glove: self.position(raw),
+                    }),
+                    None => Err(invalid(format!(
+                        "pinch {i}: glove channel {channel} is not a long finger's (0 little .. 3 index)"
+                    ))),
+                }
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let fit =
+            fit_pinches(&OperatorHand::default(), &samples).map_err(|e| invalid(e.to_string()))?;
+        let fitted = Calibration {
+            operator: Some(fit.params),
+            ..*self
+        };
+        Ok((fitted, fit))
     }
 }
 
@@ -447,6 +574,143 @@ outer = 970
         cal.validate().unwrap();
         let n = cal.closure(&[0, 0, 0, 900, 0, 0]);
         assert_eq!(n[3], 1.0);
+    }
+
+    const OPERATOR: &str = r#"
+[operator]
+thumb_base_mm = [-22.5, 31, -9.75]
+thumb_direction_deg = 40
+opposition_deg = 88.5
+thumb_flexion_scale = 1.1
+thumb_length_scale = 0.95
+"#;
+
+    #[test]
+    fn a_profile_without_operator_is_the_default_hand() {
+        let cal = Calibration::from_toml_str(SAMPLE, "cal.toml").unwrap();
+        assert_eq!(cal.operator, None);
+        assert_eq!(
+            cal.operator_hand(),
+            teleop_kinematics::OperatorHand::default()
+        );
+        assert!(!cal.to_toml_string().contains("[operator]"));
+        assert!(!toml::to_string(&cal).unwrap().contains("operator"));
+    }
+
+    #[test]
+    fn operator_table_round_trips_and_applies_to_the_default_hand() {
+        let text = format!("{SAMPLE}{OPERATOR}");
+        let cal = Calibration::from_toml_str(&text, "cal.toml").unwrap();
+        let p = cal.operator.unwrap();
+        assert_eq!(p.base_mm, [-22.5, 31.0, -9.75]);
+        assert_eq!(p.direction_deg, 40.0);
+        assert_eq!(p.opposition_deg, 88.5);
+        assert_eq!(p.flexion_scale, 1.1);
+        assert_eq!(p.length_scale, 0.95);
+        assert_eq!(
+            Calibration::from_toml_str(&cal.to_toml_string(), "x").unwrap(),
+            cal
+        );
+        let via_serde = toml::to_string(&cal).unwrap();
+        assert_eq!(Calibration::from_toml_str(&via_serde, "x").unwrap(), cal);
+
+        let hand = cal.operator_hand();
+        let default = teleop_kinematics::OperatorHand::default();
+        assert_eq!(hand, p.apply(&default));
+        assert!((hand.thumb.base - glam::Vec3::new(-0.0225, 0.031, -0.00975)).length() < 1e-7);
+        assert!((hand.opposition_rad - 88.5f32.to_radians()).abs() < 1e-6);
+        assert!((hand.thumb.lengths[0] - default.thumb.lengths[0] * 0.95).abs() < 1e-7);
+        assert_eq!(hand.fingers, default.fingers);
+    }
+
+    #[test]
+    fn operator_table_is_validated() {
+        let text = format!("{SAMPLE}{OPERATOR}").replace("-9.75", "25");
+        let err = Calibration::from_toml_str(&text, "cal.toml").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "cal.toml: [operator]: thumb base z (25.00 mm) is outside the human range -35..10 mm"
+        );
+        let text = format!("{SAMPLE}{OPERATOR}").replace("= 1.1", "= nan");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.starts_with("cal.toml: [operator]: thumb flexion scale (NaN)"),
+            "{msg}"
+        );
+        let text = format!("{SAMPLE}{OPERATOR}").replace("thumb_length_scale = 0.95\n", "");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("missing field `thumb_length_scale`"), "{msg}");
+        let text = format!("{SAMPLE}{OPERATOR}index_length_scale = 1\n");
+        let msg = Calibration::from_toml_str(&text, "cal.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("unknown field `index_length_scale`"), "{msg}");
+        // An unvalidated profile out of range still gives a hand: the default.
+        let mut cal = Calibration::from_toml_str(SAMPLE, "x").unwrap();
+        let mut p = teleop_kinematics::ThumbParams::of(&teleop_kinematics::OperatorHand::default());
+        p.opposition_deg = f32::NAN;
+        cal.operator = Some(p);
+        assert_eq!(
+            cal.operator_hand(),
+            teleop_kinematics::OperatorHand::default()
+        );
+    }
+
+    #[test]
+    fn position_is_one_minus_closure() {
+        let cal = Calibration::from_toml_str(SAMPLE, "x").unwrap();
+        let raw = [980, 60, 505, 30, 900, 30];
+        assert_eq!(cal.position(&raw), [1.0, 0.0, 0.5, 0.0, 1.0, 0.0]);
+    }
+
+    /// Raw glove values that put `cal`'s calibrated positions at `position`.
+    fn raw_at(cal: &Calibration, position: [f32; GLOVE_CHANNELS]) -> [u16; GLOVE_CHANNELS] {
+        std::array::from_fn(|ch| {
+            let (open, closed) = if ch == THUMB_ROTATION {
+                (cal.thumb_rotation.outer, cal.thumb_rotation.inner)
+            } else {
+                (cal.fingers[ch].open, cal.fingers[ch].closed)
+            };
+            let (open, closed) = (f32::from(open), f32::from(closed));
+            (closed + position[ch] * (open - closed)).round() as u16
+        })
+    }
+
+    #[test]
+    fn pinches_fit_the_operator_thumb() {
+        let cal = Calibration::from_toml_str(SAMPLE, "x").unwrap();
+        // The default hand pinches thumb and index at thumb flexion 0.275, opposition 0.625 and
+        // index flexion 0.675 (glove: 1 - each); this operator's glove reads the thumb a
+        // little more open and rotated out.
+        let pinch = raw_at(&cal, [1.0, 1.0, 1.0, 0.325, 0.78, 0.45]);
+        let (fitted, fit) = cal.with_pinches(&[(3, pinch)]).unwrap();
+        assert_eq!(fit.gaps.len(), 1);
+        assert_eq!(fit.gaps[0].finger, 1);
+        assert!(fit.gaps[0].before_mm > 2.0, "{:?}", fit.gaps);
+        assert!(fit.gaps[0].after_mm.abs() < 0.1, "{:?}", fit.gaps);
+        assert_eq!(fitted.fingers, cal.fingers);
+        assert_eq!(fitted.operator, Some(fit.params));
+        fitted.validate().unwrap();
+        // The written profile gives the fitted hand back, and it closes the pinch.
+        let back = Calibration::from_toml_str(&fitted.to_toml_string(), "x").unwrap();
+        assert_eq!(back, fitted);
+        let pose = teleop_kinematics::OperatorPose::from_glove(&back.position(&pinch));
+        assert!(back.operator_hand().pad_gap(&pose, 0, 1).abs() < 1e-4);
+
+        let err = cal.with_pinches(&[(4, pinch)]).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "calibration poses: [operator]: pinch 0: glove channel 4 is not a long finger's (0 little .. 3 index)"
+        );
+        let err = cal.with_pinches(&[]).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "calibration poses: [operator]: no pinch samples to fit"
+        );
     }
 
     #[test]
