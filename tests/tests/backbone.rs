@@ -333,6 +333,7 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     use std::io::{BufRead, BufReader, Write};
     use std::sync::atomic::{AtomicUsize, Ordering};
     use std::sync::Arc;
+    use teleop_sim_glove::hand::PinchFinger;
 
     let sandbox = Sandbox::new();
     sandbox.write("retarget.toml", &with_profile(RETARGET_TOML));
@@ -342,12 +343,20 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     );
     let _session = sandbox.launch(&launch);
 
-    // The operator's poses as the glove reports them (glove order, thumb rotation last).
-    const POSES: [[u16; 6]; 4] = [
+    // The operator's poses as the glove reports them (glove order, thumb rotation last): the
+    // glove's ranges, then the pinches, thumb to index, middle and ring as the simulated
+    // glove holds them and to the little finger (which the simulator does not pinch) where the
+    // default hand model's pads meet under this profile's ranges.
+    let sim_pinch = |finger: PinchFinger| finger.positions().map(|p| p.round() as u16);
+    let poses: [[u16; 6]; 8] = [
         [950, 940, 960, 930, 900, 800], // open hand
         [60, 70, 50, 80, 150, 800],     // fist
         [950, 940, 960, 930, 900, 120], // thumb in
         [950, 940, 960, 930, 900, 880], // thumb out
+        sim_pinch(PinchFinger::Index),
+        sim_pinch(PinchFinger::Middle),
+        sim_pinch(PinchFinger::Ring),
+        [270, 950, 950, 950, 280, 140], // pinch thumb to little
     ];
     let pose = Arc::new(AtomicUsize::new(0));
     let stop = Arc::new(AtomicUsize::new(0));
@@ -357,7 +366,7 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
             let node = NodeRuntime::new("e2e-glove", &ipc).unwrap();
             let mut glove: Publisher<GloveState> = node.publisher().unwrap();
             while stop.load(Ordering::SeqCst) == 0 {
-                let raw = POSES[pose.load(Ordering::SeqCst)];
+                let raw = poses[pose.load(Ordering::SeqCst)];
                 glove
                     .publish(&GloveState {
                         raw_position: raw,
@@ -396,7 +405,7 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
         let line = line.unwrap();
         transcript.push_str(&line);
         transcript.push('\n');
-        // "Pose k/4 (name): prompt" then "  Press Enter ..." on the next line once the
+        // "Pose k/8 (name): prompt" then "  Press Enter ..." on the next line once the
         // operator should be in pose k.
         if let Some(k) = line.strip_prefix("Pose ").and_then(|r| r.split('/').next()) {
             pose.store(k.parse::<usize>().unwrap() - 1, Ordering::SeqCst);
@@ -409,13 +418,33 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     glove_thread.join().unwrap();
     assert!(status.success(), "{transcript}");
     let profile = std::fs::read_to_string(sandbox.dir.path().join("operator.toml")).unwrap();
-    let table: std::collections::BTreeMap<String, std::collections::BTreeMap<String, i64>> =
-        toml_lite(&profile);
-    assert_eq!(table["little"]["open"], 950);
-    assert_eq!(table["little"]["closed"], 60);
-    assert_eq!(table["thumb"]["closed"], 150);
-    assert_eq!(table["thumb_rotation"]["inner"], 120);
-    assert_eq!(table["thumb_rotation"]["outer"], 880);
+    let table = toml_lite(&profile);
+    assert_eq!(table["little"]["open"], "950");
+    assert_eq!(table["little"]["closed"], "60");
+    assert_eq!(table["thumb"]["closed"], "150");
+    assert_eq!(table["thumb_rotation"]["inner"], "120");
+    assert_eq!(table["thumb_rotation"]["outer"], "880");
+    // The pinch step fitted the operator's thumb: every pinch closes in the model.
+    assert!(
+        transcript.contains("Pose 8/8 (pinch thumb to little)"),
+        "{transcript}"
+    );
+    let gaps: Vec<f32> = transcript
+        .lines()
+        .filter_map(|l| l.split_once(" mm before, ")?.1.strip_suffix(" mm after"))
+        .map(|after| after.parse().unwrap())
+        .collect();
+    assert_eq!(gaps.len(), 4, "{transcript}");
+    assert!(gaps.iter().all(|g| g.abs() < 1.0), "{transcript}");
+    for key in [
+        "thumb_base_mm",
+        "thumb_direction_deg",
+        "opposition_deg",
+        "thumb_flexion_scale",
+        "thumb_length_scale",
+    ] {
+        assert!(table["operator"].contains_key(key), "{profile}");
+    }
     // The retargeting node accepts the profile.
     let mut node = std::process::Command::new(teleop_e2e::bin("teleop-retarget"))
         .args(["--calibration", "operator.toml", "--name", "retarget-check"])
@@ -439,10 +468,11 @@ fn calibrate_records_a_profile_from_the_live_glove_and_stats_sees_the_traffic() 
     assert!(first.contains("calibration profile loaded"), "{first}");
 }
 
-/// Reads `[section]` + `key = integer` lines (all a calibration profile has).
+/// Reads `[section]` + `key = value` lines (all a calibration profile has), each value as its
+/// text.
 fn toml_lite(
     text: &str,
-) -> std::collections::BTreeMap<String, std::collections::BTreeMap<String, i64>> {
+) -> std::collections::BTreeMap<String, std::collections::BTreeMap<String, String>> {
     let mut out = std::collections::BTreeMap::new();
     let mut section = String::new();
     for line in text
@@ -455,7 +485,7 @@ fn toml_lite(
         } else if let Some((k, v)) = line.split_once('=') {
             out.entry(section.clone())
                 .or_insert_with(std::collections::BTreeMap::new)
-                .insert(k.trim().to_string(), v.trim().parse().unwrap());
+                .insert(k.trim().to_string(), v.trim().to_string());
         }
     }
     out

@@ -279,6 +279,10 @@ enum Command {
         /// Do not wait for Enter: count down `--settle` seconds before each pose instead.
         #[arg(long)]
         yes: bool,
+        /// Skip the pinch step (thumb to each finger, which fits the operator's thumb in the
+        /// hand model); the profile then has no `[operator]` table.
+        #[arg(long)]
+        no_pinch: bool,
         /// Seconds to get into each pose when `--yes` is given.
         #[arg(long, default_value = "3", value_parser = parse_seconds, allow_hyphen_values = true)]
         settle: Duration,
@@ -452,9 +456,10 @@ fn main() -> ExitCode {
         Command::Calibrate {
             out,
             yes,
+            no_pinch,
             settle,
             capture,
-        } => calibrate::run(&ipc, &out, yes, settle, capture),
+        } => calibrate::run(&ipc, &out, yes, !no_pinch, settle, capture),
         Command::View { args } => run_viewer(&ipc, &args),
     };
     match result {
