@@ -104,7 +104,7 @@ fn evaluate(
     let mut config = loaded.config.retarget.clone();
     config.mode = Some(mode);
     let scaling = config.fingertip.scaling.unwrap_or(profile.retarget.scaling);
-    let mut retargeter = Retargeter::new(config, loaded.calibration.clone(), profile)?;
+    let mut retargeter = Retargeter::new(config, loaded.calibration, profile)?;
     let mut evaluation = Evaluation::new(profile, &retargeter, scaling);
     for samples in trajectories {
         retargeter.reset();

@@ -269,7 +269,10 @@ fn fingers_of(c: &Checker, raw: &[Spanned<RawFinger>]) -> Result<Vec<Finger>, Pr
                     return c.err(
                         o.span(),
                         format!("{field}.operator"),
-                        format!("another finger follows the operator's `{}` already", o.get_ref()),
+                        format!(
+                            "another finger follows the operator's `{}` already",
+                            o.get_ref()
+                        ),
                     );
                 }
                 Some(g)

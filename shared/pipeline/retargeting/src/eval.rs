@@ -18,11 +18,16 @@
 //!
 //! Pure: the caller reads recordings and times the steps.
 
+// Vectors, joints and fingertips are parallel fixed-size arrays indexed together, as the
+// formulas in the docs write them.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{DVec3, Vec3};
 use teleop_hand_profile::HandProfile;
 use teleop_kinematics::{Chains, OperatorHand, FINGERS};
 
 use crate::retargeter::{JointTargets, Retargeter};
+use crate::solver::Uniform;
 use crate::GLOVE_CHANNELS;
 
 /// The operator model pinches a finger when its pad and the thumb's are closer than this
@@ -279,21 +284,14 @@ pub fn pinch_reach(profile: &HandProfile, finger: usize, samples: usize) -> Opti
     };
     let (thumb, other) = (follower(0)?, follower(finger)?);
     let radii = chains.chains()[thumb].pad_radius + chains.chains()[other].pad_radius;
-    // xorshift64*: reproducible without a dependency.
-    let mut state: u64 = 0x9E37_79B9_7F4A_7C15;
-    let mut uniform = move || {
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut uniform = Uniform::new(0x9E37_79B9_7F4A_7C15);
     let mut q = vec![0.0; profile.joints.len()];
     let mut best = f64::INFINITY;
     let mut within = 0;
     for _ in 0..samples {
         for (j, joint) in profile.joints.iter().enumerate() {
             let (lo, hi) = (f64::from(joint.lower), f64::from(joint.upper));
-            q[j] = lo + uniform() * (hi - lo);
+            q[j] = lo + uniform.next() * (hi - lo);
         }
         for (j, joint) in profile.joints.iter().enumerate() {
             if let Some(c) = joint.coupling {

@@ -32,8 +32,9 @@ pub struct GloveInput {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointTargets {
     /// Normalised targets (0 = the joint's open angle, 1 = its closed angle),
-    /// always finite and within each joint's `[min, max]`; the first `count`
-    /// entries are used, the rest are 0.
+    /// always finite and within each joint's `[min, max]` (a joint the
+    /// fingertip solver drives: within its limits, which may lie beyond 0 and
+    /// 1); the first `count` entries are used, the rest are 0.
     pub position: [f32; MAX_JOINTS],
     /// How many joints the hand has.
     pub count: usize,
@@ -89,6 +90,17 @@ struct JointPlan {
 }
 
 impl JointPlan {
+    /// Normalised value of an angle (not clamped).
+    fn normalised(&self, angle: f32) -> f32 {
+        (angle - self.open) / (self.closed - self.open)
+    }
+
+    /// The joint's limits, normalised, lower first.
+    fn travel(&self) -> (f32, f32) {
+        let (a, b) = (self.normalised(self.lower), self.normalised(self.upper));
+        (a.min(b), a.max(b))
+    }
+
     /// Normalised value of the angle `ratio × angle(leader)`, clamped to
     /// this joint's limits (in radians, then in normalised units).
     fn follow(&self, leader: &JointPlan, leader_n: f32, ratio: f32) -> f32 {
@@ -98,7 +110,7 @@ impl JointPlan {
         } else {
             angle.clamp(self.lower, self.upper)
         };
-        (angle - self.open) / (self.closed - self.open)
+        self.normalised(angle)
     }
 }
 
@@ -137,35 +149,26 @@ impl Retargeter {
         config.check_joints(profile)?;
         calibration.validate()?;
         let mode = config.mode.unwrap_or(profile.retarget.mode);
-        let joint_configs: Vec<JointConfig> = profile
-            .joints
-            .iter()
-            .map(|j| config.joint(&j.name))
-            .collect();
         let solver = match mode {
             RetargetMode::Joint => None,
             RetargetMode::Vector | RetargetMode::Pinch => Some(
-                Solver::new(
-                    profile,
-                    config.fingertip,
-                    mode == RetargetMode::Pinch,
-                    &joint_configs,
-                )
-                .ok_or_else(|| {
-                    ConfigError::invalid(
-                        RETARGET_ORIGIN,
-                        "mode",
-                        format!(
-                            "`{}` needs fingers that follow operator fingers (`operator` in \
+                Solver::new(profile, config.fingertip, mode == RetargetMode::Pinch).ok_or_else(
+                    || {
+                        ConfigError::invalid(
+                            RETARGET_ORIGIN,
+                            "mode",
+                            format!(
+                                "`{}` needs fingers that follow operator fingers (`operator` in \
                              the hand profile); `{}` has none: use mode `joint`",
-                            mode.name(),
-                            profile.name
-                        ),
-                    )
-                })?,
+                                mode.name(),
+                                profile.name
+                            ),
+                        )
+                    },
+                )?,
             ),
         };
-        let operator = OperatorHand::default();
+        let operator = calibration.operator_hand();
         let plans = profile
             .joints
             .iter()
@@ -295,12 +298,15 @@ impl Retargeter {
                 continue;
             };
             let jc = &plan.config;
-            let shaped = match self.solver.as_ref().filter(|s| s.drives(j)) {
-                // The fingertip solution, normalised (its curve shapes glove channels only).
-                Some(solver) => {
-                    let angle = solver.solution()[j] as f32;
-                    ((angle - plan.open) / (plan.closed - plan.open)).clamp(0.0, 1.0)
-                }
+            let solved = self.solver.as_ref().filter(|s| s.drives(j));
+            // The fingertip solver has the joint's whole travel; the glove map its [min, max].
+            let (min, max) = match solved {
+                Some(_) => plan.travel(),
+                None => (jc.min, jc.max),
+            };
+            let shaped = match solved {
+                // The fingertip solution, normalised (curves shape glove channels only).
+                Some(solver) => plan.normalised(solver.solution()[j] as f32),
                 None => {
                     let mut raw = *offset;
                     for &(ch, gain) in &channels[..*used] {
@@ -315,7 +321,7 @@ impl Retargeter {
             let Some(prev) = previous.map(|p| p[j]) else {
                 // Fresh start: jump to the (clamped) value.
                 self.anchor[j] = filtered;
-                let (v, c) = clamp_count(filtered, jc.min, jc.max);
+                let (v, c) = clamp_count(filtered, min, max);
                 clamped += u8::from(c);
                 *out = v;
                 continue;
@@ -327,7 +333,7 @@ impl Retargeter {
             if (filtered - self.anchor[j]).abs() >= self.config.deadband {
                 self.anchor[j] = filtered;
             }
-            let (target, c) = clamp_count(self.anchor[j], jc.min, jc.max);
+            let (target, c) = clamp_count(self.anchor[j], min, max);
             clamped += u8::from(c);
 
             // Slew limit relative to the previous output.
@@ -340,7 +346,7 @@ impl Retargeter {
             };
             // prev and target are both within limits, so v is too; guard rounding / NaN.
             *out = if v.is_finite() {
-                v.clamp(jc.min, jc.max)
+                v.clamp(min, max)
             } else {
                 prev
             };
@@ -349,7 +355,11 @@ impl Retargeter {
         for (j, plan) in self.plans.iter().enumerate() {
             if let Drive::Coupled { to, ratio } = plan.drive {
                 let followed = plan.follow(&self.plans[to], position[to], ratio);
-                let (v, c) = clamp_count(followed, plan.config.min, plan.config.max);
+                let (min, max) = match self.solver.as_ref().filter(|s| s.drives(j)) {
+                    Some(_) => plan.travel(),
+                    None => (plan.config.min, plan.config.max),
+                };
+                let (v, c) = clamp_count(followed, min, max);
                 clamped += u8::from(c);
                 position[j] = v;
             }

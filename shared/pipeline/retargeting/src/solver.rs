@@ -32,11 +32,15 @@
 //! Fixed-size arrays throughout: a solve allocates nothing and, for the same inputs in the same
 //! order, gives bit-identical results.
 
+// Vectors, joints and fingertips are parallel fixed-size arrays indexed together, as the
+// formulas in the docs write them.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{DVec3, Vec3};
 use teleop_hand_profile::{HandProfile, Role, MAX_JOINTS};
 use teleop_kinematics::Chains;
 
-use crate::config::{FingertipConfig, JointConfig};
+use crate::config::FingertipConfig;
 
 /// Most retargeted fingertips.
 const MAX_TIPS: usize = 5;
@@ -44,6 +48,8 @@ const MAX_TIPS: usize = 5;
 pub const MAX_VECTORS: usize = MAX_TIPS * (MAX_TIPS - 1) / 2 + MAX_TIPS;
 /// DexPilot keeps two pinched fingers apart only when the operator's are closer than this.
 const FINGER_GAP_BELOW_M: f64 = 0.03;
+/// Joint vectors sampled per thumb pair for its pinch restart.
+const PINCH_SEED_SAMPLES: usize = 4000;
 /// A step that moves no joint by more than this (radians) ends the solve.
 const STEP_TOLERANCE_RAD: f64 = 1e-7;
 
@@ -102,6 +108,10 @@ pub struct Solver {
     report: SolveReport,
     /// The last solve's targets.
     last_targets: Targets,
+    /// Per thumb pair: variables where the two pads come closest (a restart for a pinch), and
+    /// which variables belong to the pair's two fingers.
+    pinch_seed: [[f64; MAX_JOINTS]; MAX_TIPS - 1],
+    pinch_seed_moves: [[bool; MAX_JOINTS]; MAX_TIPS - 1],
 }
 
 /// Per-solve data: the vectors' targets and weights.
@@ -112,15 +122,9 @@ struct Targets {
 }
 
 impl Solver {
-    /// The solver for `profile`: `pinch` turns the pinch switch on (mode `pinch`), `joints`
-    /// are the per-joint limits (normalised, as configured), intersected with the profile's.
-    /// `None` when no finger of the profile follows an operator finger.
-    pub fn new(
-        profile: &HandProfile,
-        params: FingertipConfig,
-        pinch: bool,
-        joints: &[JointConfig],
-    ) -> Option<Self> {
+    /// The solver for `profile`, over its joints' full limits: `pinch` turns the pinch switch
+    /// on (mode `pinch`). `None` when no finger of the profile follows an operator finger.
+    pub fn new(profile: &HandProfile, params: FingertipConfig, pinch: bool) -> Option<Self> {
         let chains = Chains::new(profile);
         // Fingertip slots in the operator's order (thumb first).
         let mut slots: Vec<(usize, usize)> = profile
@@ -170,11 +174,9 @@ impl Solver {
         let mut upper = [0.0; MAX_JOINTS];
         let mut q = [0.0; MAX_JOINTS];
         for (j, joint) in profile.joints.iter().take(count).enumerate() {
-            let config = joints.get(j).cloned().unwrap_or_default();
-            let (a, b) = (joint.radians(config.min), joint.radians(config.max));
-            lower[j] = f64::from(a.min(b).max(joint.lower));
-            upper[j] = f64::from(a.max(b).min(joint.upper));
-            q[j] = f64::from(joint.open).clamp(lower[j], upper[j]);
+            lower[j] = f64::from(joint.lower);
+            upper[j] = f64::from(joint.upper);
+            q[j] = f64::from(joint.open);
         }
         let retargeted = |f: usize| slots.iter().any(|&(_, g)| g == f);
         let mut vars = [0; MAX_JOINTS];
@@ -195,7 +197,7 @@ impl Solver {
             }
         }
         let scaling = f64::from(params.scaling.unwrap_or(profile.retarget.scaling));
-        Some(Self {
+        let mut solver = Self {
             chains,
             params,
             scaling,
@@ -221,7 +223,47 @@ impl Solver {
                 reference: [DVec3::ZERO; MAX_VECTORS],
                 weight: [0.0; MAX_VECTORS],
             },
-        })
+            pinch_seed: [[0.0; MAX_JOINTS]; MAX_TIPS - 1],
+            pinch_seed_moves: [[false; MAX_JOINTS]; MAX_TIPS - 1],
+        };
+        solver.find_pinch_seeds(profile);
+        Some(solver)
+    }
+
+    /// For each thumb pair, the sampled joint vector (of that pair's two fingers, within the
+    /// solver's limits, [`PINCH_SEED_SAMPLES`] from a fixed seed) whose pads come closest.
+    fn find_pinch_seeds(&mut self, profile: &HandProfile) {
+        for k in 0..self.thumb_pairs {
+            let (thumb, other) = (self.tip_chain[0], self.tip_chain[k + 1]);
+            let radii = self.tip_radius[0] + self.tip_radius[k + 1];
+            let mut moves = [false; MAX_JOINTS];
+            for v in 0..self.n_vars {
+                let finger = profile.joints[self.vars[v]].finger;
+                moves[v] = finger == thumb || finger == other;
+            }
+            let mut uniform = Uniform::new(0x9E37_79B9_7F4A_7C15 ^ k as u64);
+            let mut x = [0.0; MAX_JOINTS];
+            let mut q = self.q;
+            let mut best = (f64::INFINITY, x);
+            for _ in 0..PINCH_SEED_SAMPLES {
+                for v in 0..self.n_vars {
+                    let j = self.vars[v];
+                    x[v] = self.lower[j] + uniform.next() * (self.upper[j] - self.lower[j]);
+                }
+                self.expand(&x, &mut q);
+                let q = &q[..self.joints];
+                let gap = self
+                    .chains
+                    .pad(thumb, q)
+                    .distance(self.chains.pad(other, q))
+                    - radii;
+                if gap.abs() < best.0 {
+                    best = (gap.abs(), x);
+                }
+            }
+            self.pinch_seed[k] = best.1;
+            self.pinch_seed_moves[k] = moves;
+        }
     }
 
     /// Whether joint `j` is the solver's (solved, or following a solved joint).
@@ -412,12 +454,27 @@ impl Solver {
         }
         let mut best = self.descend(&targets, &previous, &previous);
         let mut iterations = best.iterations;
-        if best.vector_part > f64::from(self.params.restart_above) {
-            let restart = self.descend(&targets, &middle, &previous);
-            iterations += restart.iterations;
-            if restart.vector_part < 0.8 * best.vector_part {
-                best = restart;
+        let restart_above = f64::from(self.params.restart_above);
+        let mut restart = |best: &mut Descent, start: &[f64; MAX_JOINTS]| {
+            if best.vector_part > restart_above {
+                let other = self.descend(&targets, start, &previous);
+                iterations += other.iterations;
+                if other.vector_part < 0.8 * best.vector_part {
+                    *best = other;
+                }
             }
+        };
+        restart(&mut best, &middle);
+        // A pinch the warm start cannot close: from where that pair meets, the other fingers
+        // where they are.
+        if let Some(k) = (0..self.thumb_pairs).find(|&k| self.projected[k]) {
+            let mut seeded = previous;
+            for v in 0..self.n_vars {
+                if self.pinch_seed_moves[k][v] {
+                    seeded[v] = self.pinch_seed[k][v];
+                }
+            }
+            restart(&mut best, &seeded);
         }
         if best.q.iter().all(|v| v.is_finite()) {
             self.q = best.q;
@@ -548,6 +605,26 @@ impl Solver {
     }
 }
 
+/// Uniform numbers in [0, 1) from a fixed seed (xorshift64*): reproducible sampling without a
+/// dependency.
+#[derive(Debug, Clone)]
+pub(crate) struct Uniform(u64);
+
+impl Uniform {
+    /// A sequence from `seed` (0 is replaced: xorshift needs a non-zero state).
+    pub(crate) fn new(seed: u64) -> Self {
+        Self(seed.max(1))
+    }
+
+    /// The next number.
+    pub(crate) fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 /// Where one descent ended.
 struct Descent {
     q: [f64; MAX_JOINTS],
@@ -635,7 +712,7 @@ mod tests {
 
     fn solver_with(hand: &str, pinch: bool, params: FingertipConfig) -> (HandProfile, Solver) {
         let profile = HandProfile::builtin(hand).unwrap();
-        let s = Solver::new(&profile, params, pinch, &[]).unwrap();
+        let s = Solver::new(&profile, params, pinch).unwrap();
         (profile, s)
     }
 
@@ -783,9 +860,10 @@ mod tests {
             let (_, mut s) = solver("shadow", true);
             let mut out = Vec::new();
             for k in 0..50 {
-                let mut pose = OperatorPose::default();
-                pose.flexion = [k as f32 / 50.0; 5];
-                pose.thumb_opposition = 0.6;
+                let pose = OperatorPose {
+                    flexion: [k as f32 / 50.0; 5],
+                    thumb_opposition: 0.6,
+                };
                 out.extend_from_slice(s.solve(&operator.pads(&pose)));
             }
             out
