@@ -24,7 +24,7 @@ pub mod logger;
 pub mod recording;
 pub mod sample;
 
-/// The hand models (`teleop-kinematics`), under the name this crate's modules use.
-pub use teleop_kinematics as kinematics;
 /// The rerun SDK this crate was built with (viewers of the same version read its data).
 pub use rerun;
+/// The hand models (`teleop-kinematics`), under the name this crate's modules use.
+pub use teleop_kinematics as kinematics;

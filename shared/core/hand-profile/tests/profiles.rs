@@ -383,7 +383,9 @@ fn pads_operators_and_retarget_defaults_are_checked() {
         ),
     ];
     for (bad, expect) in cases {
-        let e = HandProfile::from_toml_str(&bad, "x.toml").unwrap_err().to_string();
+        let e = HandProfile::from_toml_str(&bad, "x.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(expect), "{e}");
     }
 }
