@@ -56,7 +56,13 @@ fn start(args: Args) -> anyhow::Result<()> {
         Some(p) => tracing::info!(path = %p.display(), "calibration profile loaded"),
         None => tracing::info!("no calibration profile: using the full 0..1000 range"),
     }
-    tracing::info!(hand = %profile.name, joints = profile.joints.len(), "hand profile loaded");
+    let mode = config.retarget.mode.unwrap_or(profile.retarget.mode);
+    tracing::info!(
+        hand = %profile.name,
+        joints = profile.joints.len(),
+        mode = mode.name(),
+        "hand profile loaded"
+    );
     let engine = RetargetEngine::new(&config, calibration, &profile)?;
     run(&args.node.runtime()?, &config, engine)
 }
