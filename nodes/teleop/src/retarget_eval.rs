@@ -11,10 +11,10 @@ use std::time::Instant;
 
 use teleop_hand_profile::{HandProfile, RetargetMode};
 use teleop_msgs::{GloveState, Message};
-use teleop_recording::{read_messages, Filter};
+use teleop_recording::read_samples;
 use teleop_retargeting::eval::{pinch_reach, Evaluation, Summary, OPERATOR_PINCH_M, ROBOT_PINCH_M};
 use teleop_retargeting::{GloveInput, Retargeter};
-use teleop_runtime::{split, Namespace};
+use teleop_runtime::Namespace;
 
 /// What to evaluate.
 pub struct EvalOptions {
@@ -63,35 +63,22 @@ fn hand_profile(hand: &str) -> anyhow::Result<HandProfile> {
 
 /// The glove samples of one recording, in log order.
 fn glove_samples(path: &Path, namespace: Option<&Namespace>) -> anyhow::Result<Vec<GloveState>> {
-    let mut out = Vec::new();
-    let mut skipped = 0_u64;
-    for msg in read_messages(path, &Filter::all())? {
-        let msg = msg?;
-        let Some((ns, topic)) = split(&msg.topic) else {
-            continue;
-        };
-        if ns.as_ref() != namespace || topic.name != GloveState::TOPIC {
-            continue;
-        }
-        match msg.decode::<GloveState>() {
-            Some(s) => out.push(s),
-            None => skipped += 1,
-        }
-    }
-    if skipped > 0 {
+    let read = read_samples::<GloveState>(path, namespace)?;
+    if read.undecodable > 0 {
         eprintln!(
-            "{}: {skipped} glove samples could not be decoded and were skipped",
-            path.display()
+            "{}: {} glove samples could not be decoded and were skipped",
+            path.display(),
+            read.undecodable
         );
     }
     anyhow::ensure!(
-        !out.is_empty(),
+        !read.samples.is_empty(),
         "{}: no `{}` samples{}",
         path.display(),
         GloveState::TOPIC,
         namespace.map_or(String::new(), |ns| format!(" in namespace `{ns}`"))
     );
-    Ok(out)
+    Ok(read.samples)
 }
 
 /// Runs one mode over the samples.
@@ -202,6 +189,13 @@ fn print_table(modes: &[RetargetMode], summaries: &[Summary]) {
         row(
             "jerk RMS (rad/s^3)",
             each(&|s| format!("{:.0}", s.jerk_rms))
+        )
+    );
+    println!(
+        "{}",
+        row(
+            "fingertip jerk RMS, p95 (m/s^3)",
+            each(&|s| format!("{:.0}, {:.0}", s.fingertip_jerk_rms, s.fingertip_jerk.p95))
         )
     );
     println!(

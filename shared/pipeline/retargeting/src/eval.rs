@@ -12,8 +12,9 @@
 //!   distance less both radii; negative when the spheres overlap), mm, and the share under
 //!   [`ROBOT_PINCH_M`];
 //! - **joint-limit saturation**: the share of joint values within 1 mrad of a profile limit;
-//! - **jerk**: the third time derivative of each joint's angle from consecutive outputs,
-//!   rad/s³, as its RMS over joints and frames;
+//! - **jerk**: the third time derivative from four consecutive outputs (their own stamps) of
+//!   each joint's angle, rad/s³, as its RMS over joints and frames, and of each robot pad's
+//!   position, m/s³, per frame the mean over fingers (the whole hand's fingertip jerk);
 //! - **solve time**: the caller's per-step durations.
 //!
 //! Pure: the caller reads recordings and times the steps.
@@ -92,6 +93,10 @@ pub struct Summary {
     pub saturation: f64,
     /// RMS jerk over joints and frames, rad/s³.
     pub jerk_rms: f64,
+    /// Fingertip jerk (the robot's pads, per frame the mean over fingers), m/s³.
+    pub fingertip_jerk: Spread,
+    /// Its RMS over frames, m/s³.
+    pub fingertip_jerk_rms: f64,
     /// Step durations, µs.
     pub solve_us: Spread,
 }
@@ -113,8 +118,10 @@ pub struct Evaluation {
     joint_values: usize,
     jerk_sq: f64,
     jerk_terms: usize,
+    fingertip_jerk: Vec<f64>,
     solve_us: Vec<f64>,
-    /// The last three outputs (radians) and their stamps, for jerk.
+    /// The last four outputs (joints in radians, then pads in metres) and their stamps, for
+    /// jerk.
     history: Vec<(u64, Vec<f64>)>,
 }
 
@@ -142,6 +149,7 @@ impl Evaluation {
             joint_values: 0,
             jerk_sq: 0.0,
             jerk_terms: 0,
+            fingertip_jerk: Vec::new(),
             solve_us: Vec::new(),
             history: Vec::new(),
         }
@@ -208,24 +216,33 @@ impl Evaluation {
             }
         }
 
-        self.history.push((t_ns, q));
+        // Jerk from the last four outputs: the joints, then the retargeted pads.
+        let mut values = q;
+        for pad in robot.iter().flatten() {
+            values.extend_from_slice(&pad.to_array());
+        }
+        self.history.push((t_ns, values));
         if self.history.len() > 4 {
             self.history.remove(0);
         }
         if let [(t0, a), (t1, b), (t2, c), (t3, d)] = self.history.as_slice() {
             let dt = |x: u64, y: u64| (y.saturating_sub(x)) as f64 * 1e-9;
-            let (h1, h2, h3) = (dt(*t0, *t1), dt(*t1, *t2), dt(*t2, *t3));
-            if h1 > 0.0 && h2 > 0.0 && h3 > 0.0 {
-                for j in 0..d.len() {
-                    let v1 = (b[j] - a[j]) / h1;
-                    let v2 = (c[j] - b[j]) / h2;
-                    let v3 = (d[j] - c[j]) / h3;
-                    let a1 = (v2 - v1) / (0.5 * (h1 + h2));
-                    let a2 = (v3 - v2) / (0.5 * (h2 + h3));
-                    // a1 and a2 sit (h1 + 2 h2 + h3) / 4 apart.
-                    let jerk = (a2 - a1) / (0.25 * (h1 + 2.0 * h2 + h3));
-                    self.jerk_sq += jerk * jerk;
+            let h = [dt(*t0, *t1), dt(*t1, *t2), dt(*t2, *t3)];
+            if h.iter().all(|&h| h > 0.0) {
+                let jerk = |i: usize| third_derivative(h, [a[i], b[i], c[i], d[i]]);
+                let joints = self.profile.joints.len();
+                for j in 0..joints {
+                    self.jerk_sq += jerk(j).powi(2);
                     self.jerk_terms += 1;
+                }
+                let pads = (d.len() - joints) / 3;
+                if pads > 0 {
+                    let mut sum = 0.0;
+                    for p in 0..pads {
+                        let i = joints + 3 * p;
+                        sum += DVec3::new(jerk(i), jerk(i + 1), jerk(i + 2)).length();
+                    }
+                    self.fingertip_jerk.push(sum / pads as f64);
                 }
             }
         }
@@ -264,9 +281,34 @@ impl Evaluation {
             } else {
                 (self.jerk_sq / self.jerk_terms as f64).sqrt()
             },
+            fingertip_jerk: Spread::of(&mut self.fingertip_jerk.clone()),
+            fingertip_jerk_rms: rms(&self.fingertip_jerk),
             solve_us: Spread::of(&mut self.solve_us.clone()),
         }
     }
+}
+
+/// Root mean square (0 for none).
+fn rms(values: &[f64]) -> f64 {
+    if values.is_empty() {
+        0.0
+    } else {
+        (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt()
+    }
+}
+
+/// The third derivative at four samples `x` separated by the intervals `h` (seconds): second
+/// differences of the first differences, each divided by the time between the points it joins.
+fn third_derivative(h: [f64; 3], x: [f64; 4]) -> f64 {
+    let v = [
+        (x[1] - x[0]) / h[0],
+        (x[2] - x[1]) / h[1],
+        (x[3] - x[2]) / h[2],
+    ];
+    let a1 = (v[1] - v[0]) / (0.5 * (h[0] + h[1]));
+    let a2 = (v[2] - v[1]) / (0.5 * (h[1] + h[2]));
+    // a1 and a2 sit (h0 + 2 h1 + h2) / 4 apart.
+    (a2 - a1) / (0.25 * (h[0] + 2.0 * h[1] + h[2]))
 }
 
 /// The closest the robot's thumb pad and the pad of the finger following operator finger
