@@ -1,12 +1,14 @@
-//! Retargeting for the Allegro and Shadow hands (and the Revo2) driven by the operator's glove
-//! trajectory recorded in `recordings/grasp.sample.mcap`: limits and couplings hold on every
-//! command, flexion is monotone, and the glove finger the Allegro lacks moves nothing.
+//! Retargeting for every shipped hand driven by the operator's glove trajectory recorded in
+//! `recordings/grasp.sample.mcap`, in every mode: limits and couplings hold on every command, the
+//! grasp closes and opens the hand, the glove finger the Allegro lacks moves nothing; and in
+//! `joint` mode (the glove map) flexion is monotone.
 
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
 
-use teleop_hand_profile::{CommandUnits, HandProfile, Role};
+use teleop_hand_profile::{CommandUnits, HandProfile, RetargetMode, Role};
+use teleop_kinematics::Chains;
 use teleop_msgs::{units, GloveState, HandCommand, Message};
 use teleop_recording::{read_messages, Filter};
 use teleop_retarget::{NodeConfig, RetargetEngine};
@@ -23,9 +25,10 @@ fn recorded_glove() -> Vec<GloveState> {
     samples
 }
 
-fn run(profile: &HandProfile, glove: &[GloveState]) -> Vec<HandCommand> {
-    let mut engine =
-        RetargetEngine::new(&NodeConfig::default(), Calibration::default(), profile).unwrap();
+fn run(profile: &HandProfile, glove: &[GloveState], mode: RetargetMode) -> Vec<HandCommand> {
+    let mut config = NodeConfig::default();
+    config.retarget.mode = Some(mode);
+    let mut engine = RetargetEngine::new(&config, Calibration::default(), profile).unwrap();
     glove
         .iter()
         .filter_map(|s| engine.on_glove(s, s.header.stamp_ns).command)
@@ -45,9 +48,12 @@ fn radians(profile: &HandProfile, cmd: &HandCommand, j: usize) -> f32 {
 #[test]
 fn every_command_respects_the_profile_limits_and_couplings() {
     let glove = recorded_glove();
-    for name in HandProfile::builtin_names() {
+    for (name, mode) in HandProfile::builtin_names()
+        .flat_map(|n| RetargetMode::ALL.into_iter().map(move |m| (n, m)))
+    {
         let profile = HandProfile::builtin(name).unwrap();
-        let commands = run(&profile, &glove);
+        let commands = run(&profile, &glove, mode);
+        let name = format!("{name} ({})", mode.name());
         assert_eq!(commands.len(), glove.len(), "{name}");
         let want_units = match profile.command_units {
             CommandUnits::Normalised => units::NORMALISED,
@@ -79,7 +85,7 @@ fn every_command_respects_the_profile_limits_and_couplings() {
                 }
             }
         }
-        if name == "shadow" {
+        if profile.name == "shadow" {
             assert_eq!(couplings, 4 * commands.len());
         }
     }
@@ -90,8 +96,8 @@ fn the_recorded_grasp_closes_and_opens_every_hand() {
     let glove = recorded_glove();
     for name in HandProfile::builtin_names() {
         let profile = HandProfile::builtin(name).unwrap();
-        let commands = run(&profile, &glove);
-        // A flexion joint the glove's index finger (channel 3) drives.
+        // The glove map: a flexion joint the glove's index finger (channel 3) drives.
+        let commands = run(&profile, &glove, RetargetMode::Joint);
         let index = profile
             .joints
             .iter()
@@ -105,9 +111,37 @@ fn the_recorded_grasp_closes_and_opens_every_hand() {
             .iter()
             .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
         assert!(lo < 0.1 && hi > 0.35, "{name}: index closure {lo}..{hi}");
+        // Fingertip modes: the index fingertip goes down towards the palm and comes back.
+        let chains = Chains::new(&profile);
+        let finger = profile
+            .fingers
+            .iter()
+            .position(|f| f.operator == Some(3))
+            .unwrap();
+        for mode in [RetargetMode::Vector, RetargetMode::Pinch] {
+            let depth: Vec<f64> = run(&profile, &glove, mode)
+                .iter()
+                .map(|c| {
+                    let q: Vec<f64> = (0..profile.joints.len())
+                        .map(|j| f64::from(radians(&profile, c, j)))
+                        .collect();
+                    -chains.pad(finger, &q).z
+                })
+                .collect();
+            let deepest = depth.iter().copied().fold(f64::MIN, f64::max);
+            let (first, last) = (depth[0], depth[depth.len() - 1]);
+            assert!(
+                deepest > first + 0.03 && deepest > last + 0.03,
+                "{name} ({}): index pad {:.3} m below the palm at first, {deepest:.3} at most, \
+                 {last:.3} at the end",
+                mode.name(),
+                first
+            );
+        }
     }
 }
 
+/// The glove map only: fingertip optimisation may open one joint to close the fingertip.
 #[test]
 fn more_flexion_never_opens_a_joint() {
     let glove = recorded_glove();
@@ -124,7 +158,10 @@ fn more_flexion_never_opens_a_joint() {
         .collect();
     for name in HandProfile::builtin_names() {
         let profile = HandProfile::builtin(name).unwrap();
-        let (a, b) = (run(&profile, &bent), run(&profile, &glove));
+        let (a, b) = (
+            run(&profile, &bent, RetargetMode::Joint),
+            run(&profile, &glove, RetargetMode::Joint),
+        );
         // Joints driven only by finger channels with positive gains, or following one.
         let by_fingers = |j: usize| {
             let g = &profile.joints[j].glove;
@@ -171,17 +208,22 @@ fn the_allegro_ignores_the_glove_finger_it_does_not_have() {
             s
         })
         .collect();
-    let (a, b) = (run(&profile, &wiggled), run(&profile, &glove));
-    for (ca, cb) in a.iter().zip(&b) {
-        let ta: Vec<f32> = ca.active_joints().iter().map(|j| j.target).collect();
-        let tb: Vec<f32> = cb.active_joints().iter().map(|j| j.target).collect();
-        assert_eq!(ta, tb);
+    for mode in RetargetMode::ALL {
+        let (a, b) = (run(&profile, &wiggled, mode), run(&profile, &glove, mode));
+        for (ca, cb) in a.iter().zip(&b) {
+            let ta: Vec<f32> = ca.active_joints().iter().map(|j| j.target).collect();
+            let tb: Vec<f32> = cb.active_joints().iter().map(|j| j.target).collect();
+            assert_eq!(ta, tb, "{}", mode.name());
+        }
+        // The Revo2 does have a little finger: the same wiggle moves its pinky.
+        let revo2 = HandProfile::builtin("revo2").unwrap();
+        let (a, b) = (run(&revo2, &wiggled, mode), run(&revo2, &glove, mode));
+        assert!(
+            a.iter()
+                .zip(&b)
+                .any(|(x, y)| x.joints[5].target != y.joints[5].target),
+            "{}",
+            mode.name()
+        );
     }
-    // The Revo2 does have a little finger: the same wiggle moves its pinky.
-    let revo2 = HandProfile::builtin("revo2").unwrap();
-    let (a, b) = (run(&revo2, &wiggled), run(&revo2, &glove));
-    assert!(a
-        .iter()
-        .zip(&b)
-        .any(|(x, y)| x.joints[5].target != y.joints[5].target));
 }

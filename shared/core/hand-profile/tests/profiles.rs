@@ -378,7 +378,7 @@ fn pads_operators_and_retarget_defaults_are_checked() {
             "retarget.scaling",
         ),
         (
-            text.replace("mode = \"joint\"", "mode = \"magic\""),
+            text.replace("mode = \"pinch\"", "mode = \"magic\""),
             "magic",
         ),
     ];
