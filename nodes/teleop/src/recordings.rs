@@ -478,15 +478,19 @@ fn recording_profile(
                 input.display()
             )
         })?;
-    let profile = HandProfile::builtin_for_model(model).ok_or_else(|| {
+    let mut profile = HandProfile::builtin_for_model(model).ok_or_else(|| {
             anyhow::anyhow!(
                 "{}: no `{RECORDING_METADATA}` metadata and no shipped profile for hand model {model}: \
                  pass --profile",
                 input.display()
             )
         })?;
+    // A recording that embeds no profile was made before profiles, and so before fingertip
+    // retargeting: its commands came from the glove map.
+    profile.retarget.mode = teleop_hand_profile::RetargetMode::Joint;
     eprintln!(
-        "hand profile `{}` (shipped; the recording names none, its hand commands are model {model})",
+        "hand profile `{}` (shipped; the recording names none, its hand commands are model \
+         {model}), retargeting mode `joint` as then",
         profile.name
     );
     Ok(profile)
