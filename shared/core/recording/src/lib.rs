@@ -15,6 +15,7 @@
 //!   = false`).
 //! - [`read_messages`] yields payloads in log-time order (finished) or file order (killed),
 //!   checked against the message contract.
+//! - [`read_samples`] decodes the messages of one contract type in one namespace.
 //! - [`repair`] copies what a killed recorder left (or what reads of a damaged file) into a
 //!   finished file, skipping and reporting what does not read.
 //!
@@ -70,7 +71,8 @@ mod write;
 
 pub use error::RecordingError;
 pub use read::{
-    head_metadata, info, read_messages, Filter, Messages, OwnedMessage, RecordingInfo, TopicInfo,
+    head_metadata, info, read_messages, read_samples, Filter, Messages, OwnedMessage,
+    RecordingInfo, Samples, TopicInfo,
 };
 pub use repair::{repair, repair_with, RepairOptions, RepairReport, Skipped};
 pub use write::{

@@ -1,4 +1,4 @@
-//! Reading recordings: [`info`] and [`read_messages`].
+//! Reading recordings: [`info`], [`read_messages`] and [`read_samples`].
 
 use std::{
     borrow::Cow,
@@ -15,6 +15,9 @@ use mcap::{
     sans_io::{indexed_reader::ReadOrder, IndexedReadEvent, IndexedReader, IndexedReaderOptions},
     Summary,
 };
+
+use teleop_msgs::Message;
+use teleop_namespace::{qualified, Namespace};
 
 use crate::{
     file::{
@@ -634,6 +637,37 @@ fn first_log_time(file: OpenFile, strict: bool) -> Result<Option<u64>, Recording
         }
     }
     Ok(first)
+}
+
+/// The samples of one contract type in a recording, from [`read_samples`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Samples<M> {
+    /// The decoded samples, in [`read_messages`]'s order (log time for a finished file).
+    pub samples: Vec<M>,
+    /// Messages on the topic whose payload did not decode as `M`, skipped.
+    pub undecodable: u64,
+}
+
+/// Every sample of contract type `M` in a recording: the messages on `M`'s topic in
+/// `namespace` (`left/glove/state` in `left`, `glove/state` with `None`), decoded. Errors as
+/// [`read_messages`]'s, with the reading stopped at the first.
+pub fn read_samples<M: Message>(
+    path: &Path,
+    namespace: Option<&Namespace>,
+) -> Result<Samples<M>, RecordingError> {
+    let topic = qualified(namespace, M::TOPIC);
+    let mut out = Samples {
+        samples: Vec::new(),
+        undecodable: 0,
+    };
+    for msg in read_messages(path, &Filter::topics([topic]))? {
+        // Not `OwnedMessage::decode`: that wants the topic without a namespace.
+        match M::from_bytes(&msg?.payload) {
+            Ok(sample) => out.samples.push(sample),
+            Err(_) => out.undecodable += 1,
+        }
+    }
+    Ok(out)
 }
 
 /// The messages of a recording, from [`read_messages`].

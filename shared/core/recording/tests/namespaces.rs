@@ -1,5 +1,5 @@
 //! Channels of namespaced topics (`left/glove/state`): checked against the contract like the
-//! plain topic, read back under their own names.
+//! plain topic, read back under their own names, and decoded per namespace by `read_samples`.
 #![allow(clippy::unwrap_used)]
 
 use teleop_msgs::{GloveState, HandCommand, Message};
@@ -78,4 +78,15 @@ fn namespaced_channels_are_contract_channels() {
     // `decode` keeps to the plain topic: a namespaced sample is not mistaken for it.
     assert!(left_msgs[0].decode::<GloveState>().is_none());
     assert!(left_msgs[0].decode::<HandCommand>().is_none());
+
+    // `read_samples` decodes one side's samples, named by its namespace.
+    let ns = |n: &str| teleop_namespace::Namespace::new(n).unwrap();
+    for (namespace, raw) in [(None, 0), (Some(ns("left")), 1), (Some(ns("right")), 2)] {
+        let read = read_samples::<GloveState>(&path, namespace.as_ref()).unwrap();
+        assert_eq!(read.undecodable, 0);
+        let raws: Vec<u16> = read.samples.iter().map(|s| s.raw_position[0]).collect();
+        assert_eq!(raws, [raw], "{namespace:?}");
+    }
+    let none = read_samples::<GloveState>(&path, Some(&ns("other"))).unwrap();
+    assert!(none.samples.is_empty());
 }
