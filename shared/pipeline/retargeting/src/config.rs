@@ -219,6 +219,9 @@ pub struct FingertipConfig {
     pub huber_delta: f32,
     /// Weight of the squared change from the previous solution, per rad². Default 0.004.
     pub smoothness: f32,
+    /// Weight of the squared distance from the middle of each joint's range, per rad² (not in
+    /// DexPilot: it makes the solution forget its history). Default 0.001.
+    pub posture: f32,
     /// A thumb-finger pair is pinched when the operator's pads' centres come closer than this,
     /// metres. Default 0.03.
     pub pinch_engage: f32,
@@ -252,6 +255,7 @@ impl Default for FingertipConfig {
             scaling: None,
             huber_delta: 0.03,
             smoothness: 0.004,
+            posture: 0.001,
             pinch_engage: 0.03,
             pinch_release: 0.05,
             pinch_gap: 0.0001,
@@ -272,6 +276,7 @@ impl FingertipConfig {
         }
         positive("fingertip.huber_delta", self.huber_delta)?;
         non_negative("fingertip.smoothness", self.smoothness)?;
+        non_negative("fingertip.posture", self.posture)?;
         positive("fingertip.pinch_engage", self.pinch_engage)?;
         positive("fingertip.pinch_release", self.pinch_release)?;
         if self.pinch_release < self.pinch_engage {

@@ -107,6 +107,7 @@
 //!
 //! ```
 //! let text = r#"
+//! mode = "joint"       # joint | vector | pinch; default: the hand profile's [retarget] mode
 //! deadband = 0.005     # normalised
 //! max_speed = 3.0      # normalised units per second, per joint
 //!

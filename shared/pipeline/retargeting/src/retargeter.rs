@@ -422,8 +422,12 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
+    /// The Revo2 on its glove map: these tests are about mode `joint` (the fingertip modes
+    /// have theirs in `solver` and the node's tests).
     fn revo2() -> HandProfile {
-        HandProfile::builtin("revo2").unwrap()
+        let mut p = HandProfile::builtin("revo2").unwrap();
+        p.retarget.mode = RetargetMode::Joint;
+        p
     }
 
     fn input(t_ns: u64, raw: [u16; 6]) -> GloveInput {

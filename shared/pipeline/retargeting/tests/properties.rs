@@ -1,9 +1,10 @@
-//! Property tests of the retargeting pipeline.
+//! Property tests of the retargeting pipeline's glove map (mode `joint`; the fingertip modes'
+//! properties are in the solver's tests).
 
 #![allow(clippy::unwrap_used)]
 
 use proptest::prelude::*;
-use teleop_hand_profile::HandProfile;
+use teleop_hand_profile::{HandProfile, RetargetMode};
 use teleop_retargeting::{
     Calibration, Curve, FingerCalibration, GloveInput, JointConfig, OneEuroParams, RetargetConfig,
     Retargeter, RotationCalibration,
@@ -73,6 +74,7 @@ fn config() -> impl Strategy<Value = (HandProfile, RetargetConfig)> {
                     deadband,
                     max_speed,
                     joints,
+                    mode: Some(RetargetMode::Joint),
                     ..RetargetConfig::default()
                 };
                 (profile, cfg)
@@ -261,7 +263,10 @@ proptest! {
 /// Fresh retargeters on a constant input: the output equals the clamped curve value at once.
 #[test]
 fn constant_input_from_start_is_exact() {
-    let cfg = RetargetConfig::default();
+    let cfg = RetargetConfig {
+        mode: Some(RetargetMode::Joint),
+        ..RetargetConfig::default()
+    };
     let revo2 = HandProfile::builtin("revo2").unwrap();
     let mut rt = Retargeter::new(cfg, Calibration::default(), &revo2).unwrap();
     for k in 0..3000 {
