@@ -105,7 +105,8 @@ fn evaluate(
             let targets = retargeter.step(&input);
             let took = start.elapsed().as_nanos() as u64;
             let closure = retargeter.calibration().closure(&input.raw);
-            evaluation.record(input.t_ns, &closure, &targets, took);
+            let iterations = retargeter.solve_report().map_or(0, |r| r.iterations);
+            evaluation.record(input.t_ns, &closure, &targets, took, iterations);
         }
     }
     Ok(evaluation.summary())
@@ -196,6 +197,16 @@ fn print_table(modes: &[RetargetMode], summaries: &[Summary]) {
         row(
             "fingertip jerk RMS, p95 (m/s^3)",
             each(&|s| format!("{:.0}, {:.0}", s.fingertip_jerk_rms, s.fingertip_jerk.p95))
+        )
+    );
+    println!(
+        "{}",
+        row(
+            "solver iterations p50/p99/max",
+            each(&|s| format!(
+                "{:.0}/{:.0}/{:.0}",
+                s.iterations.p50, s.iterations.p99, s.iterations.max
+            ))
         )
     );
     println!(

@@ -244,8 +244,8 @@ pub struct FingertipConfig {
     /// Most Gauss-Newton iterations per descent. Default 20.
     pub max_iterations: u32,
     /// A descent from the previous solution that ends with the objective's vector part above
-    /// this is tried again from the middle of the joints' ranges. Default 0.00001 (about a
-    /// 0.8 mm error on one wrist vector).
+    /// this is tried again (see [`crate::Solver::solve`]). Default 0.0001 (about a 2.5 mm
+    /// error on one wrist vector).
     pub restart_above: f32,
 }
 
@@ -264,7 +264,7 @@ impl Default for FingertipConfig {
             finger_gap_weight: 400.0,
             pad_contact: true,
             max_iterations: 20,
-            restart_above: 0.00001,
+            restart_above: 0.0001,
         }
     }
 }

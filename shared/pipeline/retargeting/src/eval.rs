@@ -99,6 +99,8 @@ pub struct Summary {
     pub fingertip_jerk_rms: f64,
     /// Step durations, µs.
     pub solve_us: Spread,
+    /// The solver's iterations per step (0 in mode `joint`).
+    pub iterations: Spread,
 }
 
 /// Accumulates the measures of one retargeter over one or more trajectories (see the module
@@ -120,6 +122,7 @@ pub struct Evaluation {
     jerk_terms: usize,
     fingertip_jerk: Vec<f64>,
     solve_us: Vec<f64>,
+    iterations: Vec<f64>,
     /// The last four outputs (joints in radians, then pads in metres) and their stamps, for
     /// jerk.
     history: Vec<(u64, Vec<f64>)>,
@@ -151,6 +154,7 @@ impl Evaluation {
             jerk_terms: 0,
             fingertip_jerk: Vec::new(),
             solve_us: Vec::new(),
+            iterations: Vec::new(),
             history: Vec::new(),
         }
     }
@@ -161,14 +165,16 @@ impl Evaluation {
     }
 
     /// One step: the glove sample's stamp and closures (as [`crate::Calibration::closure`]
-    /// gives them), the targets made of it, and how long the step took.
+    /// gives them), the targets made of it, how long the step took and the solver's iterations.
     pub fn record(
         &mut self,
         t_ns: u64,
         closure: &[f32; GLOVE_CHANNELS],
         targets: &JointTargets,
         solve_ns: u64,
+        iterations: u32,
     ) {
+        self.iterations.push(f64::from(iterations));
         let q: Vec<f64> = self
             .profile
             .joints
@@ -284,6 +290,7 @@ impl Evaluation {
             fingertip_jerk: Spread::of(&mut self.fingertip_jerk.clone()),
             fingertip_jerk_rms: rms(&self.fingertip_jerk),
             solve_us: Spread::of(&mut self.solve_us.clone()),
+            iterations: Spread::of(&mut self.iterations.clone()),
         }
     }
 }
