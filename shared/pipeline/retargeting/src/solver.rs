@@ -54,6 +54,9 @@ const FINGER_GAP_BELOW_M: f64 = 0.03;
 /// A pinched pair whose pads are farther apart than this after the warm start is restarted from
 /// where it meets, metres.
 const PINCH_OPEN_M: f64 = 0.005;
+/// Most iterations of a restarted descent: enough to show a better branch, which the next
+/// frames' warm starts then follow.
+const RESTART_ITERATIONS: u32 = 6;
 /// Joint vectors sampled per thumb pair for its pinch restart.
 const PINCH_SEED_SAMPLES: usize = 4000;
 /// A step that lowers the objective by less than this share of it ends the descent
@@ -124,8 +127,6 @@ pub struct Solver {
     report: SolveReport,
     /// The last solve's targets.
     last_targets: Targets,
-    /// The last solve's vector part.
-    last_vector_part: f64,
     /// Per thumb pair: variables where the two pads come closest (a restart for a pinch), and
     /// which variables belong to the pair's two fingers.
     pinch_seed: [[f64; MAX_JOINTS]; MAX_TIPS - 1],
@@ -268,7 +269,6 @@ impl Solver {
                 reference: [DVec3::ZERO; MAX_VECTORS],
                 weight: [0.0; MAX_VECTORS],
             },
-            last_vector_part: 0.0,
             pinch_seed: [[0.0; MAX_JOINTS]; MAX_TIPS - 1],
             pinch_seed_moves: [[false; MAX_JOINTS]; MAX_TIPS - 1],
         };
@@ -425,12 +425,18 @@ impl Solver {
         t
     }
 
-    /// The gap between the pad surfaces of thumb pair `k` at `q`, metres.
+    /// The gap of thumb pair `k` at `q` as the pinch target measures it (between the pad
+    /// surfaces, or their centres without `pad_contact`), metres.
     fn pair_gap(&self, k: usize, q: &[f64; MAX_JOINTS]) -> f64 {
         let q = &q[..self.joints];
         let thumb = self.chains.pad(self.tip_chain[0], q);
         let other = self.chains.pad(self.tip_chain[k + 1], q);
-        thumb.distance(other) - self.tip_radius[0] - self.tip_radius[k + 1]
+        let radii = if self.params.pad_contact {
+            self.tip_radius[0] + self.tip_radius[k + 1]
+        } else {
+            0.0
+        };
+        thumb.distance(other) - radii
     }
 
     /// The fingertip slot whose wrist vector is farthest from its target at `q`.
@@ -506,12 +512,12 @@ impl Solver {
     /// little) and returns the solution (radians, every joint of the profile).
     ///
     /// From the previous solution first. When that ends with the vector part above
-    /// `restart_above` and a quarter above the last solve's, again with the fingertip farthest
-    /// from its target restarted from the middle of its joints' ranges; and while a pinch is on
-    /// but its pads are more than 5 mm apart, with the pinching pair where it meets. A
-    /// restart's result is kept when its vector part is at least a fifth lower (a jump the
-    /// downstream slew limit paces). Restarts are what get a redundant finger out of a branch
-    /// that ran into its limits.
+    /// `restart_above`, again for a few iterations with the fingertip farthest from its target
+    /// restarted from the middle of its joints' ranges; and while a pinch is on but its pads
+    /// are more than 5 mm apart, with the pinching pair where it meets. A restart's result is
+    /// kept when its vector part is at least a fifth lower (a jump the downstream slew limit
+    /// paces). Restarts are what get a redundant finger out of a branch that ran into its
+    /// limits.
     pub fn solve(&mut self, pads: &[Vec3; 5]) -> &[f64] {
         if pads.iter().any(|p| !p.is_finite()) {
             // Nothing to follow: keep the previous solution.
@@ -525,22 +531,20 @@ impl Solver {
             previous[v] = self.q[self.vars[v]];
         }
 
-        let mut best = self.descend(&targets, &previous, &previous);
+        let mut best = self.descend(&targets, &previous, &previous, self.params.max_iterations);
         let mut iterations = best.iterations;
         let mut restart = |best: &mut Descent, start: &[f64; MAX_JOINTS]| {
-            let other = self.descend(&targets, start, &previous);
+            let other = self.descend(&targets, start, &previous, RESTART_ITERATIONS);
             iterations += other.iterations;
             if other.vector_part < 0.8 * best.vector_part {
                 *best = other;
             }
         };
-        // Worse than the last frame (a finger whose warm start followed a branch into its
-        // limits): the finger farthest from its target from the middle of its joints' ranges,
-        // the others where they are. A hand whose shape cannot match the operator's leaves a
-        // steady residual; only a rise in it is looked into.
-        if best.vector_part > f64::from(self.params.restart_above)
-            && best.vector_part > 1.25 * self.last_vector_part
-        {
+        // A poor fit (a finger whose warm start followed a branch into its limits): the finger
+        // farthest from its target from the middle of its joints' ranges, the others where they
+        // are, a few iterations only (a hand whose shape cannot match the operator's leaves a
+        // steady residual, tried every frame).
+        if best.vector_part > f64::from(self.params.restart_above) {
             let worst = self.worst_fingertip(&targets, &best.q);
             let mut fresh = previous;
             for v in 0..self.n_vars {
@@ -563,7 +567,6 @@ impl Solver {
                 restart(&mut best, &seeded);
             }
         }
-        self.last_vector_part = best.vector_part;
         if best.q.iter().all(|v| v.is_finite()) {
             self.q = best.q;
         }
@@ -584,6 +587,7 @@ impl Solver {
         targets: &Targets,
         start: &[f64; MAX_JOINTS],
         previous: &[f64; MAX_JOINTS],
+        max_iterations: u32,
     ) -> Descent {
         let n = self.n_vars;
         let mut x = *start;
@@ -597,7 +601,7 @@ impl Solver {
         let posture = f64::from(self.params.posture);
         let delta = f64::from(self.params.huber_delta);
         let mut full = [DVec3::ZERO; MAX_JOINTS];
-        while iterations < self.params.max_iterations {
+        while iterations < max_iterations {
             // Pads and their Jacobians by variable.
             let mut pads = [DVec3::ZERO; MAX_TIPS];
             let mut jac = [[DVec3::ZERO; MAX_JOINTS]; MAX_TIPS];
@@ -665,7 +669,7 @@ impl Solver {
             }
             // Damped steps until one lowers the objective.
             let mut accepted = false;
-            while iterations < self.params.max_iterations {
+            while iterations < max_iterations {
                 iterations += 1;
                 let Some(step) = damped_step(&h, &g, &free, n, damping) else {
                     damping *= 10.0;
