@@ -195,7 +195,7 @@ fn bench_hand(hand: &str, frames: &[Frame]) {
         posture: 0.0,
         ..FingertipConfig::default()
     };
-    let mut solver = Solver::new(&profile, config, true)
+    let mut solver = Solver::new(&profile, config, true, &[])
         .unwrap_or_else(|| panic!("{hand}: no finger follows an operator finger"));
     let chains = Chains::new(&profile);
     // Per fingertip slot after the thumb: the profile finger and the operator finger (thumb 0 ..

@@ -207,7 +207,7 @@ impl Default for JointConfig {
 }
 
 /// Fingertip retargeting (modes `vector` and `pinch`): the objective's parameters, defaults after
-/// dex-retargeting's `DexPilotOptimizer` (0.4.6, `optimizer.py`): Huber loss on each vector's
+/// dex-retargeting's `DexPilotOptimizer` (0.5.0, `optimizer.py`): Huber loss on each vector's
 /// error, a smoothness term towards the previous solution, and the pinch switch's distances.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -279,12 +279,12 @@ impl FingertipConfig {
         non_negative("fingertip.posture", self.posture)?;
         positive("fingertip.pinch_engage", self.pinch_engage)?;
         positive("fingertip.pinch_release", self.pinch_release)?;
-        if self.pinch_release < self.pinch_engage {
+        if self.pinch_release <= self.pinch_engage {
             return Err(ConfigError::invalid(
                 RETARGET_ORIGIN,
                 "fingertip.pinch_release",
                 format!(
-                    "{} must not be below pinch_engage ({}): the switch needs hysteresis",
+                    "{} must be above pinch_engage ({}): the switch needs hysteresis",
                     self.pinch_release, self.pinch_engage
                 ),
             ));

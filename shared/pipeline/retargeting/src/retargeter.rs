@@ -33,8 +33,9 @@ pub struct GloveInput {
 pub struct JointTargets {
     /// Normalised targets (0 = the joint's open angle, 1 = its closed angle),
     /// always finite and within each joint's `[min, max]` (a joint the
-    /// fingertip solver drives: within its limits, which may lie beyond 0 and
-    /// 1); the first `count` entries are used, the rest are 0.
+    /// fingertip solver drives and the configuration does not name: within its
+    /// limits, which may lie beyond 0 and 1); the first `count` entries are
+    /// used, the rest are 0.
     pub position: [f32; MAX_JOINTS],
     /// How many joints the hand has.
     pub count: usize,
@@ -83,6 +84,9 @@ enum Drive {
 struct JointPlan {
     drive: Drive,
     config: JointConfig,
+    /// The configuration names this joint (its `[min, max]` then also bounds the fingertip
+    /// solver).
+    configured: bool,
     open: f32,
     closed: f32,
     lower: f32,
@@ -149,23 +153,39 @@ impl Retargeter {
         config.check_joints(profile)?;
         calibration.validate()?;
         let mode = config.mode.unwrap_or(profile.retarget.mode);
+        // A joint the configuration limits keeps its [min, max] in the fingertip modes too;
+        // the others have their whole travel.
+        let narrowed: Vec<Option<(f32, f32)>> = profile
+            .joints
+            .iter()
+            .map(|j| {
+                config.joints.get(&j.name).map(|c| {
+                    let (a, b) = (j.radians(c.min), j.radians(c.max));
+                    (a.min(b), a.max(b))
+                })
+            })
+            .collect();
         let solver = match mode {
             RetargetMode::Joint => None,
             RetargetMode::Vector | RetargetMode::Pinch => Some(
-                Solver::new(profile, config.fingertip, mode == RetargetMode::Pinch).ok_or_else(
-                    || {
-                        ConfigError::invalid(
-                            RETARGET_ORIGIN,
-                            "mode",
-                            format!(
-                                "`{}` needs fingers that follow operator fingers (`operator` in \
+                Solver::new(
+                    profile,
+                    config.fingertip,
+                    mode == RetargetMode::Pinch,
+                    &narrowed,
+                )
+                .ok_or_else(|| {
+                    ConfigError::invalid(
+                        RETARGET_ORIGIN,
+                        "mode",
+                        format!(
+                            "`{}` needs fingers that follow operator fingers (`operator` in \
                              the hand profile); `{}` has none: use mode `joint`",
-                                mode.name(),
-                                profile.name
-                            ),
-                        )
-                    },
-                )?,
+                            mode.name(),
+                            profile.name
+                        ),
+                    )
+                })?,
             ),
         };
         let operator = calibration.operator_hand();
@@ -193,6 +213,7 @@ impl Retargeter {
                 JointPlan {
                     drive,
                     config: config.joint(&j.name),
+                    configured: config.joints.contains_key(&j.name),
                     open: j.open,
                     closed: j.closed,
                     lower: j.lower,
@@ -301,8 +322,8 @@ impl Retargeter {
             let solved = self.solver.as_ref().filter(|s| s.drives(j));
             // The fingertip solver has the joint's whole travel; the glove map its [min, max].
             let (min, max) = match solved {
-                Some(_) => plan.travel(),
-                None => (jc.min, jc.max),
+                Some(_) if !plan.configured => plan.travel(),
+                _ => (jc.min, jc.max),
             };
             let shaped = match solved {
                 // The fingertip solution, normalised (curves shape glove channels only).
@@ -356,8 +377,8 @@ impl Retargeter {
             if let Drive::Coupled { to, ratio } = plan.drive {
                 let followed = plan.follow(&self.plans[to], position[to], ratio);
                 let (min, max) = match self.solver.as_ref().filter(|s| s.drives(j)) {
-                    Some(_) => plan.travel(),
-                    None => (plan.config.min, plan.config.max),
+                    Some(_) if !plan.configured => plan.travel(),
+                    _ => (plan.config.min, plan.config.max),
                 };
                 let (v, c) = clamp_count(followed, min, max);
                 clamped += u8::from(c);
@@ -396,7 +417,7 @@ impl Retargeter {
     /// last output until then.
     pub fn reset(&mut self) {
         if let Some(solver) = self.solver.as_mut() {
-            solver.reset_switch();
+            solver.reset();
         }
         self.filters = [OneEuro::default(); MAX_JOINTS];
         self.last_t_ns = None;
@@ -636,5 +657,46 @@ mod tests {
             err.to_string().starts_with("calibration: [little]: "),
             "{err}"
         );
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod fingertip_tests {
+    use super::*;
+    use crate::config::JointConfig;
+
+    #[test]
+    fn a_configured_joint_keeps_its_limits_in_the_fingertip_modes() {
+        let profile = HandProfile::builtin("allegro").unwrap();
+        let mut config = RetargetConfig::default();
+        config.joints.insert(
+            "index_1".into(),
+            JointConfig {
+                max: 0.3,
+                ..JointConfig::default()
+            },
+        );
+        let index_1 = profile.joint_index("index_1").unwrap();
+        for mode in [RetargetMode::Vector, RetargetMode::Pinch] {
+            config.mode = Some(mode);
+            let mut rt = Retargeter::new(config.clone(), Calibration::default(), &profile).unwrap();
+            let mut highest: f32 = 0.0;
+            // A fist, then open, then a fist.
+            for k in 0..600u64 {
+                let raw = if (k / 200) % 2 == 0 {
+                    [0; 6]
+                } else {
+                    [1000; 6]
+                };
+                let out = rt.step(&GloveInput {
+                    t_ns: k * 3_500_000,
+                    raw,
+                });
+                highest = highest.max(out.position[index_1]);
+            }
+            assert!(highest <= 0.3, "{}: index_1 reached {highest}", mode.name());
+            assert!(highest > 0.25, "{}: index_1 reached {highest}", mode.name());
+        }
     }
 }

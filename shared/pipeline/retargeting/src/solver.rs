@@ -1,6 +1,6 @@
 //! Fingertip retargeting: the robot's joint angles whose fingertip vectors best match the
 //! operator's, DexPilot's objective (Handa et al. 2020, as dex-retargeting's `DexPilotOptimizer`
-//! 0.4.6 implements it) solved by projected Gauss-Newton in Rust.
+//! 0.5.0 implements it) solved by projected Gauss-Newton in Rust.
 //!
 //! # The objective
 //!
@@ -13,8 +13,8 @@
 //! averaged over the vectors; wrist vectors weigh `pairs + fingers`, pairs 1. Moving away from
 //! the previous solution costs `smoothness × |Δq|²`, and being away from the middle of the
 //! joints' ranges `posture × |q − mid|²` (not in DexPilot): a weak pull that settles the joints a
-//! redundant finger leaves free, so that the solution forgets where it came from (a recording
-//! that starts mid-session reprocesses to the same commands) and stays off the hard stops.
+//! redundant finger leaves free (so a difference in history fades instead of staying) and keeps
+//! them off the hard stops.
 //!
 //! In `pinch` mode a thumb-finger pair whose operator pads come closer than `pinch_engage`
 //! switches to a pinch (until they part beyond `pinch_release`): its target becomes the
@@ -31,9 +31,13 @@
 //! smoothness term and a Levenberg damping, and solves the normal equations by Cholesky with the
 //! joints held at a limit they push against removed (an active set), then clamps to the limits.
 //! A step is kept only when the objective falls. It starts from the previous solution (warm
-//! start) and stops when a step moves no joint by more than 1e-7 rad or after `max_iterations`.
-//! Fixed-size arrays throughout: a solve allocates nothing and, for the same inputs in the same
-//! order, gives bit-identical results.
+//! start) and stops when a step moves no joint by more than 1e-7 rad, gains less than 1e-4 of
+//! the objective, or after `max_iterations`; restarts (see [`Solver::solve`]) run a few
+//! iterations. The first solve, and the first after [`Solver::reset`], starts from the open hand
+//! and converges without the smoothness term: an operator holding still at the start gives the
+//! same solutions however many samples came before (a recording that starts a little after the
+//! node reprocesses to its commands). Fixed-size arrays throughout: a solve allocates nothing
+//! and, for the same inputs in the same order, gives bit-identical results.
 
 // Vectors, joints and fingertips are parallel fixed-size arrays indexed together, as the
 // formulas in the docs write them.
@@ -54,6 +58,8 @@ const FINGER_GAP_BELOW_M: f64 = 0.03;
 /// A pinched pair whose pads are farther apart than this after the warm start is restarted from
 /// where it meets, metres.
 const PINCH_OPEN_M: f64 = 0.005;
+/// Most iterations of a first solve.
+const FRESH_ITERATIONS: u32 = 200;
 /// Most iterations of a restarted descent: enough to show a better branch, which the next
 /// frames' warm starts then follow.
 const RESTART_ITERATIONS: u32 = 6;
@@ -124,6 +130,10 @@ pub struct Solver {
     q: [f64; MAX_JOINTS],
     /// The pinch switch per vector.
     projected: [bool; MAX_VECTORS],
+    /// No solve since construction or [`Solver::reset`].
+    fresh: bool,
+    /// Where the first solve starts: every joint at its `open` angle.
+    initial: [f64; MAX_JOINTS],
     report: SolveReport,
     /// The last solve's targets.
     last_targets: Targets,
@@ -141,9 +151,15 @@ struct Targets {
 }
 
 impl Solver {
-    /// The solver for `profile`, over its joints' full limits: `pinch` turns the pinch switch
-    /// on (mode `pinch`). `None` when no finger of the profile follows an operator finger.
-    pub fn new(profile: &HandProfile, params: FingertipConfig, pinch: bool) -> Option<Self> {
+    /// The solver for `profile`, over its joints' limits, narrowed where `narrowed` (radians,
+    /// per joint; missing entries: none) says: `pinch` turns the pinch switch on (mode
+    /// `pinch`). `None` when no finger of the profile follows an operator finger.
+    pub fn new(
+        profile: &HandProfile,
+        params: FingertipConfig,
+        pinch: bool,
+        narrowed: &[Option<(f32, f32)>],
+    ) -> Option<Self> {
         let chains = Chains::new(profile);
         // Fingertip slots in the operator's order (thumb first).
         let mut slots: Vec<(usize, usize)> = profile
@@ -193,9 +209,14 @@ impl Solver {
         let mut upper = [0.0; MAX_JOINTS];
         let mut q = [0.0; MAX_JOINTS];
         for (j, joint) in profile.joints.iter().take(count).enumerate() {
-            lower[j] = f64::from(joint.lower);
-            upper[j] = f64::from(joint.upper);
-            q[j] = f64::from(joint.open);
+            let (lo, hi) = narrowed
+                .get(j)
+                .copied()
+                .flatten()
+                .unwrap_or((joint.lower, joint.upper));
+            lower[j] = f64::from(lo.max(joint.lower));
+            upper[j] = f64::from(hi.min(joint.upper)).max(lower[j]);
+            q[j] = f64::from(joint.open).clamp(lower[j], upper[j]);
         }
         let retargeted = |f: usize| slots.iter().any(|&(_, g)| g == f);
         let mut vars = [0; MAX_JOINTS];
@@ -264,6 +285,8 @@ impl Solver {
             slot_var_count,
             q,
             projected: [false; MAX_VECTORS],
+            fresh: true,
+            initial: q,
             report: SolveReport::default(),
             last_targets: Targets {
                 reference: [DVec3::ZERO; MAX_VECTORS],
@@ -281,7 +304,12 @@ impl Solver {
     fn find_pinch_seeds(&mut self, profile: &HandProfile) {
         for k in 0..self.thumb_pairs {
             let (thumb, other) = (self.tip_chain[0], self.tip_chain[k + 1]);
-            let radii = self.tip_radius[0] + self.tip_radius[k + 1];
+            // Measured as the pinch target measures it (see `pair_gap`).
+            let radii = if self.params.pad_contact {
+                self.tip_radius[0] + self.tip_radius[k + 1]
+            } else {
+                0.0
+            };
             let mut moves = [false; MAX_JOINTS];
             for v in 0..self.n_vars {
                 let finger = profile.joints[self.vars[v]].finger;
@@ -327,9 +355,13 @@ impl Solver {
         self.report
     }
 
-    /// Forgets the pinch switch and starts the next solve from the previous solution.
-    pub fn reset_switch(&mut self) {
+    /// Forgets the pinch switch and the solution: the next solve, like the first, starts from
+    /// the open hand and converges without the smoothness term (so what follows a reset depends
+    /// on the input alone).
+    pub fn reset(&mut self) {
         self.projected = [false; MAX_VECTORS];
+        self.q = self.initial;
+        self.fresh = true;
     }
 
     /// The retargeted fingers (profile finger indices), thumb first: the order of the vectors'
@@ -361,7 +393,7 @@ impl Solver {
             *slot = *v;
         }
         let x = [0.0; MAX_JOINTS];
-        self.objective(&self.last_targets, &full, &x, &x).0
+        self.objective(&self.last_targets, &full, &x, &x, 0.0).0
     }
 
     /// The operator's pad for slot `s` (from `pads`, in the operator's finger order).
@@ -485,6 +517,7 @@ impl Solver {
         q: &[f64; MAX_JOINTS],
         x: &[f64; MAX_JOINTS],
         previous: &[f64; MAX_JOINTS],
+        smoothness: f64,
     ) -> (f64, f64) {
         let mut pads = [DVec3::ZERO; MAX_TIPS];
         for (s, pad) in pads.iter_mut().enumerate().take(self.tips) {
@@ -504,7 +537,7 @@ impl Solver {
         }
         (
             vector_part,
-            f64::from(self.params.smoothness) * smooth + f64::from(self.params.posture) * posture,
+            smoothness * smooth + f64::from(self.params.posture) * posture,
         )
     }
 
@@ -531,10 +564,36 @@ impl Solver {
             previous[v] = self.q[self.vars[v]];
         }
 
-        let mut best = self.descend(&targets, &previous, &previous, self.params.max_iterations);
+        // The first solve (and the first after a reset) has no previous solution to stay near:
+        // it converges on the fit alone. Where the operator holds still, that is where every
+        // later solve stays, however many samples came before.
+        let (smoothness, iterations, tolerance) = if self.fresh {
+            (0.0, FRESH_ITERATIONS, 0.0)
+        } else {
+            let smoothness = f64::from(self.params.smoothness);
+            (smoothness, self.params.max_iterations, COST_TOLERANCE)
+        };
+        self.fresh = false;
+        let mut best = self.descend(
+            &targets, &previous, &previous, iterations, smoothness, tolerance,
+        );
         let mut iterations = best.iterations;
+        // A first solve runs its restarts to convergence too, so that it has already taken
+        // whatever a later frame's restart would find.
+        let restart_iterations = if tolerance == 0.0 {
+            FRESH_ITERATIONS
+        } else {
+            RESTART_ITERATIONS
+        };
         let mut restart = |best: &mut Descent, start: &[f64; MAX_JOINTS]| {
-            let other = self.descend(&targets, start, &previous, RESTART_ITERATIONS);
+            let other = self.descend(
+                &targets,
+                start,
+                &previous,
+                restart_iterations,
+                smoothness,
+                tolerance,
+            );
             iterations += other.iterations;
             if other.vector_part < 0.8 * best.vector_part {
                 *best = other;
@@ -588,16 +647,17 @@ impl Solver {
         start: &[f64; MAX_JOINTS],
         previous: &[f64; MAX_JOINTS],
         max_iterations: u32,
+        smoothness: f64,
+        cost_tolerance: f64,
     ) -> Descent {
         let n = self.n_vars;
         let mut x = *start;
         let mut q = self.q;
         self.expand(&x, &mut q);
-        let (mut vector_part, smooth) = self.objective(targets, &q, &x, previous);
+        let (mut vector_part, smooth) = self.objective(targets, &q, &x, previous, smoothness);
         let mut cost = vector_part + smooth;
         let mut damping = 1e-3;
         let mut iterations = 0;
-        let smoothness = f64::from(self.params.smoothness);
         let posture = f64::from(self.params.posture);
         let delta = f64::from(self.params.huber_delta);
         let mut full = [DVec3::ZERO; MAX_JOINTS];
@@ -611,7 +671,12 @@ impl Solver {
                     .pad_jacobian(self.tip_chain[s], &q[..self.joints], &mut full);
                 for (j, column) in full.iter().enumerate().take(self.joints) {
                     if let Some((v, ratio)) = self.moves_with[j] {
-                        jac[s][v] += ratio * *column;
+                        // A follower held at its own limit does not move with its leader.
+                        let follows = self.vars[v] == j
+                            || (self.lower[j]..=self.upper[j]).contains(&(ratio * x[v]));
+                        if follows {
+                            jac[s][v] += ratio * *column;
+                        }
                     }
                 }
             }
@@ -685,7 +750,7 @@ impl Solver {
                 let mut trial_q = q;
                 self.expand(&trial, &mut trial_q);
                 let (trial_vectors, trial_smooth) =
-                    self.objective(targets, &trial_q, &trial, previous);
+                    self.objective(targets, &trial_q, &trial, previous, smoothness);
                 let trial_cost = trial_vectors + trial_smooth;
                 if trial_cost.is_finite() && trial_cost <= cost {
                     let gain = cost - trial_cost;
@@ -694,7 +759,7 @@ impl Solver {
                     cost = trial_cost;
                     vector_part = trial_vectors;
                     damping = (damping / 3.0).max(1e-9);
-                    accepted = largest > STEP_TOLERANCE_RAD && gain > COST_TOLERANCE * cost;
+                    accepted = largest > STEP_TOLERANCE_RAD && gain > cost_tolerance * cost;
                     break;
                 }
                 damping *= 4.0;
@@ -823,7 +888,7 @@ mod tests {
 
     fn solver_with(hand: &str, pinch: bool, params: FingertipConfig) -> (HandProfile, Solver) {
         let profile = HandProfile::builtin(hand).unwrap();
-        let s = Solver::new(&profile, params, pinch).unwrap();
+        let s = Solver::new(&profile, params, pinch, &[]).unwrap();
         (profile, s)
     }
 
@@ -929,35 +994,30 @@ mod tests {
     }
 
     #[test]
-    fn with_the_smoothness_term_the_solution_trails_and_then_arrives() {
-        // A case where the Shadow thumb's five joints leave a long valley: the default
-        // smoothness makes each solve a short step along it.
-        let (profile, mut s) = solver_with(
-            "shadow",
-            false,
-            FingertipConfig {
-                posture: 0.0,
-                ..FingertipConfig::default()
-            },
-        );
-        let mut u = [0.1; 24];
-        u[20] = 0.30;
-        u[21] = 0.51;
-        let q = pose_at(&profile, &s, &u);
-        let pads = pads_for(&s, &q);
-        let thumb = s.tip_chain[0];
-        let error = |s: &Solver| {
-            s.chains
-                .pad(thumb, s.solution())
-                .distance(s.chains.pad(thumb, &q))
+    fn a_still_operator_is_a_fixed_point_however_many_samples_came_before() {
+        // A recording that starts a few samples after the node did reprocesses to the same
+        // solutions: the first solve converges, and later solves of the same pads stay there.
+        let operator = OperatorHand::default();
+        let pose = OperatorPose {
+            flexion: [0.3, 0.5, 0.4, 0.2, 0.1],
+            thumb_opposition: 0.6,
         };
-        s.solve(&pads);
-        let first = error(&s);
-        for _ in 0..300 {
-            s.solve(&pads);
+        let pads = operator.pads(&pose);
+        for hand in ["revo2", "allegro", "shadow", "leap"] {
+            let (_, mut live) = solver(hand, true);
+            let (_, mut replay) = solver(hand, true);
+            for _ in 0..3 {
+                live.solve(&pads);
+            }
+            // Within the tolerance `teleop reprocess` compares commands with.
+            let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-6);
+            let first = replay.solve(&pads).to_vec();
+            assert!(close(live.solution(), &first), "{hand}");
+            for _ in 0..5 {
+                let a = live.solve(&pads).to_vec();
+                assert!(close(&a, replay.solve(&pads)), "{hand}");
+            }
         }
-        assert!(first > 1e-3, "the first step trails: {} mm", first * 1e3);
-        assert!(error(&s) < 1e-3, "then arrives: {} mm", error(&s) * 1e3);
     }
 
     #[test]
