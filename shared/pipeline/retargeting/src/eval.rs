@@ -313,28 +313,6 @@ fn third_derivative(h: [f64; 3], x: [f64; 4]) -> f64 {
     6.0 * (second(1) - second(0)) / (t[3] - t[0])
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_third_derivative_of_a_cubic_is_exact_on_uneven_stamps() {
-        // x = 2 t^3 - t^2 + 3, whose third derivative is 12 everywhere.
-        let at = |t: f64| 2.0 * t * t * t - t * t + 3.0;
-        let h = [0.003, 0.0041, 0.0027];
-        let t = [0.0, h[0], h[0] + h[1], h[0] + h[1] + h[2]];
-        let jerk = third_derivative(h, t.map(at));
-        assert!((jerk - 12.0).abs() < 1e-6, "{jerk}");
-    }
-
-    #[test]
-    fn spreads_are_nearest_rank() {
-        let s = Spread::of(&mut [5.0, 1.0, 3.0, 2.0, 4.0]);
-        assert_eq!((s.count, s.p50, s.p95, s.max), (5, 3.0, 5.0, 5.0));
-        assert_eq!(Spread::of(&mut []), Spread::default());
-    }
-}
-
 /// The closest the robot's thumb pad and the pad of the finger following operator finger
 /// `finger` (`FINGERS` index) can come (surface gap, metres), over `samples` joint vectors
 /// drawn evenly at random (a fixed seed) within the limits, and the share of those within
@@ -370,4 +348,26 @@ pub fn pinch_reach(profile: &HandProfile, finger: usize, samples: usize) -> Opti
         within += usize::from(gap < ROBOT_PINCH_M);
     }
     Some((best, within as f64 / samples.max(1) as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_third_derivative_of_a_cubic_is_exact_on_uneven_stamps() {
+        // x = 2 t^3 - t^2 + 3, whose third derivative is 12 everywhere.
+        let at = |t: f64| 2.0 * t * t * t - t * t + 3.0;
+        let h = [0.003, 0.0041, 0.0027];
+        let t = [0.0, h[0], h[0] + h[1], h[0] + h[1] + h[2]];
+        let jerk = third_derivative(h, t.map(at));
+        assert!((jerk - 12.0).abs() < 1e-6, "{jerk}");
+    }
+
+    #[test]
+    fn spreads_are_nearest_rank() {
+        let s = Spread::of(&mut [5.0, 1.0, 3.0, 2.0, 4.0]);
+        assert_eq!((s.count, s.p50, s.p95, s.max), (5, 3.0, 5.0, 5.0));
+        assert_eq!(Spread::of(&mut []), Spread::default());
+    }
 }
