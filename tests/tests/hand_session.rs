@@ -87,8 +87,12 @@ impl Grasp for Revo2Grasp {
     }
 }
 
-/// The Allegro's middle finger (flexion joints 5, 6, 7 in the profile's and the CAN order) is
-/// stopped by the ball short of its target while its PD pushes (effort, N m).
+/// An Allegro finger (the flexion joints 1-3, 5-7, 9-11 and 13-15 in the profile's and the CAN
+/// order) is stopped by the ball short of its target while its PD pushes (effort, N m). Which
+/// one depends on the retargeting: the glove map drives the middle finger into the ball; pinch
+/// mode (the default) puts each fingertip where the operator's is, and the scripted grasp
+/// closes only a third of a fist, so the thumb and the fingers squeezed in beside the middle
+/// one press, the middle one barely.
 #[derive(Default)]
 struct AllegroGrasp {
     max_effort: f32,
@@ -104,7 +108,7 @@ impl Grasp for AllegroGrasp {
             }
         });
         w.state.drain(|s| {
-            for j in [5, 6, 7] {
+            for j in [1, 2, 3, 5, 6, 7, 9, 10, 11, 13, 14, 15] {
                 self.max_effort = self.max_effort.max(s.joints[j].effort);
                 if target[j].is_finite() {
                     self.max_gap = self.max_gap.max(target[j] - s.joints[j].position);
@@ -119,8 +123,8 @@ impl Grasp for AllegroGrasp {
         let status = sandbox.control("teleop-sim-allegro.ctl", "stats");
         assert!(
             self.shown(),
-            "{hand}: the ball stops the middle finger short of its target ({} rad) and the PD \
-             pushes ({} N m); sim: {status}\n{}",
+            "{hand}: the ball stops a finger short of its target ({} rad) and the PD pushes \
+             ({} N m); sim: {status}\n{}",
             self.max_gap,
             self.max_effort,
             session.log()
@@ -237,7 +241,7 @@ const ALLEGRO: Hand = Hand {
     joints: 16,
     link: link_kind::CAN,
     source: contact_source::EFFORT,
-    on_the_ball: Some(GLOVE_MIDDLE),
+    on_the_ball: None, // see AllegroGrasp
     numb: Some(0),
     tactile: false,
     replay: false,
