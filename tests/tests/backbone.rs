@@ -12,9 +12,12 @@ use teleop_msgs::{
 };
 use teleop_runtime::{NodeRuntime, Publisher, Subscriber};
 
+// Mode `joint`: these tests check the glove map's values end to end (the fingertip modes have
+// their own tests in teleop-retarget and the hand sessions).
 const RETARGET_TOML: &str = r#"
 glove_timeout_ms = 100
 [retarget]
+mode = "joint"
 max_speed = 5.0
 [retarget.joints.index]
 max = 0.6
