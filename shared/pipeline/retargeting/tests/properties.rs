@@ -277,3 +277,35 @@ fn constant_input_from_start_is_exact() {
         assert_eq!(out.positions(), [1.0, 0.4, 0.0, 0.25, 0.5, 0.75]);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The fingertip modes: any raw glove values (the whole u16 range, any calibration-free
+    /// input) give finite angles within every joint's limits, couplings kept.
+    #[test]
+    fn fingertip_modes_stay_finite_and_within_the_limits(
+        profile in profile(),
+        pinch in any::<bool>(),
+        raws in prop::collection::vec(prop::array::uniform6(any::<u16>()), 1..30),
+    ) {
+        let mode = if pinch { RetargetMode::Pinch } else { RetargetMode::Vector };
+        let cfg = RetargetConfig { mode: Some(mode), ..RetargetConfig::default() };
+        let mut rt = Retargeter::new(cfg, Calibration::default(), &profile).unwrap();
+        for (k, raw) in raws.iter().enumerate() {
+            let out = rt.step(&GloveInput { t_ns: k as u64 * 3 * MS, raw: *raw });
+            for (j, joint) in profile.joints.iter().enumerate() {
+                let q = joint.radians(out.position[j]);
+                prop_assert!(q.is_finite(), "{}: {q}", joint.name);
+                prop_assert!(
+                    q >= joint.lower - 1e-4 && q <= joint.upper + 1e-4,
+                    "{}: {q} outside [{}, {}]", joint.name, joint.lower, joint.upper
+                );
+                if let Some(c) = joint.coupling {
+                    let leader = profile.joints[c.to].radians(out.position[c.to]);
+                    prop_assert!((q - joint.clamp(c.ratio * leader)).abs() < 1e-4, "{}", joint.name);
+                }
+            }
+        }
+    }
+}
