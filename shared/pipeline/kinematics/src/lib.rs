@@ -33,8 +33,8 @@ use glam::Vec3;
 pub use chains::{Chain, Chains};
 pub use fit::{fit_pinches, FitError, PinchFit, PinchGap, PinchSample, ThumbParams};
 pub use operator::{
-    FingerGeometry, OperatorHand, OperatorPose, ThumbGeometry, FINGERS, GLOVE_CHANNEL_OF_FINGER,
-    GLOVE_THUMB_ROTATION,
+    finger_of_glove_finger, FingerGeometry, OperatorHand, OperatorPose, ThumbGeometry, FINGERS,
+    GLOVE_CHANNEL_OF_FINGER, GLOVE_THUMB_ROTATION,
 };
 pub use robot::RobotHand;
 

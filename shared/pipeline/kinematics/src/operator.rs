@@ -11,6 +11,14 @@ pub const FINGERS: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
 /// The glove channel (`GLOVE_CHANNELS` index: little, ring, middle, index, thumb,
 /// thumb_rotation) of each finger in [`FINGERS`] order.
 pub const GLOVE_CHANNEL_OF_FINGER: [usize; 5] = [4, 3, 2, 1, 0];
+
+/// The operator model's finger ([`FINGERS`] index) of a glove finger (`GLOVE_FINGERS` index:
+/// little .. thumb, as a hand profile's `operator` holds it); `None` past the thumb.
+pub fn finger_of_glove_finger(glove_finger: usize) -> Option<usize> {
+    GLOVE_CHANNEL_OF_FINGER
+        .iter()
+        .position(|&channel| channel == glove_finger)
+}
 /// The glove's thumb rotation channel.
 pub const GLOVE_THUMB_ROTATION: usize = 5;
 

@@ -425,3 +425,11 @@ fn strips_and_joints_cover_the_skeleton() {
     assert_eq!(r.strips().len(), 1 + 5);
     assert_eq!(r.joints().len(), 1 + 4 + 4 * 3);
 }
+
+#[test]
+fn glove_fingers_map_to_the_operator_model_s_fingers() {
+    // GLOVE_FINGERS: little, ring, middle, index, thumb; FINGERS: thumb .. little.
+    let mapped: Vec<Option<usize>> = (0..6).map(finger_of_glove_finger).collect();
+    assert_eq!(mapped, [Some(4), Some(3), Some(2), Some(1), Some(0), None]);
+    assert_eq!(FINGERS[finger_of_glove_finger(4).unwrap()], "thumb");
+}

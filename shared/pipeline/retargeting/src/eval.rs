@@ -25,7 +25,7 @@
 
 use glam::{DVec3, Vec3};
 use teleop_hand_profile::HandProfile;
-use teleop_kinematics::{Chains, OperatorHand, FINGERS};
+use teleop_kinematics::{finger_of_glove_finger, Chains, OperatorHand, FINGERS};
 
 use crate::retargeter::{JointTargets, Retargeter};
 use crate::solver::Uniform;
@@ -134,9 +134,8 @@ impl Evaluation {
     pub fn new(profile: &HandProfile, retargeter: &Retargeter, scaling: f32) -> Self {
         let mut follower = [None; 5];
         for (f, finger) in profile.fingers.iter().enumerate() {
-            if let Some(g) = finger.operator {
-                // GLOVE_FINGERS runs little .. thumb; FINGERS thumb .. little.
-                follower[4 - g.min(4)] = Some(f);
+            if let Some(i) = finger.operator.and_then(finger_of_glove_finger) {
+                follower[i] = Some(f);
             }
         }
         Self {
@@ -324,7 +323,7 @@ pub fn pinch_reach(profile: &HandProfile, finger: usize, samples: usize) -> Opti
         profile
             .fingers
             .iter()
-            .position(|f| f.operator.map(|o| 4 - o.min(4)) == Some(g))
+            .position(|f| f.operator.and_then(finger_of_glove_finger) == Some(g))
     };
     let (thumb, other) = (follower(0)?, follower(finger)?);
     let radii = chains.chains()[thumb].pad_radius + chains.chains()[other].pad_radius;

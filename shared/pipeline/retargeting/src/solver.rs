@@ -45,7 +45,7 @@
 
 use glam::{DVec3, Vec3};
 use teleop_hand_profile::{HandProfile, Role, MAX_JOINTS};
-use teleop_kinematics::Chains;
+use teleop_kinematics::{finger_of_glove_finger, Chains};
 
 use crate::config::FingertipConfig;
 
@@ -167,8 +167,8 @@ impl Solver {
             .iter()
             .enumerate()
             .filter_map(|(f, finger)| {
-                // GLOVE_FINGERS runs little .. thumb; the operator model thumb .. little.
-                finger.operator.map(|g| (4 - g.min(4), f))
+                let operator = finger.operator.and_then(finger_of_glove_finger)?;
+                Some((operator, f))
             })
             .take(MAX_TIPS)
             .collect();
