@@ -331,7 +331,13 @@ impl Calibration {
     /// operator model's sense ([`teleop_kinematics::OperatorPose::from_glove`]):
     /// `1 - closure`, so 0 = bent / thumb in and 1 = open / thumb out.
     pub fn position(&self, raw: &[u16; GLOVE_CHANNELS]) -> [f32; GLOVE_CHANNELS] {
-        self.closure(raw).map(|c| 1.0 - c)
+        Self::position_of(&self.closure(raw))
+    }
+
+    /// The operator model's positions of closures (as [`closure`](Self::closure) gives them):
+    /// `1 - closure`.
+    pub fn position_of(closure: &[f32; GLOVE_CHANNELS]) -> [f32; GLOVE_CHANNELS] {
+        closure.map(|c| 1.0 - c)
     }
 
     /// The operator's hand: the default [`OperatorHand`] with the fitted

@@ -263,7 +263,7 @@ impl Retargeter {
     /// The operator's pose for glove closures (0 = open .. 1 = closed; thumb rotation 0 =
     /// outermost .. 1 = innermost).
     pub fn operator_pose(closure: &[f32; GLOVE_CHANNELS]) -> OperatorPose {
-        OperatorPose::from_glove(&closure.map(|c| 1.0 - c))
+        OperatorPose::from_glove(&Calibration::position_of(closure))
     }
 
     /// Processes one glove sample. Allocates nothing.
