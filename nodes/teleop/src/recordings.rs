@@ -10,7 +10,7 @@ use teleop_feedback::{Event, FeedbackEngine};
 use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_msgs::{
     source_id, visit_topic, DeviceInfo, EStop, GloveDiagnostics, GloveForceCommand, GloveState,
-    HandCommand, HandState, Message, Tactile, TopicVisitor,
+    HandCommand, HandState, Message, NodeHealth, Tactile, TopicVisitor,
 };
 use teleop_recorder::{record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::{
@@ -623,8 +623,15 @@ pub fn reprocess_cmd(
                     let c = outputs.command(&mut rec, c, t)?;
                     feedback.handle(&Event::Command(c), t);
                 }
+                // The operator's fingers, for the passivity observer (as the node takes them).
+                feedback.handle(&Event::Glove(s), t);
                 continue;
             }
+            // The bridge's health gives the link's delay (freshness, passivity's `auto`).
+            "health" => Event::Health(
+                msg.decode()
+                    .ok_or_else(|| anyhow::anyhow!("bad {} payload", NodeHealth::TOPIC))?,
+            ),
             "hand/state" => Event::State(copy_input(&mut rec, state_id, msg)?),
             "hand/tactile" => Event::Tactile(copy_input(&mut rec, tactile_id, msg)?),
             "estop" => Event::EStop(copy_input(&mut rec, estop_id, msg)?),

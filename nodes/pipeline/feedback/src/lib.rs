@@ -1,6 +1,6 @@
 //! The force-feedback process's logic without its plumbing: its configuration file and the
-//! [`FeedbackEngine`] that turns tactile, hand-state, hand-command and e-stop samples (each with
-//! its receive time), its ticks and its inputs' watchdogs (a
+//! [`FeedbackEngine`] that turns tactile, hand-state, hand-command, glove-state, health and
+//! e-stop samples (each with its receive time), its ticks and its inputs' watchdogs (a
 //! [`Schedule`](teleop_runtime::schedule::Schedule)) into glove force commands. The
 //! `teleop-feedback` executable feeds it from the live topics and the clock; `teleop reprocess`
 //! feeds it from a recording and its log times, so both run the same code, schedule included.
@@ -8,12 +8,13 @@
 use std::path::{Path, PathBuf};
 
 use teleop_force_feedback::{
-    FeedbackConfig, ForceFeedback, HandInput, Inputs, PstConfig, Tactile, TactileInput,
+    FeedbackConfig, ForceFeedback, HandInput, Inputs, OperatorInput, PassivityReport, PstConfig,
+    Tactile, TactileInput, GLOVE_FINGERS,
 };
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    fingertip_sensor, force_flags, units, EStop, GloveForceCommand, HandCommand, HandState,
-    Tactile as TactileMsg,
+    fingertip_sensor, force_flags, units, EStop, GloveForceCommand, GloveState, HandCommand,
+    HandState, NodeHealth, Tactile as TactileMsg,
 };
 use teleop_runtime::sample_time;
 use teleop_runtime::schedule::Schedule;
@@ -32,6 +33,14 @@ pub struct NodeConfig {
     pub tick_ms: u64,
     /// Health report period.
     pub health_period_ms: u64,
+    /// The glove's positions older than this are stale (the passivity observer waits).
+    pub glove_timeout_ms: u64,
+    /// The node whose health reports the link between stations (`latency_p99_ms`, the one-way
+    /// delay's p99, and `link_state`): the bridge of this station.
+    pub link_node: String,
+    /// Most link delay the freshness of hand data may allow for: a delay measured above it
+    /// counts as this much.
+    pub max_link_delay_ms: u64,
     /// The force-feedback law.
     pub feedback: FeedbackConfig,
 }
@@ -44,6 +53,9 @@ impl Default for NodeConfig {
             hand_timeout_ms: 100,
             tick_ms: 10,
             health_period_ms: 500,
+            glove_timeout_ms: 100,
+            link_node: "bridge".to_string(),
+            max_link_delay_ms: 1000,
             feedback: FeedbackConfig::default(),
         }
     }
@@ -56,7 +68,9 @@ impl NodeConfig {
         check_ms("tactile_timeout_ms", self.tactile_timeout_ms)?;
         check_ms("hand_timeout_ms", self.hand_timeout_ms)?;
         check_ms("tick_ms", self.tick_ms)?;
-        check_ms("health_period_ms", self.health_period_ms)
+        check_ms("health_period_ms", self.health_period_ms)?;
+        check_ms("glove_timeout_ms", self.glove_timeout_ms)?;
+        check_ms("max_link_delay_ms", self.max_link_delay_ms)
     }
 }
 
@@ -109,6 +123,10 @@ pub enum Event {
     Command(HandCommand),
     /// An e-stop sample.
     EStop(EStop),
+    /// A glove state sample: the operator's fingers, for the passivity observer.
+    Glove(GloveState),
+    /// A health report: the link node's gives the link's delay (others are ignored).
+    Health(NodeHealth),
 }
 
 /// What one event did.
@@ -124,6 +142,9 @@ pub struct Output {
     pub estop_changed: Option<bool>,
     /// Fingers saturated at `max_force`.
     pub clamped: u8,
+    /// The passivity observer's energy and what its controller did, if the event stepped the
+    /// law.
+    pub passivity: Option<PassivityReport>,
 }
 
 /// Force feedback with its input state.
@@ -135,6 +156,15 @@ pub struct FeedbackEngine {
     /// The newest hand state and when it was made.
     state: Option<(HandState, u64)>,
     command: Option<HandCommand>,
+    /// The newest glove sample and when it was made.
+    glove: Option<(GloveState, u64)>,
+    /// The link node's newest report: the link's measured one-way delay allowed for in
+    /// freshness (ns, at most `max_link_delay_ms`; 0 while the link is down), and when it came;
+    /// `None` without a link node.
+    link: Option<(u64, u64)>,
+    max_link_delay_ns: u64,
+    glove_timeout_ns: u64,
+    link_node: String,
     estop: bool,
     stale: bool,
     /// The tick (`tick_ms`) and the watchdogs of tactile (`tactile_timeout_ms`) and hand state
@@ -146,6 +176,8 @@ pub struct FeedbackEngine {
 const TACTILE: usize = 0;
 /// The hand state input's index in the engine's schedule.
 const STATE: usize = 1;
+/// How long a link report counts: three of the bridge's one-second health periods.
+pub const LINK_REPORT_NS: u64 = 3_000_000_000;
 
 impl FeedbackEngine {
     /// An engine for the hand `profile` with this configuration.
@@ -156,6 +188,11 @@ impl FeedbackEngine {
             tactile: None,
             state: None,
             command: None,
+            glove: None,
+            link: None,
+            max_link_delay_ns: config.max_link_delay_ms.saturating_mul(1_000_000),
+            glove_timeout_ns: config.glove_timeout_ms.saturating_mul(1_000_000),
+            link_node: config.link_node.clone(),
             estop: false,
             stale: false,
             schedule: {
@@ -195,23 +232,77 @@ impl FeedbackEngine {
         self.estop
     }
 
+    /// The link delay freshness allows for at `now_ns`: the link node's newest one-way p99,
+    /// while its reports keep coming (one is due every second; after [`LINK_REPORT_NS`]
+    /// without one there is no allowance).
+    pub fn link_allowance_ns(&self, now_ns: u64) -> u64 {
+        match self.link {
+            Some((delay, at)) if now_ns.saturating_sub(at) <= LINK_REPORT_NS => delay,
+            _ => 0,
+        }
+    }
+
+    /// Whether a link between stations is in the path at `now_ns`: the link node reports it up
+    /// (the passivity controller's `auto` mode).
+    pub fn link_up(&self, now_ns: u64) -> bool {
+        self.link_allowance_ns(now_ns) > 0
+    }
+
     /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
     /// Tactile and hand-state samples are as old as their stamps say (never newer than their
-    /// receipt, see [`sample_time`]): a sample from a topic's history, made before a restart, is
-    /// stale when it arrives.
+    /// receipt, see [`sample_time`]), less the link's measured delay where a bridge reports one
+    /// ([`link_allowance_ns`](Self::link_allowance_ns)): a sample from a topic's history, made
+    /// before a restart, is stale when it arrives, while samples delayed by the link but still
+    /// arriving are fresh; a link that stops makes them stale by their receipt, a timeout after
+    /// the last one.
     /// Steps the law on tactile samples, on hand state when the hand has no tactile data and on
     /// e-stop changes (and on ticks, see [`poll`](Self::poll)).
     pub fn handle(&mut self, event: &Event, now_ns: u64) -> Output {
+        let allowance = self.link_allowance_ns(now_ns);
+        // The stamp moved later by the link's delay, never past the receipt (`sample_time`):
+        // fresh while `now <= min(stamp + allowance, received) + timeout`.
+        let made_by = |stamp: u64| stamp.saturating_add(allowance);
         let step = match *event {
             Event::Tactile(t) => {
-                self.schedule.sample(TACTILE, t.header.stamp_ns, now_ns);
-                self.tactile = Some((t, sample_time(t.header.stamp_ns, now_ns)));
+                let stamp = made_by(t.header.stamp_ns);
+                self.schedule.sample(TACTILE, stamp, now_ns);
+                self.tactile = Some((t, sample_time(stamp, now_ns)));
                 true
             }
             Event::State(s) => {
-                self.schedule.sample(STATE, s.header.stamp_ns, now_ns);
-                self.state = Some((s, sample_time(s.header.stamp_ns, now_ns)));
+                let stamp = made_by(s.header.stamp_ns);
+                self.schedule.sample(STATE, stamp, now_ns);
+                self.state = Some((s, sample_time(stamp, now_ns)));
                 self.tactile.is_none()
+            }
+            Event::Glove(g) => {
+                self.glove = Some((g, sample_time(g.header.stamp_ns, now_ns)));
+                false
+            }
+            Event::Health(h) => {
+                let name = h.name();
+                let ours = name == self.link_node
+                    || name
+                        .strip_suffix(self.link_node.as_str())
+                        .is_some_and(|ns| ns.ends_with('/'));
+                if ours {
+                    // A link that is down gives no allowance: nothing arrives anyway. An up
+                    // link counts at least 1 ns, so it is seen (`link_up`) however short.
+                    let up = h.detail("link_state") == Some(1.0);
+                    let delay_ms = h.detail("latency_p99_ms").unwrap_or(0.0);
+                    let delay = if up {
+                        let ns = if delay_ms.is_finite() {
+                            delay_ms.max(0.0) * 1e6
+                        } else {
+                            0.0
+                        };
+                        (ns as u64).clamp(1, self.max_link_delay_ns.max(1))
+                    } else {
+                        0
+                    };
+                    self.link = Some((delay, now_ns));
+                }
+                false
             }
             Event::Command(c) => {
                 self.command = Some(c);
@@ -244,6 +335,7 @@ impl FeedbackEngine {
             force: law.force,
             ..Default::default()
         };
+        let passivity = Some(law.passivity);
         msg.header.origin_ns = origin;
         for (slot, source) in msg.source.iter_mut().zip(law.source) {
             *slot = source as u8;
@@ -263,6 +355,7 @@ impl FeedbackEngine {
             became_fresh,
             estop_changed: None,
             clamped: law.clamped,
+            passivity,
         }
     }
 
@@ -287,12 +380,25 @@ impl FeedbackEngine {
             }
             _ => None,
         };
+        let operator = self
+            .glove
+            .as_ref()
+            .filter(|(g, made)| {
+                g.link_up != 0
+                    && !teleop_runtime::schedule::is_stale(*made, now_ns, self.glove_timeout_ns)
+            })
+            .map(|(g, made)| OperatorInput {
+                t_ns: *made,
+                position: core::array::from_fn::<_, GLOVE_FINGERS, _>(|f| g.position[f]),
+            });
         (
             Inputs {
                 t_ns: now_ns,
                 tactile,
                 hand,
                 estop: self.estop,
+                operator,
+                remote: self.link_up(now_ns),
             },
             origin,
         )
@@ -482,6 +588,106 @@ mod tests {
         );
         assert_eq!(engaged.estop_changed, Some(true));
         assert_eq!(engaged.command.unwrap().force, [0; 5]);
+    }
+
+    /// The bridge's health report: the link up with this one-way p99.
+    fn bridge(name: &str, one_way_ms: f64, up: bool) -> Event {
+        let mut h = NodeHealth::default();
+        h.set_name(name);
+        h.set_detail("link_state", if up { 1.0 } else { 0.0 });
+        h.set_detail("latency_p99_ms", one_way_ms);
+        Event::Health(h)
+    }
+
+    #[test]
+    fn delayed_but_continuous_data_stays_fresh_and_a_stopped_link_still_goes_stale() {
+        let ms = 1_000_000;
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 2.3;
+        let delay = 250 * ms;
+        let run = |e: &mut FeedbackEngine, from: u64, to: u64| {
+            let mut t = t;
+            let mut stale = false;
+            for i in from..to {
+                let now = 10_000 * ms + i * 10 * ms;
+                t.header.stamp_ns = now - delay; // made one link delay ago
+                while let Some((_, out)) = e.poll(now) {
+                    stale |= out.command.unwrap().flags & force_flags::STALE != 0;
+                }
+                let out = e.handle(&Event::Tactile(t), now);
+                stale |= out.command.unwrap().flags & force_flags::STALE != 0;
+            }
+            stale
+        };
+        // Without a bridge's report, 250 ms old samples are stale however regularly they come.
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        e.start(10_000 * ms);
+        assert!(run(&mut e, 0, 50));
+        // With it (a report names the link's one-way p99), they drive the glove.
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        e.start(10_000 * ms);
+        e.handle(&bridge("bridge", 252.0, true), 10_000 * ms);
+        assert!(e.link_up(10_000 * ms));
+        assert!(!run(&mut e, 0, 50), "delayed samples judged stale");
+        // The link stops after the sample received at 10 490 ms: stale 100 ms (the timeout)
+        // after that receipt, not 100 ms plus the link's delay.
+        let mut steps = std::iter::from_fn(|| e.poll(11_000 * ms));
+        let stale = steps.find(|(_, out)| out.became_stale).unwrap();
+        assert_eq!(stale.0, 10_590 * ms + 1);
+        // A bridge in another namespace's name, another node, or a link reported down: no
+        // allowance.
+        for report in [
+            bridge("left/bridge", 252.0, true),
+            bridge("sidebridge", 252.0, true),
+            bridge("bridge", 252.0, false),
+        ] {
+            let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+            e.handle(&report, 0);
+            let Event::Health(h) = report else {
+                unreachable!()
+            };
+            assert_eq!(e.link_up(1), h.name() == "left/bridge", "{}", h.name());
+        }
+        // The allowance is capped, and lapses when the reports stop.
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        e.handle(&bridge("bridge", 5000.0, true), 0);
+        assert_eq!(e.link_allowance_ns(1), 1000 * ms);
+        assert_eq!(e.link_allowance_ns(LINK_REPORT_NS + 1), 0);
+    }
+
+    #[test]
+    fn the_glove_feeds_the_passivity_observer_and_the_link_switches_it_on() {
+        let ms = 1_000_000;
+        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
+        let mut t = TactileMsg {
+            fingertip_count: 5,
+            ..Default::default()
+        };
+        t.fingertips[1].normal_n = 4.0;
+        let mut g = GloveState {
+            link_up: 1,
+            ..Default::default()
+        };
+        let mut last = None;
+        for i in 0..300u64 {
+            let now = i * ms;
+            // The index finger closes steadily into the contact: the channel absorbs.
+            g.header.stamp_ns = now;
+            g.position[3] = 0.9 - i as f32 * 0.001;
+            e.handle(&Event::Glove(g), now);
+            t.header.stamp_ns = now;
+            last = e.handle(&Event::Tactile(t), now).passivity;
+        }
+        let report = last.unwrap();
+        assert!(report.energy[3] > 0.0, "{report:?}");
+        assert!(!report.active, "auto without a link: off");
+        e.handle(&bridge("bridge", 20.0, true), 300 * ms);
+        t.header.stamp_ns = 300 * ms;
+        let report = e.handle(&Event::Tactile(t), 300 * ms).passivity.unwrap();
+        assert!(report.active, "auto with a link: on");
     }
 
     #[test]

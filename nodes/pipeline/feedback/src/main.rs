@@ -1,5 +1,6 @@
 //! `teleop-feedback`: the force-feedback process. Subscribes to `hand/tactile`, `hand/state`,
-//! `hand/command` and `estop`, runs the [`FeedbackEngine`] on every sample and on its schedule (a
+//! `hand/command`, `glove/state` (the passivity observer's finger motion), `health` (the
+//! bridge's link delay) and `estop`, runs the [`FeedbackEngine`] on every sample and on its schedule (a
 //! tick every `tick_ms`, so stale inputs ramp the force to zero even when nothing arrives, and
 //! each input's watchdog), and publishes
 //! `glove/force_command`. An engaged e-stop zeroes every force at once until it is released; it
@@ -14,7 +15,9 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use teleop_feedback::{load, Event, FeedbackEngine, NodeConfig, Output};
 use teleop_hand_profile::HandProfile;
-use teleop_msgs::{force_flags, EStop, GloveForceCommand, HandCommand, HandState, Tactile};
+use teleop_msgs::{
+    force_flags, EStop, GloveForceCommand, GloveState, HandCommand, HandState, NodeHealth, Tactile,
+};
 use teleop_runtime::{
     node_main, now_ns, EStopInput, EventLoop, Health, Input, NodeArgs, NodeRuntime, Publisher, Wake,
 };
@@ -43,11 +46,19 @@ fn main() -> ExitCode {
     node_main("feedback", start)
 }
 
+/// What the passivity layer did, counted for health: the steps at which its controller changed
+/// a force, since the node started.
+#[derive(Default)]
+struct PassivityCount {
+    acted: u64,
+}
+
 /// Logs, counts and publishes what one event did.
 fn emit(
     out: Output,
     forces: &mut Publisher<GloveForceCommand>,
     health: &mut Health,
+    passivity: &mut PassivityCount,
 ) -> anyhow::Result<()> {
     match out.estop_changed {
         Some(true) => tracing::warn!("e-stop engaged: all glove forces zero"),
@@ -68,6 +79,14 @@ fn emit(
         for (name, source) in SOURCE_DETAILS.iter().zip(cmd.source) {
             health.set_detail(name, f64::from(source));
         }
+    }
+    if let Some(report) = out.passivity {
+        if report.acted.iter().any(|&a| a) {
+            passivity.acted += 1;
+        }
+        health.set_detail("passivity_acted", passivity.acted as f64);
+        let lowest = report.energy.iter().copied().fold(f32::INFINITY, f32::min);
+        health.set_detail("passivity_energy", f64::from(lowest));
     }
     Ok(())
 }
@@ -97,6 +116,8 @@ fn run(
     let tactile = runtime.subscriber::<Tactile>()?;
     let state = runtime.subscriber::<HandState>()?;
     let command = runtime.subscriber::<HandCommand>()?;
+    let glove = runtime.subscriber::<GloveState>()?;
+    let reports = runtime.subscriber::<NodeHealth>()?;
     let mut forces = runtime.publisher::<GloveForceCommand>()?;
     // The latched e-stop: engaged before this node started (or while it restarted) is in the
     // latch file.
@@ -104,11 +125,13 @@ fn run(
     let mut health = Health::new(runtime)?;
     let health_period = Duration::from_millis(config.health_period_ms.max(10));
     let mut last_health = Instant::now();
+    let mut passivity = PassivityCount::default();
     if estop.engaged() {
         emit(
             engine.handle(&Event::EStop(estop_sample(true)), now_ns()),
             &mut forces,
             &mut health,
+            &mut passivity,
         )?;
     }
     tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
@@ -120,7 +143,7 @@ fn run(
         // The engine's ticks and watchdogs, whatever woke the loop: what fell due by now, in
         // time order, before any newer sample.
         while let Some((_, out)) = engine.poll(now_ns()) {
-            emit(out, &mut forces, &mut health)?;
+            emit(out, &mut forces, &mut health, &mut passivity)?;
         }
         let mut events = Vec::new();
         // The e-stop on every wake: its doorbell, or its latch read every LATCH_POLL when the
@@ -132,14 +155,23 @@ fn run(
             Wake::Input(0) => tactile.drain(|t| events.push(Event::Tactile(*t))),
             Wake::Input(1) => state.drain(|s| events.push(Event::State(*s))),
             Wake::Input(2) => command.drain(|c| events.push(Event::Command(*c))),
+            Wake::Input(4) => glove.drain(|g| events.push(Event::Glove(*g))),
+            Wake::Input(5) => reports.drain(|h| events.push(Event::Health(*h))),
             Wake::Input(_) | Wake::Timeout(_) | Wake::Tick => 0,
         };
         for event in &events {
-            emit(engine.handle(event, now_ns()), &mut forces, &mut health)?;
+            emit(
+                engine.handle(event, now_ns()),
+                &mut forces,
+                &mut health,
+                &mut passivity,
+            )?;
         }
         if last_health.elapsed() >= health_period {
             last_health = Instant::now();
             health.set_dropped(tactile.dropped() + state.dropped());
+            let allowance = engine.link_allowance_ns(now_ns());
+            health.set_detail("link_delay_ms", allowance as f64 / 1e6);
             let now = Instant::now();
             health.publish(&[tactile.age(now), state.age(now)])?;
         }
@@ -157,6 +189,8 @@ fn run(
             ),
             Input::new(command.listener()),
             Input::new(estop.listener()),
+            Input::new(glove.listener()),
+            Input::new(reports.listener()),
         ],
         on_wake,
     )?;

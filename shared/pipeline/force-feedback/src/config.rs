@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::GLOVE_FINGERS;
+use crate::{PassivityConfig, GLOVE_FINGERS};
 
 /// Origin reported by [`FeedbackConfig::validate`] when the configuration was
 /// not read from a file (for example built in code and handed to
@@ -46,6 +46,8 @@ pub struct FeedbackConfig {
     pub finger_gain: [f32; GLOVE_FINGERS],
     /// How a PST fingertip's raw pressure becomes a normal force (Shadow Hand).
     pub pst: PstConfig,
+    /// The passivity observer and controller (`[passivity]`).
+    pub passivity: PassivityConfig,
 }
 
 /// A PST fingertip's raw pressure as a normal force: `(pressure - zero) / counts_per_n`, never
@@ -88,6 +90,7 @@ impl Default for FeedbackConfig {
             estimate: EstimateConfig::default(),
             finger_gain: [1.0; GLOVE_FINGERS],
             pst: PstConfig::default(),
+            passivity: PassivityConfig::default(),
         }
     }
 }
@@ -298,6 +301,11 @@ impl FeedbackConfig {
         if !self.pst.zero.is_finite() {
             return Err(invalid("pst.zero", self.pst.zero, "must be finite"));
         }
+        let p = &self.passivity;
+        check_non_negative("passivity.max_damping", p.max_damping)?;
+        check_positive("passivity.reset_after_s", p.reset_after_s)?;
+        check_non_negative("passivity.max_stored", p.max_stored)?;
+        check_non_negative("passivity.velocity_tau_s", p.velocity_tau_s)?;
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
                 return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));

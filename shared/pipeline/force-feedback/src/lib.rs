@@ -10,7 +10,8 @@
 //! ([`FeedbackConfig`]): contact thresholds and gains, the joint-state contact
 //! estimate (position error, motor current, joint effort), smoothing, rate
 //! limiting, saturation, the stale-input ramp and the e-stop, applied through
-//! the profile's per-glove-finger [`FeedbackSource`]s. It does no I/O,
+//! the profile's per-glove-finger [`FeedbackSource`]s; and the time-domain
+//! passivity layer on its output ([`Passivity`]). It does no I/O,
 //! reads no clock and does no IPC: the caller hands in configuration text
 //! (with its origin for error messages) and timestamped inputs, and gets a
 //! force command back.
@@ -62,6 +63,13 @@
 //! effort_threshold_nm = 0.05       # N m, of the effort toward the closed angle
 //! effort_gain_per_nm = 2000.0      # glove units per N m
 //! effort_stall_speed_rad_s = 0.0   # effort counts only below this joint speed (0: always)
+//!
+//! [passivity]                 # time-domain passivity per glove finger (see `Passivity`)
+//! mode = "auto"               # auto (while a bridge is in the path), on, off
+//! max_damping = 20000.0       # glove units per (travel per second)
+//! reset_after_s = 0.2         # s without demand before a finger's energy sum restarts
+//! max_stored = 50.0           # glove units x travel the observer keeps at most
+//! velocity_tau_s = 0.01       # s, low-pass of the finger's velocity
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
 //! assert_eq!(config, FeedbackConfig::default());
@@ -78,12 +86,14 @@
 //! instead of freezing until the clock catches up.
 
 mod config;
+mod passivity;
 #[cfg(test)]
 mod tests;
 
 pub use config::{
     ConfigError, EstimateConfig, FeedbackConfig, PstConfig, GLOVE_FULL_SCALE, IN_MEMORY_ORIGIN,
 };
+pub use passivity::{OperatorInput, Passivity, PassivityConfig, PassivityMode, PassivityReport};
 pub use teleop_hand_profile::{FeedbackSource, HandProfile, MAX_FINGERTIPS, MAX_JOINTS};
 
 /// Number of glove fingers (`[little, ring, middle, index, thumb]`).
@@ -140,6 +150,11 @@ pub struct Inputs {
     pub hand: Option<HandInput>,
     /// Emergency stop: all forces zero at once.
     pub estop: bool,
+    /// The operator's finger positions, for the passivity observer; `None` when the glove's
+    /// samples are stale or absent (the observer waits).
+    pub operator: Option<OperatorInput>,
+    /// A link between stations is in the path (the passivity controller's `auto` mode).
+    pub remote: bool,
 }
 
 /// Where a finger's force demand came from at this step.
@@ -177,6 +192,8 @@ pub struct FeedbackOutput {
     /// True when at least one finger ramped toward zero this step because of
     /// stale input.
     pub stale: bool,
+    /// The passivity observer's energy and what its controller did.
+    pub passivity: PassivityReport,
 }
 
 /// Per-finger demand chosen at one step.
@@ -203,6 +220,8 @@ pub struct ForceFeedback {
     output: [f32; GLOVE_FINGERS],
     /// Timestamp of the previous step.
     last_t_ns: Option<u64>,
+    /// The passivity observer and controller.
+    passivity: Passivity,
 }
 
 /// `x` if finite and positive, else 0. For values that come from outside.
@@ -244,6 +263,7 @@ impl ForceFeedback {
             }
         }
         Ok(Self {
+            passivity: Passivity::new(config.passivity.clone()),
             config,
             sources,
             closing,
@@ -264,6 +284,7 @@ impl ForceFeedback {
         self.filtered = [0.0; GLOVE_FINGERS];
         self.output = [0.0; GLOVE_FINGERS];
         self.last_t_ns = None;
+        self.passivity.reset();
     }
 
     /// Seconds since the previous step; 0 on the first step and when the
@@ -405,12 +426,17 @@ impl ForceFeedback {
         if inputs.estop {
             self.filtered = [0.0; GLOVE_FINGERS];
             self.output = [0.0; GLOVE_FINGERS];
+            self.passivity.reset();
             return FeedbackOutput {
                 force: [0; GLOVE_FINGERS],
                 source: [ContactSource::EStop; GLOVE_FINGERS],
                 clamped: 0,
                 stale: false,
+                passivity: PassivityReport::default(),
             };
+        }
+        if let Some(operator) = &inputs.operator {
+            self.passivity.observe(operator);
         }
 
         let max = f32::from(self.config.max_force);
@@ -439,11 +465,17 @@ impl ForceFeedback {
             source: [ContactSource::None; GLOVE_FINGERS],
             clamped: 0,
             stale: false,
+            passivity: PassivityReport::default(),
         };
+        // What the law wants per finger, for the passivity layer: the demand (its reset) and
+        // whether the finger ramps (the layer may then only lower it).
+        let mut demand = [0.0; GLOVE_FINGERS];
+        let mut ramping = [false; GLOVE_FINGERS];
 
         for finger in 0..GLOVE_FINGERS {
             let value = match self.demand(inputs, finger) {
                 Demand::Ramp => {
+                    ramping[finger] = true;
                     let next = positive_or_zero(self.output[finger] - ramp_step);
                     // Bumpless restart: the filter resumes from the output.
                     self.filtered[finger] = next;
@@ -459,6 +491,7 @@ impl ForceFeedback {
                         d = max;
                         out.clamped += 1;
                     }
+                    demand[finger] = d;
                     // Written as a weighted sum so it is monotone in both
                     // arguments even with float rounding.
                     let f = (1.0 - alpha) * self.filtered[finger] + alpha * d;
@@ -480,8 +513,21 @@ impl ForceFeedback {
                 0.0
             };
             self.output[finger] = value;
-            out.force[finger] = (value.round() as i16).clamp(0, self.config.max_force);
         }
+        // The passivity controller acts on what is commanded, not on the law's state, so the
+        // law's filter and rate limit carry on undisturbed.
+        let active = match self.config.passivity.mode {
+            PassivityMode::On => true,
+            PassivityMode::Off => false,
+            PassivityMode::Auto => inputs.remote,
+        };
+        let (force, report) = self
+            .passivity
+            .control(self.output, demand, ramping, max, dt, active);
+        for (slot, value) in out.force.iter_mut().zip(force) {
+            *slot = (value as i16).clamp(0, self.config.max_force);
+        }
+        out.passivity = report;
         out
     }
 }

@@ -46,6 +46,8 @@ fn inputs(t_ns: u64, tactile: Tactile, hand: Option<HandInput>) -> Inputs {
         tactile,
         hand,
         estop: false,
+        operator: None,
+        remote: false,
     }
 }
 
@@ -477,6 +479,8 @@ fn estop_zeroes_at_once_then_restarts_from_zero() {
         tactile: fresh([25.0; 5]),
         hand: Some(quiet_hand()),
         estop: true,
+        operator: None,
+        remote: false,
     });
     t += MS;
     assert_eq!(out.force, [0; 5]);
@@ -724,6 +728,10 @@ fn any_config() -> BoxedStrategy<FeedbackConfig> {
                 estimate,
                 finger_gain: fg,
                 pst: PstConfig::default(),
+                passivity: PassivityConfig {
+                    mode: PassivityMode::On,
+                    ..PassivityConfig::default()
+                },
             },
         )
         .boxed()
@@ -822,13 +830,16 @@ proptest! {
         profile in any_profile(),
         t0 in any::<u64>(),
         steps in prop::collection::vec(any_step(), 1..200),
+        fingers in prop::collection::vec(prop::array::uniform5(-0.5f32..1.5), 200),
     ) {
         let max = config.max_force;
         let mut ff = ForceFeedback::new(config, &profile).expect("valid config");
         let mut t = t0;
-        for (c, tactile, hand, estop) in steps {
+        // The operator's fingers move anywhere (the passivity controller, on, acts on them).
+        for ((c, tactile, hand, estop), position) in steps.into_iter().zip(fingers) {
             t = apply(t, c);
-            let out = ff.step(&Inputs { t_ns: t, tactile, hand, estop });
+            let operator = Some(OperatorInput { t_ns: t, position });
+            let out = ff.step(&Inputs { t_ns: t, tactile, hand, estop, operator, remote: true });
             for &f in &out.force {
                 prop_assert!((0..=max).contains(&f), "force {f} outside 0..={max}: {out:?}");
             }

@@ -1,0 +1,402 @@
+//! Time-domain passivity of the force-feedback channel, per glove finger: an observer of the
+//! energy that flows between the operator's finger and everything behind the glove (the
+//! network, the robot hand and what it touches), and a controller that dissipates what that
+//! channel would otherwise generate.
+//!
+//! The method is Hannaford and Ryu's (IEEE Transactions on Robotics and Automation, 2002,
+//! "Time-domain passivity control of haptic interfaces"): a one-port is passive when the energy
+//! that has flowed into it never goes negative; the passivity observer sums force times velocity
+//! at the port every sample, and the passivity controller, an adaptive damper, takes out exactly
+//! the deficit when the sum goes negative. Here the port is the glove finger: the velocity is
+//! the operator's finger closing, from the glove's own positions, the force the one this law
+//! commands, so the observer needs nothing from the robot station and holds whatever delay the
+//! link adds.
+//!
+//! # Units and signs
+//!
+//! Force in glove units (positive pushes the finger open), position in the glove's normalised
+//! travel (1 open .. 0 bent), so the closing velocity is `-d position / dt` in travel per
+//! second and energy is in glove units × travel: 1000 is the glove's full-scale force (about
+//! 3 N) over a finger's full travel. Power into the channel is `force × closing velocity`:
+//! positive while the operator presses against the push (the channel absorbs, like a spring
+//! being compressed), negative while the push drives the finger open (the channel gives back).
+//! A passive channel never gives back more than it took: the observed energy stays `>= 0`.
+//!
+//! # What the controller does
+//!
+//! When the observed energy `E` is negative it adds a damper `alpha` to the commanded force,
+//! `f + alpha × v`, with `alpha = -E / (v² Δt)` (the deficit taken out over one glove sample
+//! interval `Δt`), capped at `max_damping`, and the result clamped to the law's force limits.
+//! The change always opposes the motion (`Δf × v >= 0`, also after the clamp), so the
+//! controller never adds energy: opening, it lowers the push that throws the finger open;
+//! closing, it resists a little more. While the energy is positive it leaves the force alone,
+//! so an undelayed contact feels as before.
+//!
+//! # Resets
+//!
+//! A sum over a whole session would let energy absorbed in one grasp pay for energy generated
+//! much later, and a deficit left from one contact would damp the next; both are known problems
+//! of a plain running sum. Two rules bound it: the sum is reset to zero once the finger has had
+//! no force (the law's demand, before the controller) for `reset_after_s`, so each contact
+//! starts afresh, and the stored energy is capped at `max_stored`, so a long squeeze cannot
+//! bank energy for a later burst.
+
+use serde::{Deserialize, Serialize};
+
+use crate::GLOVE_FINGERS;
+
+/// When the passivity controller acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PassivityMode {
+    /// While a link between stations is in the path (a bridge reports its delay): on at the
+    /// operator station of a remote session, off where glove and hand share a machine.
+    Auto,
+    /// Always.
+    On,
+    /// Never (the observer still runs and reports).
+    Off,
+}
+
+/// The passivity layer's configuration (`[feedback.passivity]`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PassivityConfig {
+    /// When the controller acts. Default `auto`.
+    pub mode: PassivityMode,
+    /// Largest damping the controller adds, glove units per (travel per second). Default
+    /// 20000: at 0.05 travel/s (a slow drift) it can take out 1000, the whole force.
+    pub max_damping: f32,
+    /// The observer's sum restarts after the finger's demand has been zero this long (s).
+    /// Default 0.2.
+    pub reset_after_s: f32,
+    /// Most energy the observer keeps (glove units × travel). Default 50: full-scale force over
+    /// a twentieth of the travel, more than a firm grasp stores.
+    pub max_stored: f32,
+    /// Time constant of the low-pass on the finger's velocity (s), which the glove's whole-unit
+    /// positions make noisy. Default 0.01; 0 disables it.
+    pub velocity_tau_s: f32,
+}
+
+impl Default for PassivityConfig {
+    fn default() -> Self {
+        Self {
+            mode: PassivityMode::Auto,
+            max_damping: 20_000.0,
+            reset_after_s: 0.2,
+            max_stored: 50.0,
+            velocity_tau_s: 0.01,
+        }
+    }
+}
+
+/// One sample of the operator's fingers, from the glove.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OperatorInput {
+    /// When the glove measured them (ns, the same clock as [`crate::Inputs::t_ns`]).
+    pub t_ns: u64,
+    /// Finger positions in glove order, normalised travel (1 open .. 0 bent).
+    pub position: [f32; GLOVE_FINGERS],
+}
+
+/// What the passivity layer saw and did at one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PassivityReport {
+    /// The observer's energy per glove finger (glove units × travel); negative: the channel
+    /// generated that much (before the controller took it out).
+    pub energy: [f32; GLOVE_FINGERS],
+    /// Fingers whose force the controller changed at this step.
+    pub acted: [bool; GLOVE_FINGERS],
+    /// Whether the controller was on at this step (its mode, and the link for `auto`).
+    pub active: bool,
+}
+
+/// The observer and controller of every glove finger.
+#[derive(Debug, Clone)]
+pub struct Passivity {
+    config: PassivityConfig,
+    /// The newest glove sample taken into the sum.
+    last: Option<OperatorInput>,
+    /// Observed energy per finger.
+    energy: [f32; GLOVE_FINGERS],
+    /// Filtered closing velocity per finger, travel per second.
+    velocity: [f32; GLOVE_FINGERS],
+    /// The glove's sample interval, s (the controller's `Δt`).
+    interval_s: f32,
+    /// The force in effect since the last glove sample, per finger (glove units).
+    applied: [f32; GLOVE_FINGERS],
+    /// How long each finger's demand has been zero, s.
+    idle_s: [f32; GLOVE_FINGERS],
+}
+
+impl Passivity {
+    /// A layer with nothing observed yet.
+    pub fn new(config: PassivityConfig) -> Self {
+        Self {
+            config,
+            last: None,
+            energy: [0.0; GLOVE_FINGERS],
+            velocity: [0.0; GLOVE_FINGERS],
+            interval_s: 0.0,
+            applied: [0.0; GLOVE_FINGERS],
+            idle_s: [0.0; GLOVE_FINGERS],
+        }
+    }
+
+    /// The configuration in use.
+    pub fn config(&self) -> &PassivityConfig {
+        &self.config
+    }
+
+    /// Forgets everything observed (e-stop, reset).
+    pub fn reset(&mut self) {
+        *self = Self::new(self.config.clone());
+    }
+
+    /// The observer's energy per finger.
+    pub fn energy(&self) -> [f32; GLOVE_FINGERS] {
+        self.energy
+    }
+
+    /// Takes a glove sample into the sum: the force in effect since the previous sample times
+    /// the finger's closing displacement. A sample not newer than the last one changes
+    /// nothing; the first one only sets the reference.
+    pub fn observe(&mut self, operator: &OperatorInput) {
+        let Some(last) = self.last else {
+            self.last = Some(*operator);
+            return;
+        };
+        if operator.t_ns <= last.t_ns {
+            return;
+        }
+        let dt = (operator.t_ns - last.t_ns) as f32 * 1e-9;
+        let tau = self.config.velocity_tau_s;
+        let alpha = if tau > 0.0 {
+            1.0 - (-dt / tau).exp()
+        } else {
+            1.0
+        };
+        for f in 0..GLOVE_FINGERS {
+            let closing = last.position[f] - operator.position[f];
+            if !closing.is_finite() {
+                continue;
+            }
+            let e = self.energy[f] + self.applied[f] * closing;
+            self.energy[f] = if e.is_finite() {
+                e.min(self.config.max_stored)
+            } else {
+                0.0
+            };
+            let v = closing / dt;
+            self.velocity[f] += alpha * (v - self.velocity[f]);
+        }
+        self.interval_s = dt;
+        self.last = Some(*operator);
+    }
+
+    /// The force to command for each finger given the law's `force` (within `0..=max`), after
+    /// `dt` seconds since the previous step: the controller's damper where the observed energy
+    /// is negative and `active`, the force unchanged elsewhere; a finger whose force is
+    /// ramping to zero (`ramping`: its inputs are stale) is only ever lowered. `demand` is the
+    /// law's demand per finger, for the reset. The result is rounded to whole glove units, as
+    /// commanded, and remembered as the force in effect until the next glove sample.
+    pub fn control(
+        &mut self,
+        force: [f32; GLOVE_FINGERS],
+        demand: [f32; GLOVE_FINGERS],
+        ramping: [bool; GLOVE_FINGERS],
+        max: f32,
+        dt: f32,
+        active: bool,
+    ) -> ([f32; GLOVE_FINGERS], PassivityReport) {
+        let mut out = force;
+        let mut report = PassivityReport {
+            active,
+            ..PassivityReport::default()
+        };
+        for f in 0..GLOVE_FINGERS {
+            // The reset: a finger without demand long enough starts its next contact afresh.
+            if demand[f] > 0.0 {
+                self.idle_s[f] = 0.0;
+            } else {
+                self.idle_s[f] += dt;
+                if self.idle_s[f] >= self.config.reset_after_s {
+                    self.energy[f] = 0.0;
+                }
+            }
+            // The energy at the end of the next sample if the law's force were applied at the
+            // finger's present velocity (Hannaford and Ryu's observer includes the present
+            // sample's f(n) v(n) before the controller acts on it).
+            let (v, dt_sample) = (self.velocity[f], self.interval_s);
+            let predicted = self.energy[f] + force[f] * v * dt_sample;
+            if active && predicted < 0.0 && v != 0.0 && dt_sample > 0.0 {
+                let alpha = (-predicted / (v * v * dt_sample)).min(self.config.max_damping);
+                let damped = force[f] + alpha * v;
+                let upper = if ramping[f] { force[f] } else { max };
+                if damped.is_finite() {
+                    out[f] = damped.clamp(0.0, upper.max(0.0));
+                }
+            }
+            out[f] = out[f].round();
+            report.acted[f] = out[f] != force[f].round();
+            self.applied[f] = out[f];
+        }
+        report.energy = self.energy;
+        (out, report)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    /// A layer that keeps whatever energy it sees and does not filter the velocity.
+    fn exact() -> Passivity {
+        Passivity::new(PassivityConfig {
+            max_stored: f32::MAX,
+            velocity_tau_s: 0.0,
+            ..PassivityConfig::default()
+        })
+    }
+
+    /// Every finger at `p`, sampled at `t_ms`.
+    fn at(t_ms: u64, p: f32) -> OperatorInput {
+        OperatorInput {
+            t_ns: t_ms * MS,
+            position: [p; GLOVE_FINGERS],
+        }
+    }
+
+    /// Commands `force` on every finger (a demand, the controller off) and then moves every
+    /// finger from `from` to `to` in `steps` glove samples of 1 ms from `*t`.
+    fn push_and_move(pc: &mut Passivity, t: &mut u64, force: f32, from: f32, to: f32, steps: u32) {
+        pc.control([force; 5], [force; 5], [false; 5], 1000.0, 0.001, false);
+        for k in 1..=steps {
+            *t += 1;
+            pc.observe(&at(*t, from + (to - from) * k as f32 / steps as f32));
+        }
+    }
+
+    #[test]
+    fn the_observer_sums_force_times_closing_displacement() {
+        let mut pc = exact();
+        let mut t = 0;
+        pc.observe(&at(t, 0.9));
+        // Pressing 0.1 of the travel closed against 500: the channel absorbs 50.
+        push_and_move(&mut pc, &mut t, 500.0, 0.9, 0.8, 10);
+        assert!((pc.energy()[3] - 50.0).abs() < 1e-3, "{:?}", pc.energy());
+        // Released under the same force: all of it comes back, nothing more (a spring).
+        push_and_move(&mut pc, &mut t, 500.0, 0.8, 0.9, 10);
+        assert!(pc.energy()[3].abs() < 1e-3, "{:?}", pc.energy());
+        // Pressed under 300 and thrown back open under 800 (the force of a delayed wall): the
+        // channel generated 80 - 30 = 50.
+        push_and_move(&mut pc, &mut t, 300.0, 0.9, 0.8, 10);
+        push_and_move(&mut pc, &mut t, 800.0, 0.8, 0.9, 10);
+        assert!((pc.energy()[3] + 50.0).abs() < 1e-3, "{:?}", pc.energy());
+        // Without motion nothing flows, whatever the force.
+        push_and_move(&mut pc, &mut t, 800.0, 0.9, 0.9, 10);
+        assert!((pc.energy()[3] + 50.0).abs() < 1e-3, "{:?}", pc.energy());
+        // Old or repeated samples change nothing.
+        pc.observe(&at(t - 5, 0.2));
+        pc.observe(&at(t, 0.2));
+        assert!((pc.energy()[3] + 50.0).abs() < 1e-3, "{:?}", pc.energy());
+    }
+
+    #[test]
+    fn the_controller_takes_out_the_deficit_over_one_sample() {
+        let mut pc = exact();
+        let mut t = 0;
+        pc.observe(&at(t, 0.8));
+        // Generated 10 while the finger opens at 1 travel/s: any push would generate more, so
+        // the force goes to zero.
+        push_and_move(&mut pc, &mut t, 1000.0, 0.8, 0.81, 10);
+        assert!((pc.energy()[0] + 10.0).abs() < 1e-3);
+        let (out, report) = pc.control([600.0; 5], [600.0; 5], [false; 5], 800.0, 0.001, true);
+        assert_eq!(out, [0.0; 5]);
+        assert_eq!(report.acted, [true; 5]);
+        assert!(report.active);
+        // With 0.3 stored, opening at 1 travel/s for one more 1 ms sample under 600 would
+        // generate 0.6: the controller lets through exactly what is stored, 0.3 / 0.001 = 300.
+        let mut pc = exact();
+        t = 0;
+        pc.observe(&at(t, 0.81));
+        push_and_move(&mut pc, &mut t, 100.0, 0.81, 0.807, 3); // absorbs 0.3
+        push_and_move(&mut pc, &mut t, 0.0, 0.807, 0.817, 10); // opens at 1 travel/s, no force
+        assert!((pc.energy()[0] - 0.3).abs() < 1e-3, "{:?}", pc.energy());
+        let (out, _) = pc.control([600.0; 5], [600.0; 5], [false; 5], 800.0, 0.001, false);
+        assert_eq!(out, [600.0; 5], "off: unchanged");
+        let (out, _) = pc.control([600.0; 5], [600.0; 5], [false; 5], 800.0, 0.001, true);
+        assert!((out[0] - 300.0).abs() < 1.0, "{out:?}");
+        // Applied for that sample, the sum ends at zero: passive, not beyond.
+        t += 1;
+        pc.observe(&at(t, 0.818));
+        assert!(pc.energy()[0].abs() < 0.01, "{:?}", pc.energy());
+        // Closing, the push absorbs energy: the force is left alone even with a deficit the
+        // sample pays back.
+        push_and_move(&mut pc, &mut t, 0.0, 0.818, 0.808, 10);
+        let (out, report) = pc.control([600.0; 5], [600.0; 5], [false; 5], 800.0, 0.001, true);
+        assert_eq!((out[0], report.acted[0]), (600.0, false));
+    }
+
+    #[test]
+    fn the_sum_restarts_after_a_finger_has_had_no_demand() {
+        let mut pc = exact();
+        let mut t = 0;
+        pc.observe(&at(t, 0.8));
+        push_and_move(&mut pc, &mut t, 500.0, 0.8, 0.81, 10);
+        assert!(pc.energy()[0] < 0.0);
+        // 0.15 s without demand: kept; 0.2 s: restarted.
+        for _ in 0..150 {
+            pc.control([0.0; 5], [0.0; 5], [false; 5], 800.0, 0.001, true);
+        }
+        assert!(pc.energy()[0] < 0.0);
+        for _ in 0..60 {
+            pc.control([0.0; 5], [0.0; 5], [false; 5], 800.0, 0.001, true);
+        }
+        assert_eq!(pc.energy(), [0.0; 5]);
+        // Stored energy is capped.
+        let mut pc = Passivity::new(PassivityConfig::default());
+        pc.observe(&at(0, 0.9));
+        let mut t = 0;
+        push_and_move(&mut pc, &mut t, 1000.0, 0.9, 0.5, 40);
+        assert_eq!(pc.energy()[0], PassivityConfig::default().max_stored);
+    }
+
+    proptest! {
+        /// Whatever the motion, forces and energy, the controller's change opposes the finger's
+        /// velocity (it only dissipates), stays within the force limits and only lowers a
+        /// ramping finger.
+        #[test]
+        fn prop_the_controller_never_adds_energy_nor_exceeds_the_limits(
+            samples in prop::collection::vec(
+                (prop::array::uniform5(-0.2f32..1.2), prop::array::uniform5(0.0f32..=800.0),
+                 prop::array::uniform5(any::<bool>()), 1u64..20),
+                1..100),
+            max in 0.0f32..=1000.0,
+        ) {
+            let mut pc = Passivity::new(PassivityConfig::default());
+            let mut t = 0;
+            for (position, force, ramping, gap) in samples {
+                t += gap;
+                pc.observe(&at(t, 0.0)); // reference the filter on the first sample
+                pc.observe(&OperatorInput { t_ns: t * MS + 1, position });
+                let force = force.map(|f| f.min(max));
+                let (out, report) = pc.control(force, force, ramping, max, 0.001, true);
+                for f in 0..GLOVE_FINGERS {
+                    prop_assert!((0.0..=max.round()).contains(&out[f]), "{out:?} max {max}");
+                    let change = out[f] - force[f].round();
+                    prop_assert!(change * pc.velocity[f] >= 0.0,
+                        "finger {f}: change {change} at closing velocity {}", pc.velocity[f]);
+                    if ramping[f] {
+                        prop_assert!(out[f] <= force[f].round());
+                    }
+                    prop_assert!(report.energy[f].is_finite());
+                }
+            }
+        }
+    }
+}
