@@ -320,7 +320,10 @@ mod tests {
             })
         );
         d.advance_to(1.0);
-        assert!(d.hand().positions()[3] > 520, "index pushed open");
+        // 0.9 N against the operator's finger, stiffened to 290 N/m: 3.1 mm, 18 raw units.
+        let p = d.hand().positions();
+        assert!((515..=521).contains(&p[3]), "index pushed open: {p:?}");
+        assert_eq!(d.hand().forces()[3], 300, "and the force felt");
         assert_eq!(d.force_set()[3], 300);
     }
 

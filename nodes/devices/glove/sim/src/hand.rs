@@ -6,13 +6,27 @@
 //! command pushes the hand open; a positive measured force means the finger pushes towards a
 //! fist), currents in mA, temperatures in degrees Celsius. Pure: time comes in as seconds, on
 //! the simulator kit's plant clock.
+//!
+//! Each channel is one of the operator's fingers: a mass, damper and spring in the range
+//! measured for human fingertips, pulled by the operator's muscles toward where the script
+//! means it to be, pushed by its actuator, stiffening while the operator squeezes
+//! ([`HandModel`]), so that force feedback moves it and a badly timed push can make it ring.
+//! Inside, travel is in metres and force in newtons ([`METRES_PER_RAW`],
+//! [`NEWTONS_PER_FORCE`]). The thumb's rotation moves the same way, pushed by nothing. What the
+//! glove measures is the force between finger and actuator: under force control the cable's
+//! pull, i.e. the command; under position control what the stiff servo needs to hold the
+//! finger against the operator.
 
 use std::path::Path;
 
-use teleop_sim_kit::plant::{lag, Clock};
+use teleop_sim_kit::plant::{lag, Clock, Joint};
 
-/// Longest integration step, s.
-const STEP_S: f64 = 0.001;
+/// Longest integration step, s. Semi-implicit Euler (the kit's [`Joint`], the damper taken at
+/// the step's mean velocity) is stable while `omega * h < 2`; the stiffest default finger
+/// (1500 N/m, 6 g: omega = 500 rad/s) has `omega * h = 0.125`, and its frequency and damping
+/// ratio then come out within 0.2 % of the continuous system's (the unit tests measure them to
+/// 1 %).
+const STEP_S: f64 = 0.000_25;
 
 /// Channels: little, ring, middle, index, thumb, thumb rotation.
 pub const CHANNELS: usize = 6;
@@ -252,16 +266,55 @@ pub enum Drive {
     Position(f32),
 }
 
-/// Physical constants of the model.
+/// Fingertip travel per raw position unit, m: the index fingertip pad's path from open (1000)
+/// to fist (0) in the operator model (`teleop_kinematics::OperatorHand::default()`) is 0.169 m
+/// long (measured by the unit test `a_raw_unit_is_a_thousandth_of_the_index_pads_travel`); the
+/// other fingers' pads travel 0.14 to 0.19 m, and one scale serves every channel.
+pub const METRES_PER_RAW: f64 = 0.169 / 1000.0;
+
+/// Newtons per glove force unit: each finger pushes with up to 3 N actively (the manual, 1.1),
+/// the full scale of a force command (1000).
+pub const NEWTONS_PER_FORCE: f64 = 3.0 / 1000.0;
+
+/// The whole travel, m.
+const TRAVEL_M: f64 = 1000.0 * METRES_PER_RAW;
+
+/// The operator's fingers and the glove's actuators.
+///
+/// Each channel's fingertip, `x` metres along its travel from the fist, is a mass on a spring
+/// and a damper (SI; positive opens):
+///
+/// `m x'' = k (x_eq - x) - b x' + F`, stopped hard at both ends of the travel,
+///
+/// where `x_eq` is the operator's equilibrium point, which follows the script's intent no faster
+/// than `max_speed`, and `F` the actuator's push. Squeezing stiffens the finger: the operator's
+/// effort `e` follows the muscles' pull `|k (x_eq - x)|` with the time constant `effort_tau_s`,
+/// and
+///
+/// `k = min(stiffness_n_per_m + stiffening_per_m * e, max_stiffness_n_per_m)`,
+/// `b = damping_n_s_per_m * sqrt(k / stiffness_n_per_m)`
+///
+/// (the damping keeps the relaxed finger's damping ratio). At rest under a steady push `F` the
+/// effort is `|F|` and the finger gives way by `F / k`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HandModel {
-    /// Finger displacement per unit of actuator force against the operator's intent
-    /// (raw position units per glove force unit).
-    pub compliance: f32,
-    /// Time constant of the finger following its equilibrium, seconds.
-    pub tau_s: f32,
-    /// Fastest finger motion, raw units per second.
+    /// The finger's effective mass at the fingertip, kg.
+    pub mass_kg: f32,
+    /// The relaxed finger's stiffness about its equilibrium point, N/m.
+    pub stiffness_n_per_m: f32,
+    /// The relaxed finger's damping, N s/m.
+    pub damping_n_s_per_m: f32,
+    /// Stiffness gained per newton of the operator's effort, N/m per N.
+    pub stiffening_per_m: f32,
+    /// The stiffest the finger gets, N/m.
+    pub max_stiffness_n_per_m: f32,
+    /// Time constant by which the operator's effort follows the muscles' pull, s.
+    pub effort_tau_s: f32,
+    /// Fastest the operator's equilibrium point and the position servo move, raw units per
+    /// second.
     pub max_speed: f32,
+    /// Time constant of the position servo following its set-point, s.
+    pub servo_tau_s: f32,
     /// Idle current in mA.
     pub idle_ma: f32,
     /// Current per unit of force, mA.
@@ -282,11 +335,32 @@ pub struct HandModel {
 }
 
 impl Default for HandModel {
+    /// The finger's figures are chosen within the ranges commonly cited for human fingertips
+    /// (masses of a few grams, damping of a few N s/m, stiffness of a few hundred N/m), not
+    /// copied from one table. Sources: Hajian and Howe (1997, "Identification of the
+    /// mechanical impedance at the human finger tip", J. Biomech. Eng.), the usual reference
+    /// for the fingertip as a mass, damper and spring (read here through others' summaries,
+    /// not its tables); Hasser and Cutkosky (2002, a lumped second-order model of nine subjects
+    /// pinching a haptic knob), who report damping and stiffness rising steadily with grip
+    /// force and the inertia staying about constant except at very large grip forces; Van
+    /// Doren (1998, Motor Control 2, "Grasp stiffness as a function of grasp force and finger
+    /// span") and Höppner, McIntyre and van der Smagt (2013, PLOS ONE, "Task dependency of grip
+    /// stiffness"), who find grasp stiffness rising about linearly with grip force. The
+    /// relaxed finger here: 6 g, 1 N s/m, 200 N/m (29 Hz, damping ratio 0.46); 100 N/m more
+    /// per newton of effort, 500 N/m at the glove's full 3 N, at most 1500 N/m (80 Hz, from
+    /// 13 N). The effort's time constant, 0.1 s, is a choice: several of the finger's periods,
+    /// so that a quick disturbance meets a steady stiffness as in the identification
+    /// experiments, and shorter than a voluntary reaction.
     fn default() -> Self {
         Self {
-            compliance: 0.1,
-            tau_s: 0.05,
+            mass_kg: 0.006,
+            stiffness_n_per_m: 200.0,
+            damping_n_s_per_m: 1.0,
+            stiffening_per_m: 100.0,
+            max_stiffness_n_per_m: 1500.0,
+            effort_tau_s: 0.1,
             max_speed: 4000.0,
+            servo_tau_s: 0.05,
             idle_ma: 40.0,
             ma_per_force: 0.8,
             ambient_c: 30.0,
@@ -309,9 +383,17 @@ const OVER_CURRENT: u8 = 4;
 pub struct Hand {
     model: HandModel,
     script: Script,
-    /// Actual raw positions.
-    position: [f32; CHANNELS],
+    /// Each fingertip's travel from the fist, m.
+    travel: [f64; CHANNELS],
+    /// Its rate, m/s (positive opens).
+    speed: [f64; CHANNELS],
+    /// Where the operator's muscles pull each finger, m.
+    equilibrium: [f64; CHANNELS],
+    /// The operator's effort per finger, N.
+    effort: [f64; CHANNELS],
     drive: [Drive; FINGERS],
+    /// The force each actuator measures, glove units.
+    force: [f32; FINGERS],
     temperature: [f32; FINGERS],
     overload_for: [f32; FINGERS],
     errors: [u8; FINGERS],
@@ -319,14 +401,20 @@ pub struct Hand {
 }
 
 impl Hand {
-    /// A hand following `script`, actuators applying no force.
+    /// A hand following `script`, at rest where the script starts, actuators applying no force.
     pub fn new(script: Script, model: HandModel) -> Self {
-        let position = script.at(0.0);
+        let travel = script
+            .at(0.0)
+            .map(|p| f64::from(p.clamp(0.0, 1000.0)) * METRES_PER_RAW);
         Self {
             model,
             script,
-            position,
+            travel,
+            speed: [0.0; CHANNELS],
+            equilibrium: travel,
+            effort: [0.0; CHANNELS],
             drive: [Drive::Force(0.0); FINGERS],
+            force: [0.0; FINGERS],
             temperature: [model.ambient_c; FINGERS],
             overload_for: [0.0; FINGERS],
             errors: [0; FINGERS],
@@ -348,38 +436,83 @@ impl Hand {
 
     /// Advances the model to time `t` seconds.
     pub fn advance_to(&mut self, t: f32) {
-        // The operator's intent is taken at `t` for every sub-step (the finger settles on
-        // where the hand is meant to be at the time asked).
+        // The operator's intent is taken at each sub-step's time, so that the finger's
+        // velocity is the script's and not a staircase of the caller's steps.
         let mut clock = self.clock;
-        clock.advance_to(f64::from(t), |_, h| self.step(t, h as f32));
+        clock.advance_to(f64::from(t), |now, h| self.step(now as f32, h));
         self.clock = clock;
     }
 
-    /// The model's time, s.
-    fn time(&self) -> f32 {
-        self.clock.time() as f32
+    /// The stiffness (N/m) and damping (N s/m) of channel `ch` at its present effort.
+    fn impedance(&self, ch: usize) -> (f64, f64) {
+        let m = &self.model;
+        let relaxed = f64::from(m.stiffness_n_per_m);
+        let k = (relaxed + f64::from(m.stiffening_per_m) * self.effort[ch])
+            .min(f64::from(m.max_stiffness_n_per_m));
+        let damping_scale = if relaxed > 0.0 {
+            (k / relaxed).sqrt()
+        } else {
+            1.0
+        };
+        (k, f64::from(m.damping_n_s_per_m) * damping_scale)
     }
 
-    fn step(&mut self, now: f32, h: f32) {
+    fn step(&mut self, now: f32, h: f64) {
         let m = self.model;
         let intent = self.script.at(now);
-        for (ch, pos) in self.position.iter_mut().enumerate() {
-            let target = match self.drive.get(ch) {
-                // The operator resists: the finger settles where the actuator's push balances
-                // the operator's stiffness.
-                Some(Drive::Force(f)) if self.errors[ch] & LOCKED_ROTOR == 0 => {
-                    intent[ch] + m.compliance * f
+        let max_move = f64::from(m.max_speed) * METRES_PER_RAW * h;
+        for (ch, meant) in intent.into_iter().enumerate() {
+            let wanted = f64::from(meant.clamp(0.0, 1000.0)) * METRES_PER_RAW;
+            self.equilibrium[ch] += (wanted - self.equilibrium[ch]).clamp(-max_move, max_move);
+            let (k, b) = self.impedance(ch);
+            // The operator's muscles, N (positive opens).
+            let pull = k * (self.equilibrium[ch] - self.travel[ch]);
+            self.effort[ch] = lag(self.effort[ch], pull.abs(), h, f64::from(m.effort_tau_s));
+            // A locked actuator pushes no more; the thumb's rotation has none.
+            let drive = self
+                .drive
+                .get(ch)
+                .filter(|_| self.errors[ch] & LOCKED_ROTOR == 0);
+            let (x, v) = (&mut self.travel[ch], &mut self.speed[ch]);
+            let measured = match drive {
+                Some(Drive::Position(p)) => {
+                    // A stiff servo: the finger goes where the actuator takes it, and the
+                    // actuator feels the operator's spring and damper (the finger's few grams
+                    // left out: the servo's abrupt starts would turn them into spikes).
+                    let target = f64::from(p.clamp(0.0, 1000.0)) * METRES_PER_RAW;
+                    let to = (lag(*x, target, h, f64::from(m.servo_tau_s)) - *x)
+                        .clamp(-max_move, max_move);
+                    *x += to;
+                    *v = to / h;
+                    (b * *v - pull) / NEWTONS_PER_FORCE
                 }
-                Some(Drive::Position(p)) if self.errors[ch] & LOCKED_ROTOR == 0 => *p,
-                _ => intent[ch],
+                other => {
+                    // The cable pulls with the commanded force: that is what its sensor reads.
+                    let push = match other {
+                        Some(Drive::Force(f)) => f64::from(f.clamp(-1000.0, 1000.0)),
+                        _ => 0.0,
+                    };
+                    let force = pull + push * NEWTONS_PER_FORCE;
+                    let mass = f64::from(m.mass_kg);
+                    // The damper acts at the step's mean velocity (trapezoidal, solved for
+                    // in closed form): at the velocity the step starts with, as the kit's
+                    // joint takes it, it would damp the stiffest finger 6 % too much.
+                    let mean = (*v + 0.5 * h * force / mass) / (1.0 + 0.5 * h * b / mass);
+                    let finger = Joint {
+                        inertia: mass,
+                        damping: 0.0,
+                    };
+                    finger.step(x, v, force - b * mean, h, (0.0, TRAVEL_M));
+                    push
+                }
+            };
+            if let Some(f) = self.force.get_mut(ch) {
+                *f = measured.clamp(-1000.0, 1000.0) as f32;
             }
-            .clamp(0.0, 1000.0);
-            let step =
-                (lag(*pos, target, h, m.tau_s) - *pos).clamp(-m.max_speed * h, m.max_speed * h);
-            *pos = (*pos + step).clamp(0.0, 1000.0);
         }
+        let h = h as f32;
         for f in 0..FINGERS {
-            let load = self.load(f, &intent).abs();
+            let load = self.force[f].abs();
             let current = self.current(load);
             let steady = m.ambient_c + m.c_per_ma * current;
             self.temperature[f] = lag(self.temperature[f], steady, h, m.thermal_tau_s);
@@ -399,31 +532,31 @@ impl Hand {
         }
     }
 
-    /// Force between finger and actuator, glove units (positive: the finger pushes towards a
-    /// fist, i.e. the actuator is pushing it open against the operator).
-    fn load(&self, finger: usize, intent: &[f32; CHANNELS]) -> f32 {
-        ((self.position[finger] - intent[finger]) / self.model.compliance).clamp(-1000.0, 1000.0)
-    }
-
     fn current(&self, load: f32) -> f32 {
         (self.model.idle_ma + self.model.ma_per_force * load).clamp(0.0, 1000.0)
     }
 
     /// Actual raw positions (little, ring, middle, index, thumb, thumb rotation).
     pub fn positions(&self) -> [u16; CHANNELS] {
-        self.position.map(|p| p.round().clamp(0.0, 1000.0) as u16)
+        self.travel
+            .map(|x| (x / METRES_PER_RAW).round().clamp(0.0, 1000.0) as u16)
     }
 
-    /// Measured finger forces (glove units).
+    /// The fingers' velocities, raw units per second (positive opens), in the order of
+    /// [`Hand::positions`].
+    pub fn velocities(&self) -> [f32; CHANNELS] {
+        self.speed.map(|v| (v / METRES_PER_RAW) as f32)
+    }
+
+    /// Measured finger forces (glove units): the force between each finger and its actuator,
+    /// positive when the finger pushes towards a fist (the actuator pushing it open).
     pub fn forces(&self) -> [i16; FINGERS] {
-        let intent = self.script.at(self.time());
-        core::array::from_fn(|f| self.load(f, &intent).round() as i16)
+        self.force.map(|f| f.round() as i16)
     }
 
     /// Actuator currents in mA.
     pub fn currents(&self) -> [u16; FINGERS] {
-        let intent = self.script.at(self.time());
-        core::array::from_fn(|f| self.current(self.load(f, &intent).abs()).round() as u16)
+        self.force.map(|f| self.current(f.abs()).round() as u16)
     }
 
     /// Actuator temperatures in degrees Celsius.
@@ -457,7 +590,16 @@ mod tests {
 
     #[test]
     fn free_hand_follows_the_script() {
-        let mut h = Hand::new(Script::OpenClose { period_s: 4.0 }, HandModel::default());
+        let s = Script::OpenClose { period_s: 4.0 };
+        let mut h = Hand::new(s.clone(), HandModel::default());
+        // A quarter period: the hand closes fastest.
+        h.advance_to(1.0);
+        let wanted = (s.at(1.001)[0] - s.at(0.999)[0]) / 0.002;
+        let v = h.velocities()[0];
+        assert!(
+            wanted < -600.0 && (v - wanted).abs() < 0.02 * wanted.abs(),
+            "{v} raw/s, the script {wanted}"
+        );
         h.advance_to(2.0); // half a period: closed
         assert!(h.positions()[0] < 200, "{:?}", h.positions());
         h.advance_to(4.0);
@@ -466,26 +608,182 @@ mod tests {
     }
 
     #[test]
-    fn opening_force_pushes_the_finger_open_and_is_felt() {
+    fn a_raw_unit_is_a_thousandth_of_the_index_pads_travel() {
+        let model = OperatorHand::default();
+        let pad = |flexion: f32| {
+            let mut pose = OperatorPose::default();
+            pose.flexion[1] = flexion;
+            model.pads(&pose)[1]
+        };
+        let steps = 1000;
+        let travel: f32 = (0..steps)
+            .map(|i| pad(i as f32 / steps as f32).distance(pad((i + 1) as f32 / steps as f32)))
+            .sum();
+        let per_raw = f64::from(travel) / 1000.0;
+        assert!(
+            (per_raw - METRES_PER_RAW).abs() < 0.005 * METRES_PER_RAW,
+            "the index pad travels {travel} m"
+        );
+    }
+
+    /// A finger's travel from its equilibrium, raw units.
+    fn offset(h: &Hand, ch: usize) -> f64 {
+        (h.travel[ch] - h.equilibrium[ch]) / METRES_PER_RAW
+    }
+
+    /// The relaxed finger's stiffness with the force it resists (N), as [`HandModel`] states it.
+    fn stiffness_at(m: &HandModel, newtons: f64) -> f64 {
+        (f64::from(m.stiffness_n_per_m) + f64::from(m.stiffening_per_m) * newtons)
+            .min(f64::from(m.max_stiffness_n_per_m))
+    }
+
+    #[test]
+    fn a_constant_force_gives_way_by_force_over_stiffness_and_is_felt() {
         let mut h = still(300.0);
         h.set_drive(3, Drive::Force(500.0));
         h.advance_to(1.0);
-        let p = h.positions();
+        let newtons = 500.0 * NEWTONS_PER_FORCE;
+        let k = stiffness_at(&HandModel::default(), newtons);
+        let expected = newtons / k / METRES_PER_RAW;
+        assert!(expected > 10.0, "{expected}");
         assert!(
-            (p[3] as f32 - 350.0).abs() < 5.0,
-            "index pushed open by 0.1 * 500: {p:?}"
+            (offset(&h, 3) - expected).abs() < 0.01 * expected,
+            "pushed open {} raw, F/k = {expected}",
+            offset(&h, 3)
         );
+        assert!(
+            h.velocities()[3].abs() < 1.0,
+            "at rest: {:?}",
+            h.velocities()
+        );
+        let p = h.positions();
         assert_eq!(p[0], 300, "other fingers untouched");
-        assert!((h.forces()[3] - 500).abs() <= 2, "{:?}", h.forces());
+        assert_eq!(h.forces()[3], 500, "the cable's force");
         assert!(h.currents()[3] > h.currents()[0]);
+    }
+
+    #[test]
+    fn the_grip_stiffens_with_the_squeeze_and_saturates() {
+        let m = HandModel::default();
+        let mut secant = Vec::new();
+        for force in [100.0, 400.0, 1000.0] {
+            let mut h = still(500.0);
+            h.set_drive(3, Drive::Force(force));
+            h.advance_to(1.5);
+            let newtons = f64::from(force) * NEWTONS_PER_FORCE;
+            let k = newtons / (offset(&h, 3) * METRES_PER_RAW);
+            let law = stiffness_at(&m, newtons);
+            assert!((k - law).abs() < 0.01 * law, "{force}: {k} N/m, {law} N/m");
+            secant.push(k);
+        }
+        assert!(
+            secant[2] > 1.5 * secant[0] && secant[1] > secant[0],
+            "{secant:?} N/m"
+        );
+        // Held far from where the operator means it to be: as stiff as the model allows.
+        let mut h = still(900.0);
+        h.set_drive(3, Drive::Position(100.0));
+        h.advance_to(1.0);
+        let (k, b) = h.impedance(3);
+        assert_eq!(k, f64::from(m.max_stiffness_n_per_m));
+        let ratio = (k / f64::from(m.stiffness_n_per_m)).sqrt();
+        assert!(
+            (b - f64::from(m.damping_n_s_per_m) * ratio).abs() < 1e-9,
+            "{b}"
+        );
+    }
+
+    /// The damped natural frequency (Hz) and damping ratio of channel 3 ringing down from a
+    /// displacement, measured from the trajectory: zero crossings for the period, successive
+    /// extremes (half a period apart) for the logarithmic decrement.
+    fn ring_down(model: HandModel) -> (f64, f64) {
+        let mut h = Hand::new(Script::Hold([500.0; CHANNELS]), model);
+        h.travel[3] += 200.0 * METRES_PER_RAW;
+        let (mut crossings, mut extremes) = (Vec::new(), Vec::new());
+        let (mut before, mut t) = (offset(&h, 3), 0.0);
+        let mut rising = before < 0.0;
+        for k in 1..=800 {
+            let now = k as f32 * STEP_S as f32;
+            h.advance_to(now);
+            let x = offset(&h, 3);
+            if (x > 0.0) != (before > 0.0) {
+                crossings.push(t + STEP_S * before / (before - x));
+            }
+            if rising != (x > before) {
+                extremes.push(before.abs());
+                rising = x > before;
+            }
+            (before, t) = (x, f64::from(now));
+        }
+        assert!(
+            crossings.len() >= 4 && extremes.len() >= 3,
+            "{crossings:?} {extremes:?}"
+        );
+        let period = crossings[2] - crossings[0];
+        let decrement = (extremes[0] / extremes[1]).ln();
+        let zeta = decrement / (core::f64::consts::PI.powi(2) + decrement.powi(2)).sqrt();
+        let damped_hz = 1.0 / period;
+        (damped_hz / (1.0 - zeta * zeta).sqrt(), zeta)
+    }
+
+    #[test]
+    fn a_released_finger_rings_down_at_its_natural_frequency_and_damping() {
+        let relaxed = HandModel {
+            stiffening_per_m: 0.0,
+            ..HandModel::default()
+        };
+        // As stiff as squeezing makes it, the damping raised alike.
+        let squeezed = HandModel {
+            stiffness_n_per_m: relaxed.max_stiffness_n_per_m,
+            damping_n_s_per_m: relaxed.damping_n_s_per_m
+                * (relaxed.max_stiffness_n_per_m / relaxed.stiffness_n_per_m).sqrt(),
+            ..relaxed
+        };
+        for model in [relaxed, squeezed] {
+            let (m, b, k) = (
+                f64::from(model.mass_kg),
+                f64::from(model.damping_n_s_per_m),
+                f64::from(model.stiffness_n_per_m),
+            );
+            let hz = (k / m).sqrt() / core::f64::consts::TAU;
+            let zeta = b / (2.0 * (k * m).sqrt());
+            let (measured_hz, measured_zeta) = ring_down(model);
+            assert!(
+                (measured_hz - hz).abs() < 0.01 * hz && (measured_zeta - zeta).abs() < 0.01 * zeta,
+                "{k} N/m: {measured_hz} Hz, damping ratio {measured_zeta}; \
+                 the parameters give {hz} Hz, {zeta}"
+            );
+            // Within the human finger's figures: tens of hertz, well but not over damped.
+            assert!((20.0..100.0).contains(&hz) && (0.2..0.8).contains(&zeta));
+        }
+    }
+
+    #[test]
+    fn the_travel_stops_hard_at_its_ends() {
+        let mut h = Hand::new(
+            Script::Hold([10.0, 500.0, 500.0, 990.0, 500.0, 500.0]),
+            HandModel::default(),
+        );
+        h.set_drive(0, Drive::Force(-1000.0));
+        h.set_drive(3, Drive::Force(1000.0));
+        h.advance_to(0.5);
+        assert_eq!((h.positions()[0], h.positions()[3]), (0, 1000));
+        assert_eq!((h.velocities()[0], h.velocities()[3]), (0.0, 0.0));
+        assert_eq!(
+            (h.forces()[0], h.forces()[3]),
+            (-1000, 1000),
+            "the cables still pull"
+        );
     }
 
     #[test]
     fn position_drive_moves_the_finger() {
         let mut h = still(900.0);
         h.set_drive(4, Drive::Position(100.0));
+        h.advance_to(0.02);
+        assert!(h.velocities()[4] < -1000.0, "{:?}", h.velocities());
         h.advance_to(1.0);
-        assert!(h.positions()[4] <= 101);
+        assert_eq!(h.positions()[4], 100, "a stiff servo");
         assert!(h.forces()[4] < -900, "the operator resists being closed");
     }
 
@@ -497,6 +795,10 @@ mod tests {
         assert_eq!(h.errors()[0], 0);
         h.advance_to(3.5);
         assert_eq!(h.errors()[0], LOCKED_ROTOR | OVER_CURRENT);
+        // Locked, the actuator pushes no more: the finger goes back to the operator.
+        assert_eq!(h.forces()[0], 0);
+        h.advance_to(4.5);
+        assert!((offset(&h, 0)).abs() < 0.5, "{}", offset(&h, 0));
         h.set_drive(0, Drive::Force(0.0));
         h.clear_errors();
         assert_eq!(h.errors()[0], 0);
