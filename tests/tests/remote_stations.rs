@@ -2,7 +2,8 @@
 //! station (`launch/revo2-robot.toml`) in two network namespaces joined by a veth pair (192.0.2.0/24,
 //! RFC 5737, on the veth only), each with its own iceoryx2 root and prefix, joined only by their
 //! `teleop-bridge`s over zenoh with mutual TLS. The simulated Revo2 session closes its loop
-//! across them; then the faults: injected delay and loss, the link cut and restored, the
+//! across them; then the faults: injected delay (20 ms, then 250 ms each way, which the nodes
+//! allow for as the bridges measure it) and loss, the link cut and restored, the
 //! operator's e-stop engaging the robot, the robot's bridge killed and restarted by its launcher
 //! meanwhile, the release crossing to the restarted bridge, a station with a certificate from
 //! another CA, and, last, both bridges frozen: nothing flows. Then a station certified by the
@@ -158,6 +159,55 @@ fn two_stations_across_a_veth_pair() {
         felt > 100 && following > holding,
         "at 20 ms each way: glove force up to {felt}; hand states following {following}, \
          holding {holding}\n{}\n{}",
+        operator.logs(),
+        robot.logs()
+    );
+    // 250 ms each way, a wide-area link: the bridges measure the delay and report it, and the
+    // nodes behind them allow for it (`teleop_runtime::link`), so the delayed but continuing
+    // hand state and touch still drive the glove, and the robot's hand still follows.
+    for station in [&robot, &operator] {
+        assert_eq!(station.control("delay 250"), "ok delay 250 ms\n");
+    }
+    for (station, name) in [(&operator, "operator"), (&robot, "robot")] {
+        until(
+            both,
+            Duration::from_secs(10),
+            &format!("the {name} bridge reports the 250 ms it measures"),
+            || {
+                let mut p99 = 0.0;
+                station.health_of("bridge", |h| {
+                    p99 = h.detail("latency_p99_ms").unwrap_or(0.0);
+                });
+                p99 > 240.0
+            },
+        );
+    }
+    // The next report reaches every node (one a second).
+    std::thread::sleep(Duration::from_millis(1500));
+    forces.drain(|_| {});
+    robot_states.drain(|_| {});
+    let (mut felt, mut commands_seen, mut stale) = (0i16, 0u32, 0u32);
+    let (mut holding, mut following) = (0u32, 0u32);
+    let end = Instant::now() + Duration::from_secs(7);
+    while Instant::now() < end {
+        forces.drain(|f| {
+            felt = felt.max(max_force(f));
+            commands_seen += 1;
+            stale += u32::from(f.flags & force_flags::STALE != 0);
+        });
+        robot_states.drain(|s| {
+            if s.holding == 0 {
+                following += 1;
+            } else {
+                holding += 1;
+            }
+        });
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert!(
+        felt > 100 && stale * 10 < commands_seen && following > holding,
+        "at 250 ms each way: glove force up to {felt}, {stale} of {commands_seen} force \
+         commands stale; hand states following {following}, holding {holding}\n{}\n{}",
         operator.logs(),
         robot.logs()
     );

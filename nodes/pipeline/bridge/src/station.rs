@@ -64,7 +64,13 @@ struct Shared {
     /// The send stamps of the heartbeats sent: only their echoes make exchanges.
     sent_beats: Mutex<SentBeats>,
     latency: Mutex<Option<LatencyWindow>>,
+    /// The link's measured one-way delay (p99 of the window, at most [`MAX_LINK_ALLOWANCE_NS`])
+    /// that `max_age_ms` allows for, updated with the health report.
+    allowance_ns: AtomicU64,
 }
+
+/// Most link delay a topic's `max_age_ms` allows for on top of itself.
+const MAX_LINK_ALLOWANCE_NS: u64 = 1_000_000_000;
 
 impl Shared {
     fn faults(&self) -> Faults {
@@ -438,6 +444,9 @@ fn outgoing(
             health.set_detail("rtt_ms", ms(shared.rtt_ns.load(Ordering::Relaxed)));
             let p99 = shared.percentiles().map_or(0, |(_, p99, _)| u64::from(p99) * 1000);
             health.set_detail("latency_p99_ms", ms(p99));
+            shared
+                .allowance_ns
+                .store(p99.min(MAX_LINK_ALLOWANCE_NS), Ordering::Relaxed);
             let since_beat = (received != 0).then(|| Duration::from_nanos(now.saturating_sub(received)));
             if let Err(e) = health.publish(&[since_beat]) {
                 tracing::warn!("health: {e}");
@@ -661,7 +670,22 @@ fn incoming(
                     }
                 }
                 (Frame::Sample(origin, payload), Slot::Topic(i)) => {
-                    match ports[i].publish(payload, &clock, now, max_age[i]) {
+                    // Every frame's transit counts toward the link's delay, also one too old to
+                    // publish: a link slower than `max_age_ms` is measured, and then allowed for.
+                    // Only once a heartbeat exchange has set the clock: before, the peer's stamps
+                    // cannot be read on this clock.
+                    let one_way = now.saturating_sub(clock.to_local(origin.send_ns));
+                    if let (Some(_), Ok(mut window)) = (clock.rtt_ns(), shared.latency.lock()) {
+                        if let Some(window) = window.as_mut() {
+                            window.push(u32::try_from(one_way / 1000).unwrap_or(u32::MAX));
+                        }
+                    }
+                    // Older on arrival than the topic's limit plus the link's measured delay:
+                    // not published. Delayed but continuing samples go through; the subscribers
+                    // judge their freshness against the same delay (the bridge's health).
+                    let allowance = shared.allowance_ns.load(Ordering::Relaxed);
+                    let max_age = max_age[i].map(|age| age.saturating_add(allowance));
+                    match ports[i].publish(payload, &clock, now, max_age) {
                         Ok(Arrival::Published(header)) => {
                             stale_logged[i] = false;
                             shared.received.fetch_add(1, Ordering::Relaxed);
@@ -674,12 +698,6 @@ fn incoming(
                             shared
                                 .superseded
                                 .fetch_add(u64::from(origin.superseded), Ordering::Relaxed);
-                            let one_way = now.saturating_sub(clock.to_local(origin.send_ns));
-                            if let Ok(mut window) = shared.latency.lock() {
-                                if let Some(window) = window.as_mut() {
-                                    window.push(u32::try_from(one_way / 1000).unwrap_or(u32::MAX));
-                                }
-                            }
                         }
                         Ok(Arrival::Stale(_, age)) => {
                             shared.stale.fetch_add(1, Ordering::Relaxed);
@@ -687,7 +705,7 @@ fn incoming(
                                 tracing::warn!(
                                     topic = ports[i].topic(),
                                     age_ms = age / 1_000_000,
-                                    max_age_ms = max_age[i].unwrap_or(0) / 1_000_000,
+                                    max_age_ms = max_age.unwrap_or(0) / 1_000_000,
                                     "samples arrive too old: not published (counted)"
                                 );
                             }

@@ -16,6 +16,7 @@ use teleop_msgs::{
     fingertip_sensor, force_flags, units, EStop, GloveForceCommand, GloveState, HandCommand,
     HandState, NodeHealth, Tactile as TactileMsg,
 };
+use teleop_runtime::link::LinkDelay;
 use teleop_runtime::sample_time;
 use teleop_runtime::schedule::Schedule;
 
@@ -35,9 +36,6 @@ pub struct NodeConfig {
     pub health_period_ms: u64,
     /// The glove's positions older than this are stale (the passivity observer waits).
     pub glove_timeout_ms: u64,
-    /// The node whose health reports the link between stations (`latency_p99_ms`, the one-way
-    /// delay's p99, and `link_state`): the bridge of this station.
-    pub link_node: String,
     /// Most link delay the freshness of hand data may allow for: a delay measured above it
     /// counts as this much.
     pub max_link_delay_ms: u64,
@@ -54,7 +52,6 @@ impl Default for NodeConfig {
             tick_ms: 10,
             health_period_ms: 500,
             glove_timeout_ms: 100,
-            link_node: "bridge".to_string(),
             max_link_delay_ms: 1000,
             feedback: FeedbackConfig::default(),
         }
@@ -158,13 +155,9 @@ pub struct FeedbackEngine {
     command: Option<HandCommand>,
     /// The newest glove sample and when it was made.
     glove: Option<(GloveState, u64)>,
-    /// The link node's newest report: the link's measured one-way delay allowed for in
-    /// freshness (ns, at most `max_link_delay_ms`; 0 while the link is down), and when it came;
-    /// `None` without a link node.
-    link: Option<(u64, u64)>,
-    max_link_delay_ns: u64,
+    /// The station's bridge's newest report of the link.
+    link: LinkDelay,
     glove_timeout_ns: u64,
-    link_node: String,
     estop: bool,
     stale: bool,
     /// The tick (`tick_ms`) and the watchdogs of tactile (`tactile_timeout_ms`) and hand state
@@ -176,8 +169,6 @@ pub struct FeedbackEngine {
 const TACTILE: usize = 0;
 /// The hand state input's index in the engine's schedule.
 const STATE: usize = 1;
-/// How long a link report counts: three of the bridge's one-second health periods.
-pub const LINK_REPORT_NS: u64 = 3_000_000_000;
 
 impl FeedbackEngine {
     /// An engine for the hand `profile` with this configuration.
@@ -189,10 +180,8 @@ impl FeedbackEngine {
             state: None,
             command: None,
             glove: None,
-            link: None,
-            max_link_delay_ns: config.max_link_delay_ms.saturating_mul(1_000_000),
+            link: LinkDelay::new(config.max_link_delay_ms.saturating_mul(1_000_000)),
             glove_timeout_ns: config.glove_timeout_ms.saturating_mul(1_000_000),
-            link_node: config.link_node.clone(),
             estop: false,
             stale: false,
             schedule: {
@@ -232,26 +221,21 @@ impl FeedbackEngine {
         self.estop
     }
 
-    /// The link delay freshness allows for at `now_ns`: the link node's newest one-way p99,
-    /// while its reports keep coming (one is due every second; after [`LINK_REPORT_NS`]
-    /// without one there is no allowance).
+    /// The link delay freshness allows for at `now_ns` ([`LinkDelay::allowance_ns`]).
     pub fn link_allowance_ns(&self, now_ns: u64) -> u64 {
-        match self.link {
-            Some((delay, at)) if now_ns.saturating_sub(at) <= LINK_REPORT_NS => delay,
-            _ => 0,
-        }
+        self.link.allowance_ns(now_ns)
     }
 
-    /// Whether a link between stations is in the path at `now_ns`: the link node reports it up
-    /// (the passivity controller's `auto` mode).
+    /// Whether a link between stations is up in the path at `now_ns` (the passivity
+    /// controller's `auto` mode).
     pub fn link_up(&self, now_ns: u64) -> bool {
-        self.link_allowance_ns(now_ns) > 0
+        self.link.up(now_ns)
     }
 
     /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
     /// Tactile and hand-state samples are as old as their stamps say (never newer than their
-    /// receipt, see [`sample_time`]), less the link's measured delay where a bridge reports one
-    /// ([`link_allowance_ns`](Self::link_allowance_ns)): a sample from a topic's history, made
+    /// receipt, see [`sample_time`]), less the link's measured delay where the station's
+    /// bridge reports one ([`teleop_runtime::link`]): a sample from a topic's history, made
     /// before a restart, is stale when it arrives, while samples delayed by the link but still
     /// arriving are fresh; a link that stops makes them stale by their receipt, a timeout after
     /// the last one.
@@ -280,28 +264,7 @@ impl FeedbackEngine {
                 false
             }
             Event::Health(h) => {
-                let name = h.name();
-                let ours = name == self.link_node
-                    || name
-                        .strip_suffix(self.link_node.as_str())
-                        .is_some_and(|ns| ns.ends_with('/'));
-                if ours {
-                    // A link that is down gives no allowance: nothing arrives anyway. An up
-                    // link counts at least 1 ns, so it is seen (`link_up`) however short.
-                    let up = h.detail("link_state") == Some(1.0);
-                    let delay_ms = h.detail("latency_p99_ms").unwrap_or(0.0);
-                    let delay = if up {
-                        let ns = if delay_ms.is_finite() {
-                            delay_ms.max(0.0) * 1e6
-                        } else {
-                            0.0
-                        };
-                        (ns as u64).clamp(1, self.max_link_delay_ns.max(1))
-                    } else {
-                        0
-                    };
-                    self.link = Some((delay, now_ns));
-                }
+                self.link.report(&h, now_ns);
                 false
             }
             Event::Command(c) => {
@@ -637,25 +600,7 @@ mod tests {
         let mut steps = std::iter::from_fn(|| e.poll(11_000 * ms));
         let stale = steps.find(|(_, out)| out.became_stale).unwrap();
         assert_eq!(stale.0, 10_590 * ms + 1);
-        // A bridge in another namespace's name, another node, or a link reported down: no
-        // allowance.
-        for report in [
-            bridge("left/bridge", 252.0, true),
-            bridge("sidebridge", 252.0, true),
-            bridge("bridge", 252.0, false),
-        ] {
-            let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
-            e.handle(&report, 0);
-            let Event::Health(h) = report else {
-                unreachable!()
-            };
-            assert_eq!(e.link_up(1), h.name() == "left/bridge", "{}", h.name());
-        }
-        // The allowance is capped, and lapses when the reports stop.
-        let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
-        e.handle(&bridge("bridge", 5000.0, true), 0);
-        assert_eq!(e.link_allowance_ns(1), 1000 * ms);
-        assert_eq!(e.link_allowance_ns(LINK_REPORT_NS + 1), 0);
+        // Which reports count, the cap and the lapse: teleop_runtime::link's tests.
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The ports and the safety policy of every hand node: `hand/command` in, followed only while
-//! fresh by its own stamp, while the latched e-stop is released and when [`Admission`] takes
-//! it; after any hold (stale, e-stop, refused, a device brought up again) position targets ramp
+//! fresh by its own stamp (less the link's measured delay when it crossed from another station:
+//! the station's bridge reports it in `health`, see [`teleop_runtime::link`]), while the latched
+//! e-stop is released and when [`Admission`] takes it; after any hold (stale, e-stop, refused, a device brought up again) position targets ramp
 //! back to the operator's pose with [`Resume`]. `hand/state` and `hand/tactile` out, device
 //! info and health published periodically, also while the hand is away.
 //!
@@ -11,8 +12,13 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{control_mode, DeviceInfo, HandCommand, HandState, Tactile, MAX_JOINTS};
-use teleop_runtime::{EStopInput, Health, NodeRuntime, Publisher, RuntimeError, Subscriber};
+use teleop_msgs::{
+    control_mode, DeviceInfo, HandCommand, HandState, NodeHealth, Tactile, MAX_JOINTS,
+};
+use teleop_runtime::link::{LinkDelay, DEFAULT_MAX_LINK_DELAY_NS};
+use teleop_runtime::{
+    now_ns, EStopInput, Health, NodeRuntime, Publisher, RuntimeError, Subscriber,
+};
 
 use crate::admission::{Admission, Refusal};
 use crate::resume::Resume;
@@ -49,6 +55,9 @@ pub struct HandPorts {
     device: Publisher<DeviceInfo>,
     connected: Option<DeviceInfo>,
     commands: Subscriber<HandCommand>,
+    /// Health reports, for the station's bridge's report of the link.
+    reports: Subscriber<NodeHealth>,
+    link: LinkDelay,
     estop: EStopInput,
     state: Publisher<HandState>,
     tactile: Publisher<Tactile>,
@@ -84,6 +93,8 @@ impl HandPorts {
             device: runtime.publisher()?,
             connected: None,
             commands: runtime.subscriber()?,
+            reports: runtime.subscriber()?,
+            link: LinkDelay::new(DEFAULT_MAX_LINK_DELAY_NS),
             estop: EStopInput::new(runtime)?,
             state: runtime.publisher()?,
             tactile: runtime.publisher()?,
@@ -123,7 +134,16 @@ impl HandPorts {
         }
         let cmd = self.commands.poll_latest();
         let now = Instant::now();
-        let fresh = self.commands.is_fresh(now, self.timing.stale_after);
+        let stamp_now = now_ns();
+        let link = &mut self.link;
+        self.reports.drain(|h| {
+            link.report(h, stamp_now);
+        });
+        let fresh = self.commands.is_fresh_over_link(
+            now,
+            self.timing.stale_after,
+            self.link.allowance_ns(stamp_now),
+        );
         let dt = now.duration_since(self.last_command).as_secs_f64();
         self.last_command = now;
         let Some(mut cmd) = cmd.filter(|_| fresh && !self.estop.engaged()) else {

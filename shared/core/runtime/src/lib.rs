@@ -23,6 +23,8 @@
 //!   exit status) and [`NodeArgs`], the arguments every node with a configuration file takes;
 //! - [`schedule`]: when a pipeline engine's inputs go stale (by their samples' stamps) and when
 //!   it ticks (absolute deadlines), pure, for the nodes and for reprocessing alike;
+//! - [`link`]: the link between stations as a bridge's health reports it, whose measured delay
+//!   the freshness of samples that crossed it allows for;
 //! - [`args`]: command-line value parsers (`teleop` and the device service commands);
 //! - [`realtime`]: the scheduling policy, priority, CPU affinity, memory locking and nice value
 //!   `launch.toml` gives a process, for its time-critical threads;
@@ -41,6 +43,7 @@ mod estop;
 mod event_loop;
 mod health;
 mod ipc;
+pub mod link;
 mod logging;
 pub mod node_main;
 mod ports;

@@ -174,12 +174,22 @@ impl<M: Message> Subscriber<M> {
     /// stamp ([`sample_time`]), so a sample from the topic's history, made long before this
     /// subscriber received it, is not fresh.
     pub fn is_fresh(&self, now: Instant, timeout: Duration) -> bool {
+        self.is_fresh_over_link(now, timeout, 0)
+    }
+
+    /// [`is_fresh`](Self::is_fresh) for a topic that crossed a link between stations with this
+    /// measured one-way delay (ns, see [`crate::link`]): the stamp counts `link_delay_ns` later,
+    /// never later than the receipt, so delayed but continuing samples are fresh and a link
+    /// that stops is stale `timeout` after its last sample arrived.
+    pub fn is_fresh_over_link(&self, now: Instant, timeout: Duration, link_delay_ns: u64) -> bool {
         let Some(age) = self.age(now) else {
             return false;
         };
         let received_ns = self.received_ns.get();
         let made = sample_time(
-            self.latest.get().map_or(0, |m| m.header().stamp_ns),
+            self.latest
+                .get()
+                .map_or(0, |m| m.header().stamp_ns.saturating_add(link_delay_ns)),
             received_ns,
         );
         age + Duration::from_nanos(received_ns - made) <= timeout

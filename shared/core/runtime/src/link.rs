@@ -1,0 +1,116 @@
+//! The link between stations as the nodes downstream of a bridge see it: the bridge's health
+//! report names the link's state and its measured one-way delay (`link_state`, and
+//! `latency_p99_ms`, the p99 of the frames' transit), and a node that judges the freshness of
+//! samples that crossed it allows for that delay. A sample is then fresh while
+//! `now <= min(stamp + delay, received) + timeout`: delayed but continuing samples stay fresh,
+//! a link that stops is stale a timeout after its last sample, and a sample made long ago (a
+//! topic's history) is stale as before. Pure: times come in as nanoseconds.
+
+use teleop_msgs::NodeHealth;
+
+/// The node name of a station's bridge (its process in the launch file), whose health reports
+/// the link; in a namespace, `<namespace>/bridge`.
+pub const LINK_NODE: &str = "bridge";
+
+/// How long a bridge's report counts: three of its one-second health periods. Without a newer
+/// one the link gives no allowance (the bridge stopped).
+pub const LINK_REPORT_NS: u64 = 3_000_000_000;
+
+/// Most link delay allowed for unless configured otherwise, ns.
+pub const DEFAULT_MAX_LINK_DELAY_NS: u64 = 1_000_000_000;
+
+/// The newest link report of a station's bridge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LinkDelay {
+    max_ns: u64,
+    /// The delay allowed for (0: the link is down) and when it was reported.
+    latest: Option<(u64, u64)>,
+}
+
+impl LinkDelay {
+    /// No link seen yet; delays above `max_ns` will count as `max_ns`.
+    pub fn new(max_ns: u64) -> Self {
+        Self {
+            max_ns,
+            latest: None,
+        }
+    }
+
+    /// Takes a health report received at `now_ns`: only the bridge's ([`LINK_NODE`], or
+    /// `<namespace>/bridge`) counts. Returns whether it was the bridge's.
+    pub fn report(&mut self, health: &NodeHealth, now_ns: u64) -> bool {
+        let name = health.name();
+        let bridge = name == LINK_NODE
+            || name
+                .strip_suffix(LINK_NODE)
+                .is_some_and(|ns| ns.ends_with('/'));
+        if !bridge {
+            return false;
+        }
+        // A link that is down gives no allowance: nothing arrives over it anyway. An up link
+        // counts at least 1 ns, so it is seen as up however short its delay.
+        let up = health.detail("link_state") == Some(1.0);
+        let delay = if up {
+            let ms = health.detail("latency_p99_ms").unwrap_or(0.0);
+            let ns = if ms.is_finite() {
+                ms.max(0.0) * 1e6
+            } else {
+                0.0
+            };
+            (ns as u64).clamp(1, self.max_ns.max(1))
+        } else {
+            0
+        };
+        self.latest = Some((delay, now_ns));
+        true
+    }
+
+    /// The delay to allow for at `now_ns` (ns): the bridge's newest one-way p99 while its
+    /// reports keep coming and say the link is up, else 0.
+    pub fn allowance_ns(&self, now_ns: u64) -> u64 {
+        match self.latest {
+            Some((delay, at)) if now_ns.saturating_sub(at) <= LINK_REPORT_NS => delay,
+            _ => 0,
+        }
+    }
+
+    /// Whether a link between stations is up in the path at `now_ns`.
+    pub fn up(&self, now_ns: u64) -> bool {
+        self.allowance_ns(now_ns) > 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bridge(name: &str, one_way_ms: f64, up: bool) -> NodeHealth {
+        let mut h = NodeHealth::default();
+        h.set_name(name);
+        h.set_detail("link_state", if up { 1.0 } else { 0.0 });
+        h.set_detail("latency_p99_ms", one_way_ms);
+        h
+    }
+
+    #[test]
+    fn only_the_bridges_report_counts_capped_while_it_keeps_coming() {
+        let ms = 1_000_000;
+        let mut link = LinkDelay::new(1000 * ms);
+        assert!(!link.up(0));
+        assert!(!link.report(&bridge("feedback", 250.0, true), 0));
+        assert!(!link.report(&bridge("sidebridge", 250.0, true), 0));
+        assert!(!link.up(0));
+        assert!(link.report(&bridge("left/bridge", 250.0, true), 0));
+        assert_eq!(link.allowance_ns(1), 250 * ms);
+        assert!(link.report(&bridge("bridge", 5000.0, true), 0));
+        assert_eq!(link.allowance_ns(1), 1000 * ms, "capped");
+        assert_eq!(link.allowance_ns(LINK_REPORT_NS), 1000 * ms);
+        assert_eq!(link.allowance_ns(LINK_REPORT_NS + 1), 0, "lapsed");
+        link.report(&bridge("bridge", 0.0, true), 0);
+        assert!(link.up(1), "a fast link is still a link");
+        link.report(&bridge("bridge", 250.0, false), 0);
+        assert!(!link.up(1), "down");
+        link.report(&bridge("bridge", f64::NAN, true), 0);
+        assert_eq!(link.allowance_ns(1), 1);
+    }
+}
