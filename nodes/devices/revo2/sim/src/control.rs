@@ -1,6 +1,7 @@
 //! The emulated Revo2's control socket: the simulator kit's common words (`unplug MS` takes the
-//! EtherCAT link down) and the Revo2's own (`wrong-wkc P`, `watchdog`, `refuse CODE`,
-//! `foe-stall N|off`, `flash-time ERASE_MS PER_KIB_MS`, `power-cycle MS`, `versions`).
+//! EtherCAT link down, `object NAME` places an object with the process's contact model) and the
+//! Revo2's own (`wrong-wkc P`, `watchdog`, `refuse CODE`, `foe-stall N|off`,
+//! `flash-time ERASE_MS PER_KIB_MS`, `power-cycle MS`, `versions`).
 
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -10,7 +11,7 @@ use teleop_sim_kit::command::{Args, DeviceCommand, ParseError, MAX_MS};
 use teleop_sim_kit::outage::Outage;
 use teleop_sim_kit::{lock, Object, Simulator, Stats};
 
-use crate::hand::VirtualObject;
+use crate::hand::{ObjectModel, ShapeObject, VirtualObject};
 use crate::Revo2;
 
 /// The Revo2's own control commands.
@@ -64,34 +65,63 @@ impl DeviceCommand for Revo2Command {
     }
 }
 
+/// How the objects touch the fingers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Contact {
+    /// By geometry ([`ShapeObject`]), with this surface stiffness, newtons per metre.
+    Geometric {
+        /// The objects' surface stiffness.
+        stiffness_n_per_m: f32,
+    },
+    /// In joint space ([`VirtualObject`]): each finger stops at a fixed position.
+    Joint,
+}
+
 /// The emulated Revo2 as its control socket drives it.
 pub struct Revo2Sim {
     device: Arc<Mutex<SubDevice<Revo2>>>,
     start: Instant,
     link: Outage,
+    contact: Contact,
 }
 
 impl Revo2Sim {
-    /// `device`, whose time zero is `start`.
-    pub fn new(device: Arc<Mutex<SubDevice<Revo2>>>, start: Instant) -> Self {
+    /// `device`, whose time zero is `start`, placing objects with `contact`.
+    pub fn new(device: Arc<Mutex<SubDevice<Revo2>>>, start: Instant, contact: Contact) -> Self {
         Self {
             device,
             start,
             link: Outage::new(),
+            contact,
         }
     }
 }
 
-/// The Revo2's geometry of `object` (it has no bar).
-pub fn virtual_object(object: Option<Object>) -> Result<Option<VirtualObject>, String> {
-    match object {
-        None => Ok(None),
-        Some(Object::Ball) => Ok(Some(VirtualObject::ball())),
-        Some(other) => Err(format!(
-            "object: the Revo2 simulator has no {}: use ball or none",
-            other.name()
-        )),
-    }
+/// The Revo2's model of `object` under `contact`: geometrically a ball or a bar (a block across
+/// the fingers); in joint space only a ball.
+pub fn object_model(
+    object: Option<Object>,
+    contact: Contact,
+) -> Result<Option<ObjectModel>, String> {
+    let Some(object) = object else {
+        return Ok(None);
+    };
+    Ok(Some(match (contact, object) {
+        (Contact::Geometric { stiffness_n_per_m }, Object::Ball) => {
+            ObjectModel::Shape(ShapeObject::ball(stiffness_n_per_m))
+        }
+        (Contact::Geometric { stiffness_n_per_m }, Object::Bar) => {
+            ObjectModel::Shape(ShapeObject::block(stiffness_n_per_m))
+        }
+        (Contact::Joint, Object::Ball) => ObjectModel::Joint(VirtualObject::ball()),
+        (Contact::Joint, other) => {
+            return Err(format!(
+                "object: the Revo2 simulator's joint-space contact has no {}: use ball or none \
+                 (or --contact geometric)",
+                other.name()
+            ))
+        }
+    }))
 }
 
 impl Simulator for Revo2Sim {
@@ -136,7 +166,7 @@ impl Simulator for Revo2Sim {
     }
 
     fn set_object(&self, object: Option<Object>) -> Result<String, String> {
-        let o = virtual_object(object)?;
+        let o = object_model(object, self.contact)?;
         lock(&self.device).app_mut().hand_mut().set_object(o);
         Ok(format!("object {}", object.map_or("none", Object::name)))
     }
@@ -183,5 +213,35 @@ impl Simulator for Revo2Sim {
                 format!("control {control} wrist {wrist}")
             }
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn objects_take_the_contact_model_and_only_geometry_has_a_bar() {
+        let firm = Contact::Geometric {
+            stiffness_n_per_m: 3000.0,
+        };
+        assert_eq!(object_model(None, firm), Ok(None));
+        assert_eq!(
+            object_model(Some(Object::Ball), firm),
+            Ok(Some(ObjectModel::Shape(ShapeObject::ball(3000.0))))
+        );
+        assert_eq!(
+            object_model(Some(Object::Bar), firm),
+            Ok(Some(ObjectModel::Shape(ShapeObject::block(3000.0))))
+        );
+        assert_eq!(
+            object_model(Some(Object::Ball), Contact::Joint),
+            Ok(Some(ObjectModel::Joint(VirtualObject::ball())))
+        );
+        let err = object_model(Some(Object::Bar), Contact::Joint).unwrap_err();
+        assert!(
+            err.contains("bar") && err.contains("--contact geometric"),
+            "{err}"
+        );
     }
 }

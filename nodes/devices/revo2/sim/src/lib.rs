@@ -1,7 +1,9 @@
 //! The emulated BrainCo Revo2, for running the pipeline without hardware.
 //!
 //! - [`hand`]: six joints with speed limits and dynamics, the five control modes, current that
-//!   follows the load, virtual objects that produce tactile force (pure);
+//!   follows the load, objects in the hand that produce tactile force (pure);
+//! - [`contact`]: objects that touch the fingertip pads by geometry, placed by the hand
+//!   profile's kinematics (pure);
 //! - [`device`]: the Revo2 firmware as an EtherCAT application: the object dictionary of
 //!   `teleop-revo2-protocol`, PDO assignment, process data, configuration side effects;
 //! - [`firmware`]: the firmware upgrade over FoE in BOOT (section 6): checks with the FoE error
@@ -13,6 +15,7 @@
 //! Must not depend on: the Revo2 node or ethercrab (a master bug must not hide behind shared
 //! master code).
 
+pub mod contact;
 pub mod control;
 pub mod device;
 pub mod firmware;
@@ -28,8 +31,10 @@ pub use firmware::{FlashTiming, Upgrade};
 /// sync managers before requesting BOOT, as on devices whose boot loader has its own mailbox.
 pub const BOOTSTRAP_MAILBOX: ((u16, u16), (u16, u16)) = ((0x1000, 256), (0x1200, 256));
 
-/// An emulated Revo2 with an optional virtual object in its hand, acting on every AL control
-/// write at once (for callers that drive its clock themselves).
+/// An emulated Revo2 with an optional joint-space object in its hand ([`hand::VirtualObject`]:
+/// the model whose numbers the in-process tests pin; a geometric object goes in through
+/// [`Revo2::hand_mut`]), acting on every AL control write at once (for callers that drive its
+/// clock themselves).
 pub fn revo2_subdevice(object: Option<hand::VirtualObject>, serial: u32) -> SubDevice<Revo2> {
     revo2_subdevice_with_loop(object, serial, std::time::Duration::ZERO)
 }
@@ -58,10 +63,13 @@ pub fn revo2_subdevice_with_loop(
     revo2_behind(config, object)
 }
 
-/// The emulated Revo2's firmware (with an optional virtual object in its hand) behind an ESC
+/// The emulated Revo2's firmware (with an optional joint-space object in its hand) behind an ESC
 /// configured as `config`: the Revo2's own, or a test's variant of it (another identity, other
 /// mailboxes).
 pub fn revo2_behind(config: EscConfig, object: Option<hand::VirtualObject>) -> SubDevice<Revo2> {
-    let hand = hand::Hand::new(hand::HandParams::default(), object);
+    let hand = hand::Hand::new(
+        hand::HandParams::default(),
+        object.map(hand::ObjectModel::Joint),
+    );
     SubDevice::new(config, Revo2::new(hand, &Versions::default()))
 }
