@@ -9,7 +9,9 @@
 //! (found by bisection along the joint), instead of integrating a stiff spring, so that a rigid
 //! object (1e5 N/m) is as stable at the hand's 0.5 ms step as a sponge. The balance is taken
 //! along the pad's motion: the surface force projected on the direction the joint moves the pad
-//! (the pad's Jacobian column) against the motor's push at the fingertip.
+//! (the pad's Jacobian column) against the motor's push at the fingertip, with friction resisting
+//! the part of the motion that slides over the surface. Without it a pad pressing a ball off its
+//! centre line, or deep into a soft one, slides round its side and through it.
 //!
 //! Only the pads touch (a sphere of the profile's `pad_radius` around each finger's `pad`); the
 //! links pass through the object. Only the joints that close a fingertip give way to the
@@ -103,9 +105,14 @@ pub struct ShapeObject {
     /// Surface stiffness, newtons per metre of a pad's penetration: a sponge a few hundred, a
     /// firm object a few thousand, a rigid block 1e4..1e5.
     pub stiffness_n_per_m: f32,
-    /// Surface damping, newtons per metre per second of penetration speed (0: none). It only
-    /// resists, never pulls a pad in.
+    /// Surface damping, newtons per metre per second of penetration speed (0: none); the
+    /// surface's force never pulls a pad in.
     pub damping_n_s_per_m: f32,
+    /// Friction coefficient between a pad and the surface: a pad sliding over it is resisted by
+    /// up to this many newtons per newton of normal force. Taken as a function of the pad's
+    /// position only (the same pressing in and backing out, no stick-slip), so the object
+    /// stores and returns energy but never makes any.
+    pub friction: f32,
     /// Tangential force as a share of the normal force (the object's weight pulling sideways).
     pub tangential_share: f32,
     /// Direction of the tangential force, degrees (0 = towards the fingertip, clockwise).
@@ -115,13 +122,16 @@ pub struct ShapeObject {
 }
 
 impl ShapeObject {
-    /// `shape` with a surface of this stiffness, no damping, and the tangential force and
-    /// proximity range of today's joint-space ball (`VirtualObject::ball`).
+    /// `shape` with a surface of this stiffness, no damping, friction 0.5 (within the range
+    /// measured for skin on common materials, about 0.2 to above 1: Derler and Gerhardt,
+    /// "Tribology of skin", Tribology Letters 45, 2012), and the tangential force and proximity
+    /// range of the joint-space ball (`VirtualObject::ball`).
     pub fn new(shape: Shape, stiffness_n_per_m: f32) -> Self {
         Self {
             shape,
             stiffness_n_per_m,
             damping_n_s_per_m: 0.0,
+            friction: 0.5,
             tangential_share: 0.25,
             tangential_direction_deg: 180,
             approach_m: 0.02,
@@ -131,10 +141,11 @@ impl ShapeObject {
     /// A ball 80 mm across (an orange) under the fingers, clear of the palm, placed by a grid
     /// search over its centre and radius: closing fingers meet it near the joint-space ball's
     /// travel (index at 36 %, middle 34 %, ring and pinky 30 %), and press it rather than graze
-    /// it, so that at 3000 N/m every finger's full push (15.7 N) is held (a smaller ball lets
-    /// the outer fingers slide past its side). The thumb's contact depends on its abduction:
-    /// with the abduction at 70 % it meets the ball at 12 % of its flexion, at 60 % at 22 %,
-    /// and below 50 % it passes beside the ball.
+    /// it (a smaller ball lets the outer fingers slide round its side). With the default
+    /// friction every finger's full push (15.7 N) is held from about 2000 N/m, a 5 N push from
+    /// about 500 N/m; a softer ball is pressed through. The thumb's contact depends on its
+    /// abduction: with the abduction at 70 % it meets the ball at 12 % of its flexion, at 60 %
+    /// at 22 %, and below 50 % it passes beside the ball.
     pub fn ball(stiffness_n_per_m: f32) -> Self {
         Self::new(
             Shape::Sphere {
@@ -293,7 +304,7 @@ impl Pads {
         let pad = self.pad(&object.shape, f, &self.angles(positions), &mut jacobian);
         (pad.gap < 0.0).then(|| {
             let force = normal_force(object, -pad.gap, previous_depth, h);
-            force * pad.normal.dot(jacobian[j].normalize_or_zero())
+            force * along(pad.normal, jacobian[j].normalize_or_zero(), object.friction)
         })
     }
 
@@ -382,13 +393,26 @@ impl Pads {
             state.normal_n[f] = force as f32;
             for (j, load) in state.load_n.iter_mut().enumerate() {
                 if self.fingertip_of_joint[j] == f {
-                    let along = pad.normal.dot(jacobian[j].normalize_or_zero());
-                    *load = (force * along).abs() as f32;
+                    let direction = jacobian[j].normalize_or_zero();
+                    *load = (force * along(pad.normal, direction, object.friction)).abs() as f32;
                 }
             }
         }
         state
     }
+}
+
+/// The surface's push along a pad's motion `direction` (a unit vector, or zero for a joint that
+/// does not move the pad) per newton of normal force, signed the way the `normal` pushes: the
+/// normal's component, and the friction (`friction` per newton) against the part of the motion
+/// that slides over the surface.
+fn along(normal: DVec3, direction: DVec3, friction: f32) -> f64 {
+    let cos = normal.dot(direction);
+    if cos == 0.0 {
+        return 0.0;
+    }
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    cos + cos.signum() * f64::from(friction.max(0.0)) * sin
 }
 
 /// The surface's normal force at `depth` metres that was `previous_depth` a step of `h` seconds

@@ -868,4 +868,27 @@ mod shape_tests {
         assert!((h.positions()[2] - 700.0).abs() < 1.0);
         assert_eq!(h.touches()[1], Touch::default());
     }
+
+    #[test]
+    fn friction_holds_a_finger_that_presses_the_ball_off_its_centre_line() {
+        // The index's plane passes 27 mm beside the ball's centre: pressing it, the pad slides
+        // round the side of a frictionless soft ball and through it.
+        let index = |friction: f32| {
+            let ball = ShapeObject {
+                friction,
+                ..ShapeObject::ball(1000.0)
+            };
+            let mut h = Hand::new(HandParams::default(), Some(ObjectModel::Shape(ball)));
+            h.command(2, mode::POSITION_SPEED, 700.0, 1000.0);
+            run(&mut h, 1.0);
+            (h.positions()[2], h.touches()[1].normal_n)
+        };
+        let (held, force) = index(0.5);
+        assert!(
+            held < 450.0 && force > 5.0,
+            "with friction: {held}, {force} N"
+        );
+        let (slid, _) = index(0.0);
+        assert!(slid > 690.0, "without: {slid}");
+    }
 }
