@@ -11,10 +11,12 @@
 //! test command does); [`bin`] says so when one is missing.
 //!
 //! Must not depend on: node internals. Tests talk to the pipeline only through its topics and
-//! its command line, as a user would.
+//! its command line, as a user would; the one exception, [`haptics`], runs the stages' library
+//! code in one process on a simulated clock (a closed loop across a delay, deterministic).
 
 pub mod ecat;
 pub mod hand;
+pub mod haptics;
 pub mod netns;
 pub mod rig;
 pub mod stations;
