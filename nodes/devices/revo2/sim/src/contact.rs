@@ -37,6 +37,10 @@ const TOLERANCE: f32 = 1e-4;
 /// (1000 / 2^24 < 1e-4), and a bound where f32 rounding would stall the bracket.
 const MAX_BISECTIONS: usize = 24;
 
+/// The share of an object's squash depth that [`normal_force`] counts as left at least, so the
+/// force stays finite (a million times the linear spring's) at and past the middle.
+const MIN_SQUASH_LEFT: f64 = 1e-6;
+
 /// A shape in the hand's frame (metres; `teleop_hand_profile`'s frame: wrist at the origin,
 /// fingers along +Y, the back of the hand towards +Z, the thumb on the -X side).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -58,6 +62,17 @@ pub enum Shape {
 }
 
 impl Shape {
+    /// How deep a pad can press in before the object is squashed flat, metres: to the sphere's
+    /// centre, to the box's middle across its thinnest side.
+    fn squash_depth(&self) -> f64 {
+        match *self {
+            Shape::Sphere { radius, .. } => f64::from(radius),
+            Shape::Box { half_extents, .. } => {
+                f64::from(half_extents[0].min(half_extents[1]).min(half_extents[2]))
+            }
+        }
+    }
+
     /// The signed distance from `p` to the surface (negative inside) and the outward normal at
     /// the nearest surface point.
     fn distance(&self, p: DVec3) -> (f64, DVec3) {
@@ -103,7 +118,9 @@ pub struct ShapeObject {
     /// Where it is.
     pub shape: Shape,
     /// Surface stiffness, newtons per metre of a pad's penetration: a sponge a few hundred, a
-    /// firm object a few thousand, a rigid block 1e4..1e5.
+    /// firm object a few thousand, a rigid block 1e4..1e5. It is the stiffness of a shallow
+    /// press: the object stiffens as it is squashed, without bound as a pad nears its middle
+    /// (see [`normal_force`]).
     pub stiffness_n_per_m: f32,
     /// Surface damping, newtons per metre per second of penetration speed (0: none); the
     /// surface's force never pulls a pad in.
@@ -142,10 +159,11 @@ impl ShapeObject {
     /// search over its centre and radius: closing fingers meet it near the joint-space ball's
     /// travel (index at 36 %, middle 34 %, ring and pinky 30 %), and press it rather than graze
     /// it (a smaller ball lets the outer fingers slide round its side). With the default
-    /// friction every finger's full push (15.7 N) is held from about 2000 N/m, a 5 N push from
-    /// about 500 N/m; a softer ball is pressed through. The thumb's contact depends on its
-    /// abduction: with the abduction at 70 % it meets the ball at 12 % of its flexion, at 60 %
-    /// at 22 %, and below 50 % it passes beside the ball.
+    /// friction every finger's full push (15.7 N) is held from about 1000 N/m (below, the index
+    /// and pinky, off the ball's centre line, slide round it), a 5 N push from about 500 N/m
+    /// (the four fingers from 300 N/m, the thumb sliding past). The thumb's contact depends on
+    /// its abduction: with the abduction at 70 % it meets the ball at 12 % of its flexion, at
+    /// 60 % at 22 %, and below 50 % it passes beside the ball.
     pub fn ball(stiffness_n_per_m: f32) -> Self {
         Self::new(
             Shape::Sphere {
@@ -417,8 +435,16 @@ fn along(normal: DVec3, direction: DVec3, friction: f32) -> f64 {
 
 /// The surface's normal force at `depth` metres that was `previous_depth` a step of `h` seconds
 /// ago, newtons: the spring, plus the damping while the pad goes in; never a pull.
+///
+/// The spring is `k d / (1 - d / s)` for a depth `d` of an object squashed flat at `s`
+/// ([`Shape::squash_depth`]): `k d` for a shallow press, unbounded towards `s`. A crude stand-in
+/// for a foam's densification (its stress rising steeply once the cells collapse: Gibson and
+/// Ashby, "Cellular Solids", 1997, chapter 5); what matters here is that a pad never presses
+/// through a soft object's middle, where its surface would push it on and out the other side.
+/// A rigid object's depths are far from `s`, so it stays linear.
 fn normal_force(object: &ShapeObject, depth: f64, previous_depth: f64, h: f64) -> f64 {
-    let spring = f64::from(object.stiffness_n_per_m) * depth;
+    let left = (1.0 - depth / object.shape.squash_depth()).max(MIN_SQUASH_LEFT);
+    let spring = f64::from(object.stiffness_n_per_m) * depth / left;
     let rate = if h > 0.0 {
         (depth - previous_depth) / h
     } else {
@@ -491,15 +517,29 @@ mod tests {
     }
 
     #[test]
+    fn a_soft_object_stiffens_towards_its_middle_and_stays_finite_past_it() {
+        let sponge = ShapeObject::ball(300.0);
+        let at = |depth: f64| normal_force(&sponge, depth, depth, 0.0005);
+        assert!((at(0.001) - 0.3 / 0.975).abs() < 1e-6);
+        assert!(at(0.03) > 3.0 * 300.0 * 0.03, "{}", at(0.03));
+        for depth in [0.0399, 0.04, 0.05] {
+            let force = at(depth);
+            assert!(force.is_finite() && force > 1e3, "{depth}: {force}");
+        }
+    }
+
+    #[test]
     fn the_surface_force_never_pulls() {
         let object = ShapeObject {
             damping_n_s_per_m: 100.0,
             ..ShapeObject::ball(1000.0)
         };
-        // Going in: spring plus damping; coming out fast: no pull.
+        // Going in: spring plus damping; coming out fast: no pull. The ball (40 mm radius)
+        // 2 mm deep has 5 % of its squash depth gone: the spring is 1 / 0.95 of k d.
         let h = 0.0005;
-        assert!((normal_force(&object, 0.002, 0.001, h) - (2.0 + 200.0)).abs() < 1e-9);
+        let spring = 2.0 / 0.95;
+        assert!((normal_force(&object, 0.002, 0.001, h) - (spring + 200.0)).abs() < 1e-6);
         assert_eq!(normal_force(&object, 0.001, 0.002, h), 0.0);
-        assert!((normal_force(&object, 0.002, 0.002, h) - 2.0).abs() < 1e-12);
+        assert!((normal_force(&object, 0.002, 0.002, h) - spring).abs() < 1e-6);
     }
 }
