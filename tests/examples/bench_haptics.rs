@@ -194,8 +194,9 @@ fn bench() -> Result<(), String> {
          force (or position) swings more than {CYCLE_FORCE_P2P} units ({CYCLE_FINGER_P2P} raw), \
          its second half keeps at least {CYCLE_KEEPS} of the first half's swing and it crosses \
          its mean at least {CYCLE_CROSSINGS} times; shown: the finger whose force swings most \
-         and the period (the autocorrelation's highest peak after its first zero); `n/N` = \
-         grasps whose held part oscillates;"
+         and the period (the autocorrelation's highest peak after its first zero; two periods \
+         must fit in the held part, so a slower swing shows only in p2p); `n/N` = grasps whose \
+         held part oscillates;"
     );
     println!(
         "- settle: from the first tactile force above the threshold on the robot's index to \

@@ -7,7 +7,7 @@
 //! `teleop_feedback::FeedbackEngine`) or its simulators'; what the executables add around them
 //! (their topics, serial line and EtherCAT frames) is reduced to what changes the loop's timing
 //! and values, each emulation naming the code it follows. Deterministic: no processes, no
-//! threads, no wall clock; a few seconds of the loop take milliseconds.
+//! threads, no wall clock; a grasp (6 s of the loop) takes about 0.2 s in a release build.
 //!
 //! [`run`] runs one [`Case`] and records every millisecond ([`Tick`]); [`analyse`] turns a run
 //! into the haptics benchmark's metrics ([`Metrics`]). `bench_haptics` prints them over delays,
@@ -864,6 +864,9 @@ pub struct Hold {
     pub error_index_pct: Option<f32>,
     /// Mean of the errors of the fingers in contact, % (`None`: none in contact).
     pub error_mean_pct: Option<f32>,
+    /// Mean felt force over the held part of the fingers in contact (expecting at least
+    /// [`CONTACT_MIN`]), glove units (`None`: none in contact).
+    pub felt_contact: Option<f32>,
     /// Peak-to-peak of the index's felt force over the held part, glove units.
     pub felt_p2p_index: f32,
     /// Largest peak-to-peak of a finger's felt force over the held part, glove units.
@@ -923,6 +926,10 @@ pub fn analyse(stations: &Stations, case: &Case, ticks: &[Tick]) -> Metrics {
             (want >= CONTACT_MIN).then(|| (felt - want) / want * 100.0)
         };
         let errors: Vec<f32> = (0..FINGERS).filter_map(error).collect();
+        let touching: Vec<f32> = (0..FINGERS)
+            .filter(|&f| mean(&|t| expected(t, f)) >= CONTACT_MIN)
+            .map(|f| mean(&|t| t.felt[f]))
+            .collect();
         let felt_index = mean(&|t| t.felt[INDEX]);
         let felt: [Vec<f32>; FINGERS] =
             core::array::from_fn(|f| held.iter().map(|t| t.felt[f]).collect());
@@ -954,6 +961,8 @@ pub fn analyse(stations: &Stations, case: &Case, ticks: &[Tick]) -> Metrics {
             error_index_pct: error(INDEX),
             error_mean_pct: (!errors.is_empty())
                 .then(|| errors.iter().sum::<f32>() / errors.len() as f32),
+            felt_contact: (!touching.is_empty())
+                .then(|| touching.iter().sum::<f32>() / touching.len() as f32),
             felt_p2p_index: p2p(&felt[INDEX]),
             felt_p2p: swing(&felt),
             finger_p2p: swing(&finger),
