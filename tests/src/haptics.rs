@@ -1073,4 +1073,55 @@ mod tests {
         assert!(bridge_passes(0, 151, Some(100), 51));
         assert!(bridge_passes(0, u64::MAX, None, 0));
     }
+
+    #[test]
+    fn the_figures_of_a_known_grasp() {
+        let stations = Stations::repository().expect("the repository's configuration");
+        let law = stations.feedback().clone();
+        let case = Case {
+            grasps: 1,
+            grasp_period_s: 1.0,
+            ..Case::new(0, Object::RIGID, Feedback::Plain)
+        };
+        // The robot's index touches at 0.3 s with a force the law turns into 500 units; the
+        // glove's index feels 450 from 0.4 s on, after a swing that ends there. Meanwhile the
+        // actuator pushes 100 while the finger opens at 1000 raw/s for 0.1 s (the channel gives
+        // 100 x 1 travel/s x 0.1 s = 10), then as much while it closes (it takes 10 back).
+        let newtons = law.contact_threshold_n + 500.0 / (law.gain_per_n * law.finger_gain[INDEX]);
+        let ticks: Vec<Tick> = (0..=1000)
+            .map(|ms| {
+                let t_s = f64::from(ms) * 1e-3;
+                let mut tick = Tick {
+                    t_s,
+                    ..Tick::default()
+                };
+                if t_s >= 0.3 {
+                    tick.robot_n[INDEX] = newtons;
+                    tick.felt[INDEX] = if t_s >= 0.4 { 450.0 } else { 900.0 };
+                }
+                if (0.1..0.2).contains(&t_s) {
+                    (tick.drive[0], tick.velocity[0]) = (100.0, 1000.0);
+                } else if (0.2..0.3).contains(&t_s) {
+                    (tick.drive[0], tick.velocity[0]) = (100.0, -1000.0);
+                }
+                tick.finger[INDEX] = 500.0 + if ms % 20 < 10 { 10.0 } else { -10.0 };
+                tick
+            })
+            .collect();
+        let m = analyse(&stations, &case, &ticks);
+        let hold = m.holds[0];
+        assert!((hold.expected_index - 500.0).abs() < 0.5, "{hold:?}");
+        let error = hold.error_index_pct.expect("the index in contact");
+        assert!((error + 10.0).abs() < 0.1, "{hold:?}");
+        assert_eq!(hold.felt_contact, Some(450.0));
+        assert!(
+            (hold.settle_s.expect("settles") - 0.1).abs() < 0.0015,
+            "{hold:?}"
+        );
+        assert_eq!((hold.felt_p2p_index, hold.finger_p2p), (0.0, 20.0));
+        let (finger, period) = hold.cycle.expect("the finger swings 20 raw every 20 ms");
+        assert_eq!(finger, INDEX);
+        assert!((period - 0.02).abs() < 0.0015, "{hold:?}");
+        assert!((m.generated - 10.0).abs() < 0.05, "{m:?}");
+    }
 }
