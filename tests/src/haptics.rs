@@ -320,7 +320,8 @@ impl Stations {
         let ms = |ns: u64| ns as f64 / 1e6;
         let age = |a: Option<u64>| a.map_or("none".to_string(), |ns| format!("{} ms", ms(ns)));
         format!(
-            "glove exchange every {:.3} ms (force timeout {} ms, clamp {}); Revo2 cycle {} ms, \
+            "glove exchange every {:.3} ms (force timeout {} ms, clamp {}; its diagnostic \
+             register reads, a few a second, left out); Revo2 cycle {} ms, \
              command stale after {} ms, tactile {}; bridges drop samples older on arrival than \
              the link's one-way delay plus: hand/command {}, hand/state {}, hand/tactile {}; \
              feedback tick {} ms, timeouts tactile {} ms / hand {} ms (freshness in the hand \
