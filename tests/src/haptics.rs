@@ -765,6 +765,9 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
             let raw = operator.positions();
             let mut sample = GloveState {
                 raw_position: raw,
+                // The forces the glove measures between finger and actuator, as the node
+                // reports them (the passivity observer's force).
+                force: operator.forces(),
                 position: raw.map(|p| (f32::from(p) / 1000.0).clamp(0.0, 1.0)),
                 link_up: 1,
                 exchanges: glove_seq as u32,

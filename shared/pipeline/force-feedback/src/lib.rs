@@ -69,7 +69,8 @@
 //! max_damping = 20000.0       # glove units per (travel per second)
 //! reset_after_s = 0.2         # s without demand before a finger's energy sum restarts
 //! max_stored = 50.0           # glove units x travel the observer keeps at most
-//! velocity_tau_s = 0.01       # s, low-pass of the finger's velocity
+//! velocity_tau_s = 0.0        # s, low-pass of the finger's velocity (0: none)
+//! tolerance = 10.0            # the deficit (glove units x travel) the controller lets pass
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
 //! assert_eq!(config, FeedbackConfig::default());
@@ -467,15 +468,12 @@ impl ForceFeedback {
             stale: false,
             passivity: PassivityReport::default(),
         };
-        // What the law wants per finger, for the passivity layer: the demand (its reset) and
-        // whether the finger ramps (the layer may then only lower it).
+        // What the law wants per finger, for the passivity layer's reset.
         let mut demand = [0.0; GLOVE_FINGERS];
-        let mut ramping = [false; GLOVE_FINGERS];
 
         for finger in 0..GLOVE_FINGERS {
             let value = match self.demand(inputs, finger) {
                 Demand::Ramp => {
-                    ramping[finger] = true;
                     let next = positive_or_zero(self.output[finger] - ramp_step);
                     // Bumpless restart: the filter resumes from the output.
                     self.filtered[finger] = next;
@@ -514,17 +512,17 @@ impl ForceFeedback {
             };
             self.output[finger] = value;
         }
-        // The passivity controller acts on what is commanded, not on the law's state, so the
-        // law's filter and rate limit carry on undisturbed.
+        // The passivity controller lowers what is commanded, and the rate limit climbs back
+        // from there: a force that jumped back to the law's value once the finger stops
+        // opening would throw it open again.
         let active = match self.config.passivity.mode {
             PassivityMode::On => true,
             PassivityMode::Off => false,
             PassivityMode::Auto => inputs.remote,
         };
-        let (force, report) = self
-            .passivity
-            .control(self.output, demand, ramping, max, dt, active);
-        for (slot, value) in out.force.iter_mut().zip(force) {
+        let (force, report) = self.passivity.control(self.output, demand, max, dt, active);
+        for ((slot, value), state) in out.force.iter_mut().zip(force).zip(&mut self.output) {
+            *state = value.min(*state);
             *slot = (value as i16).clamp(0, self.config.max_force);
         }
         out.passivity = report;
