@@ -471,7 +471,7 @@ impl ForceFeedback {
         // What the law wants per finger, for the passivity layer's reset.
         let mut demand = [0.0; GLOVE_FINGERS];
 
-        for finger in 0..GLOVE_FINGERS {
+        for (finger, wanted) in demand.iter_mut().enumerate() {
             let value = match self.demand(inputs, finger) {
                 Demand::Ramp => {
                     let next = positive_or_zero(self.output[finger] - ramp_step);
@@ -489,7 +489,7 @@ impl ForceFeedback {
                         d = max;
                         out.clamped += 1;
                     }
-                    demand[finger] = d;
+                    *wanted = d;
                     // Written as a weighted sum so it is monotone in both
                     // arguments even with float rounding.
                     let f = (1.0 - alpha) * self.filtered[finger] + alpha * d;
