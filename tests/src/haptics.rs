@@ -177,16 +177,29 @@ struct GloveFile {
     baud: u32,
     force_timeout_ms: u64,
     max_force: i16,
+    diagnostics_hz: f32,
 }
 
-/// The glove node's exchange: its period and force path.
+/// The glove node's exchange: its period, force path and diagnostic reads.
 #[derive(Debug, Clone, Copy)]
 struct GloveNode {
     /// One force exchange, ns.
     exchange_ns: u64,
     force_timeout_ns: u64,
     max_force: f32,
+    /// One diagnostic register read takes the place of a force exchange this often, ns
+    /// (`None`: never).
+    diagnostic_ns: Option<u64>,
+    /// Whether `glove/state`'s forces are read with every exchange instead of from the
+    /// diagnostic reads (a glove node that does not exist yet; see
+    /// [`Stations::forces_every_exchange`]).
+    forces_every_exchange: bool,
 }
+
+/// The registers the glove node reads in turn in its diagnostic slots; the first, the actual
+/// forces, is what `glove/state`'s `force` reports (nodes/devices/glove/node/src/node.rs,
+/// `DIAGNOSTICS` and `read_diagnostic`).
+const DIAGNOSTIC_REGISTERS: usize = 5;
 
 /// What the loop takes from `config/revo2.toml`.
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -290,6 +303,10 @@ impl Stations {
                     + EXCHANGE_OVERHEAD_NS,
                 force_timeout_ns: glove.force_timeout_ms * 1_000_000,
                 max_force: f32::from(glove.max_force),
+                diagnostic_ns: (glove.diagnostics_hz > 0.0).then(|| {
+                    (1e9 / (f64::from(glove.diagnostics_hz) * DIAGNOSTIC_REGISTERS as f64)) as u64
+                }),
+                forces_every_exchange: false,
             },
             revo2: Revo2Node {
                 cycle_ns: (1e9 / revo2.cycle_hz) as u64,
@@ -310,6 +327,16 @@ impl Stations {
         Self::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(".."))
     }
 
+    /// The same stations with a glove node that reports the glove's measured forces in every
+    /// `glove/state` (as if it read them with each exchange), instead of today's node, whose
+    /// `force` is the actual-force register read in its diagnostic slots (`diagnostics_hz`
+    /// complete sets a second): what the passivity observer would see with forces as fresh as
+    /// the positions.
+    pub fn forces_every_exchange(mut self) -> Self {
+        self.glove.forces_every_exchange = true;
+        self
+    }
+
     /// The force-feedback configuration (gain, threshold, saturation, per-finger gains).
     pub fn feedback(&self) -> &teleop_force_feedback::FeedbackConfig {
         &self.feedback.feedback
@@ -320,8 +347,8 @@ impl Stations {
         let ms = |ns: u64| ns as f64 / 1e6;
         let age = |a: Option<u64>| a.map_or("none".to_string(), |ns| format!("{} ms", ms(ns)));
         format!(
-            "glove exchange every {:.3} ms (force timeout {} ms, clamp {}; its diagnostic \
-             register reads, a few a second, left out); Revo2 cycle {} ms, \
+            "glove exchange every {:.3} ms (force timeout {} ms, clamp {}), glove/state's \
+             measured forces {}; Revo2 cycle {} ms, \
              command stale after {} ms, tactile {}; bridges drop samples older on arrival than \
              the link's one-way delay plus: hand/command {}, hand/state {}, hand/tactile {}; \
              feedback tick {} ms, timeouts tactile {} ms / hand {} ms (freshness in the hand \
@@ -329,6 +356,16 @@ impl Stations {
             ms(self.glove.exchange_ns),
             ms(self.glove.force_timeout_ns),
             self.glove.max_force,
+            match (self.glove.forces_every_exchange, self.glove.diagnostic_ns) {
+                (true, _) => "read with every exchange (not today's glove node)".to_string(),
+                (false, Some(ns)) => format!(
+                    "from the actual-force register read every {} ms (a diagnostic read takes \
+                     an exchange's place every {} ms)",
+                    ms(ns * DIAGNOSTIC_REGISTERS as u64),
+                    ms(ns)
+                ),
+                (false, None) => "never read (diagnostics off)".to_string(),
+            },
             ms(self.revo2.cycle_ns),
             ms(self.revo2.stale_command_ns),
             match self.revo2.tactile {
@@ -657,6 +694,11 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
     let mut next_exchange = 0u64;
     let mut next_cycle = 0u64;
     let mut next_report = 0u64;
+    // The glove node's diagnostic slots: the next, which register it reads, and the forces the
+    // last actual-force read gave.
+    let mut next_diagnostic = 0u64;
+    let mut diagnostic_slot = 0usize;
+    let mut glove_force = [0i16; FINGERS];
     // The bridges' measured one-way delay, allowed for on top of max_age_ms.
     let mut bridge_allowance = 0u64;
     let mut glove_seq = 0u64;
@@ -747,9 +789,21 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
             );
         }
 
-        // The glove node's exchange: the force to send (fresh by its stamp, else zero; clamped),
-        // then the answer's positions as glove/state into retargeting.
-        if now >= next_exchange {
+        // The glove node's exchange: in a diagnostic slot a register read (the actual forces,
+        // then four others, in turn), else the force to send (fresh by its stamp, else zero;
+        // clamped) and the answer's positions as glove/state into retargeting.
+        let diagnostic = stations
+            .glove
+            .diagnostic_ns
+            .filter(|_| now >= next_exchange && now >= next_diagnostic);
+        if let Some(period) = diagnostic {
+            next_exchange += stations.glove.exchange_ns;
+            next_diagnostic = now + period;
+            if diagnostic_slot == 0 {
+                glove_force = operator.forces();
+            }
+            diagnostic_slot = (diagnostic_slot + 1) % DIAGNOSTIC_REGISTERS;
+        } else if now >= next_exchange {
             next_exchange += stations.glove.exchange_ns;
             let max = stations.glove.max_force;
             let forces = match force.command {
@@ -767,7 +821,11 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
                 raw_position: raw,
                 // The forces the glove measures between finger and actuator, as the node
                 // reports them (the passivity observer's force).
-                force: operator.forces(),
+                force: if stations.glove.forces_every_exchange {
+                    operator.forces()
+                } else {
+                    glove_force
+                },
                 position: raw.map(|p| (f32::from(p) / 1000.0).clamp(0.0, 1.0)),
                 link_up: 1,
                 exchanges: glove_seq as u32,
