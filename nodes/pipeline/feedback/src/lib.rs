@@ -353,7 +353,6 @@ impl FeedbackEngine {
             .map(|(g, made)| OperatorInput {
                 t_ns: *made,
                 position: core::array::from_fn::<_, GLOVE_FINGERS, _>(|f| g.position[f]),
-                force: g.force.map(f32::from),
             });
         (
             Inputs {
@@ -620,11 +619,10 @@ mod tests {
         let mut last = None;
         for i in 0..300u64 {
             let now = i * ms;
-            // The index finger closes steadily into the contact against the glove's push (as
-            // the glove measures it): the channel absorbs.
+            // The index finger closes steadily into the contact against the glove's push: the
+            // channel absorbs.
             g.header.stamp_ns = now;
             g.position[3] = 0.9 - i as f32 * 0.001;
-            g.force[3] = 400;
             e.handle(&Event::Glove(g), now);
             t.header.stamp_ns = now;
             last = e.handle(&Event::Tactile(t), now).passivity;

@@ -8,10 +8,12 @@
 //! that has flowed into it never goes negative; the passivity observer sums force times velocity
 //! at the port every sample, and the passivity controller, an adaptive damper, takes out exactly
 //! the deficit when the sum goes negative. Here the port is the glove finger: the motion is the
-//! operator's finger closing and the force the one between finger and actuator, both as the
-//! glove measures them in the same exchange, so the observer needs nothing from the robot
-//! station, holds whatever delay the link adds, and counts the force that acted, not the one
-//! commanded (which reaches the finger an exchange later).
+//! operator's finger closing, from the glove's positions, and the force the one the glove
+//! applied meanwhile: the glove node sends the newest force command in each exchange and reads
+//! the positions in the same exchange, so the force acting between two glove samples is the
+//! command that was newest when the first of them arrived (the glove's measured force comes
+//! only with its slow diagnostic reads). The observer needs nothing from the robot station and
+//! holds whatever delay the link adds.
 //!
 //! # Units and signs
 //!
@@ -112,9 +114,6 @@ pub struct OperatorInput {
     pub t_ns: u64,
     /// Finger positions in glove order, normalised travel (1 open .. 0 bent).
     pub position: [f32; GLOVE_FINGERS],
-    /// The measured force between each finger and its actuator, glove units (positive: the
-    /// actuator pushes the finger open).
-    pub force: [f32; GLOVE_FINGERS],
 }
 
 /// What the passivity layer saw and did at one step.
@@ -143,6 +142,10 @@ pub struct Passivity {
     interval_s: f32,
     /// How long each finger's demand has been zero, s.
     idle_s: [f32; GLOVE_FINGERS],
+    /// The newest force commanded, per finger (glove units).
+    applied: [f32; GLOVE_FINGERS],
+    /// The force acting since the newest glove sample: the command newest when it came.
+    latched: [f32; GLOVE_FINGERS],
 }
 
 impl Passivity {
@@ -155,6 +158,8 @@ impl Passivity {
             velocity: [0.0; GLOVE_FINGERS],
             interval_s: 0.0,
             idle_s: [0.0; GLOVE_FINGERS],
+            applied: [0.0; GLOVE_FINGERS],
+            latched: [0.0; GLOVE_FINGERS],
         }
     }
 
@@ -173,12 +178,14 @@ impl Passivity {
         self.energy
     }
 
-    /// Takes a glove sample into the sum: the mean of the measured forces at the previous
-    /// sample and this one times the finger's closing displacement between them. A sample not
-    /// newer than the last one changes nothing; the first one only sets the reference.
+    /// Takes a glove sample into the sum: the force acting since the previous sample times the
+    /// finger's closing displacement since then; the newest command then acts until the next
+    /// sample. A sample not newer than the last one changes nothing; the first one only sets
+    /// the reference.
     pub fn observe(&mut self, operator: &OperatorInput) {
         let Some(last) = self.last else {
             self.last = Some(*operator);
+            self.latched = self.applied;
             return;
         };
         if operator.t_ns <= last.t_ns {
@@ -193,12 +200,10 @@ impl Passivity {
         };
         for f in 0..GLOVE_FINGERS {
             let closing = last.position[f] - operator.position[f];
-            if !(closing.is_finite() && last.force[f].is_finite() && operator.force[f].is_finite())
-            {
+            if !closing.is_finite() {
                 continue;
             }
-            let force = 0.5 * (last.force[f] + operator.force[f]);
-            let e = self.energy[f] + force * closing;
+            let e = self.energy[f] + self.latched[f] * closing;
             self.energy[f] = if e.is_finite() {
                 e.min(self.config.max_stored)
             } else {
@@ -209,6 +214,7 @@ impl Passivity {
         }
         self.interval_s = dt;
         self.last = Some(*operator);
+        self.latched = self.applied;
     }
 
     /// The force to command for each finger given the law's `force` (within `0..=max`), after
@@ -258,6 +264,7 @@ impl Passivity {
             }
             out[f] = out[f].round();
             report.acted[f] = out[f] != force[f].round();
+            self.applied[f] = out[f];
         }
         report.energy = self.energy;
         (out, report)
@@ -285,15 +292,9 @@ mod tests {
 
     /// Every finger at `p`, sampled at `t_ms`.
     fn at(t_ms: u64, p: f32) -> OperatorInput {
-        at_force(t_ms, p, 0.0)
-    }
-
-    /// Every finger at `p` under the measured force `force`, sampled at `t_ms`.
-    fn at_force(t_ms: u64, p: f32, force: f32) -> OperatorInput {
         OperatorInput {
             t_ns: t_ms * MS,
             position: [p; GLOVE_FINGERS],
-            force: [force; GLOVE_FINGERS],
         }
     }
 
@@ -301,16 +302,12 @@ mod tests {
     /// finger from `from` to `to` in `steps` glove samples of 1 ms from `*t`.
     fn push_and_move(pc: &mut Passivity, t: &mut u64, force: f32, from: f32, to: f32, steps: u32) {
         pc.control([force; 5], [force; 5], 1000.0, 0.001, false);
-        // The glove measures the force from the sample where it starts.
+        // The glove takes the command in its next exchange.
         *t += 1;
-        pc.observe(&at_force(*t, from, force));
+        pc.observe(&at(*t, from));
         for k in 1..=steps {
             *t += 1;
-            pc.observe(&at_force(
-                *t,
-                from + (to - from) * k as f32 / steps as f32,
-                force,
-            ));
+            pc.observe(&at(*t, from + (to - from) * k as f32 / steps as f32));
         }
     }
 
@@ -367,9 +364,9 @@ mod tests {
         // Applied for that sample (the glove measures it from its next exchange), the sum ends
         // at zero: passive, not beyond.
         t += 1;
-        pc.observe(&at_force(t, 0.817, out[0]));
+        pc.observe(&at(t, 0.817));
         t += 1;
-        pc.observe(&at_force(t, 0.818, out[0]));
+        pc.observe(&at(t, 0.818));
         assert!(pc.energy()[0].abs() < 0.01, "{:?}", pc.energy());
         // Closing, the push absorbs energy: the force is left alone even with a deficit the
         // sample pays back.
@@ -419,7 +416,7 @@ mod tests {
             for (position, force, gap) in samples {
                 t += gap;
                 pc.observe(&at(t, 0.0)); // reference the filter on the first sample
-                pc.observe(&OperatorInput { t_ns: t * MS + 1, position, force });
+                pc.observe(&OperatorInput { t_ns: t * MS + 1, position });
                 let force = force.map(|f| f.min(max));
                 let (out, report) = pc.control(force, force, max, 0.001, true);
                 for f in 0..GLOVE_FINGERS {

@@ -838,8 +838,7 @@ proptest! {
         // The operator's fingers move anywhere (the passivity controller, on, acts on them).
         for ((c, tactile, hand, estop), position) in steps.into_iter().zip(fingers) {
             t = apply(t, c);
-            let force = position.map(|p| p * 800.0);
-            let operator = Some(OperatorInput { t_ns: t, position, force });
+            let operator = Some(OperatorInput { t_ns: t, position });
             let out = ff.step(&Inputs { t_ns: t, tactile, hand, estop, operator, remote: true });
             for &f in &out.force {
                 prop_assert!((0..=max).contains(&f), "force {f} outside 0..={max}: {out:?}");
