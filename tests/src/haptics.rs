@@ -1047,8 +1047,9 @@ pub fn analyse(stations: &Stations, case: &Case, ticks: &[Tick]) -> Metrics {
     let observed = ticks.iter().flat_map(|t| t.observed).fold(0.0f32, f32::min);
     Metrics {
         holds,
-        generated: -generated,
-        observed: -observed,
+        // `0.0 - x`, not `-x`: nothing generated is 0, not -0.
+        generated: 0.0 - generated,
+        observed: 0.0 - observed,
     }
 }
 
