@@ -1,6 +1,7 @@
 //! The virtual objects a simulated hand can hold, one name each on every simulator (the
-//! `object` command, the `--object` argument). Each simulator gives an object its geometry in
-//! its own joint space; one that has no such object says so.
+//! `object` command, the `--object` argument). Each simulator gives an object its geometry: in
+//! its own joint space, or (the Revo2's by default) as a shape touched by the fingertip pads;
+//! one that has no such object says so.
 
 /// An object in the simulated hand.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
