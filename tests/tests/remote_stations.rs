@@ -141,24 +141,10 @@ fn two_stations_across_a_veth_pair() {
     // and the glove feels the ball. (Whether the hand's 100 ms command timeout ever
     // trips at 20 ms is measured by `bench_remote`, in release builds.)
     let robot_states = robot.node.subscriber::<HandState>().unwrap();
-    forces.drain(|_| {});
-    let (mut felt, mut holding, mut following) = (0i16, 0u32, 0u32);
-    let end = Instant::now() + Duration::from_secs(7);
-    while Instant::now() < end {
-        forces.drain(|f| felt = felt.max(max_force(f)));
-        robot_states.drain(|s| {
-            if s.holding == 0 {
-                following += 1;
-            } else {
-                holding += 1;
-            }
-        });
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let grasp = one_grasp(&forces, &robot_states);
     assert!(
-        felt > 100 && following > holding,
-        "at 20 ms each way: glove force up to {felt}; hand states following {following}, \
-         holding {holding}\n{}\n{}",
+        grasp.felt > 100 && grasp.following > grasp.holding,
+        "at 20 ms each way: {grasp:?}\n{}\n{}",
         operator.logs(),
         robot.logs()
     );
@@ -184,30 +170,10 @@ fn two_stations_across_a_veth_pair() {
     }
     // The next report reaches every node (one a second).
     std::thread::sleep(Duration::from_millis(1500));
-    forces.drain(|_| {});
-    robot_states.drain(|_| {});
-    let (mut felt, mut commands_seen, mut stale) = (0i16, 0u32, 0u32);
-    let (mut holding, mut following) = (0u32, 0u32);
-    let end = Instant::now() + Duration::from_secs(7);
-    while Instant::now() < end {
-        forces.drain(|f| {
-            felt = felt.max(max_force(f));
-            commands_seen += 1;
-            stale += u32::from(f.flags & force_flags::STALE != 0);
-        });
-        robot_states.drain(|s| {
-            if s.holding == 0 {
-                following += 1;
-            } else {
-                holding += 1;
-            }
-        });
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    let grasp = one_grasp(&forces, &robot_states);
     assert!(
-        felt > 100 && stale * 10 < commands_seen && following > holding,
-        "at 250 ms each way: glove force up to {felt}, {stale} of {commands_seen} force \
-         commands stale; hand states following {following}, holding {holding}\n{}\n{}",
+        grasp.felt > 100 && grasp.stale * 10 < grasp.forces && grasp.following > grasp.holding,
+        "at 250 ms each way: {grasp:?}\n{}\n{}",
         operator.logs(),
         robot.logs()
     );
@@ -373,6 +339,50 @@ fn two_stations_across_a_veth_pair() {
     let (mut operator, mut robot) = (operator, robot);
     assert!(operator.session.stop().success(), "{}", operator.logs());
     assert!(robot.session.stop().success(), "{}", robot.logs());
+}
+
+/// What one whole grasp of the scripted operator (6 s) showed at both stations.
+#[derive(Debug)]
+struct Grasp {
+    /// The largest glove force commanded.
+    felt: i16,
+    /// Force commands seen, and those flagged STALE.
+    forces: u32,
+    stale: u32,
+    /// The robot hand's states following commands, and holding.
+    following: u32,
+    holding: u32,
+}
+
+/// Watches the operator's force commands and the robot hand's states for 7 s (a grasp and a
+/// second), from now on.
+fn one_grasp(forces: &Subscriber<GloveForceCommand>, states: &Subscriber<HandState>) -> Grasp {
+    forces.drain(|_| {});
+    states.drain(|_| {});
+    let mut g = Grasp {
+        felt: 0,
+        forces: 0,
+        stale: 0,
+        following: 0,
+        holding: 0,
+    };
+    let end = Instant::now() + Duration::from_secs(7);
+    while Instant::now() < end {
+        forces.drain(|f| {
+            g.felt = g.felt.max(max_force(f));
+            g.forces += 1;
+            g.stale += u32::from(f.flags & force_flags::STALE != 0);
+        });
+        states.drain(|s| {
+            if s.holding == 0 {
+                g.following += 1;
+            } else {
+                g.holding += 1;
+            }
+        });
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    g
 }
 
 /// A third station in the operator's namespace whose certificate comes from another CA tries the
