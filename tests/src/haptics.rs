@@ -27,10 +27,10 @@ use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
     control_mode, device_model, fingertip_sensor, force_flags, link_kind, units, Fingertip,
     GloveForceCommand, GloveState, HandCommand, HandState, JointState, NodeHealth, Tactile,
-    MAX_JOINTS,
 };
 use teleop_retarget::RetargetEngine;
-use teleop_runtime::link::{LinkDelay, DEFAULT_MAX_LINK_DELAY_NS, LINK_NODE};
+use teleop_runtime::link::{stamp_over_link, LinkDelay, DEFAULT_MAX_LINK_DELAY_NS, LINK_NODE};
+use teleop_runtime::sample_time;
 use teleop_sim_glove::hand::{self as glove_sim, Drive, HandModel, Script};
 use teleop_sim_revo2::hand::{self as revo2_sim, HandParams, ObjectModel, ShapeObject};
 
@@ -501,22 +501,13 @@ impl RobotStation {
         let fresh = self
             .command
             .filter(|(c, received)| {
-                let made = c.header.stamp_ns.saturating_add(allowance).min(*received);
+                let made = sample_time(stamp_over_link(c.header.stamp_ns, allowance), *received);
                 now_ns.saturating_sub(made) <= self.node.stale_command_ns
             })
             .map(|(c, _)| c);
         let follow = fresh.and_then(|mut cmd| {
             self.admission.admit(&mut cmd, Some(&measured)).ok()?;
-            let n = usize::from(cmd.joint_count).min(MAX_JOINTS);
-            let mut targets = [0.0f64; MAX_JOINTS];
-            for (t, j) in targets.iter_mut().zip(&cmd.joints[..n]) {
-                *t = f64::from(j.target);
-            }
-            if self.resume.follow(&mut targets[..n], dt) {
-                for (j, t) in cmd.joints[..n].iter_mut().zip(&targets) {
-                    j.target = *t as f32;
-                }
-            }
+            self.resume.follow_command(&mut cmd, dt);
             Some(cmd)
         });
         let outputs = match follow {

@@ -16,7 +16,7 @@ use teleop_msgs::{
     fingertip_sensor, force_flags, units, EStop, GloveForceCommand, GloveState, HandCommand,
     HandState, NodeHealth, Tactile as TactileMsg,
 };
-use teleop_runtime::link::LinkDelay;
+use teleop_runtime::link::{stamp_over_link, LinkDelay};
 use teleop_runtime::sample_time;
 use teleop_runtime::schedule::Schedule;
 
@@ -245,7 +245,7 @@ impl FeedbackEngine {
         let allowance = self.link_allowance_ns(now_ns);
         // The stamp moved later by the link's delay, never past the receipt (`sample_time`):
         // fresh while `now <= min(stamp + allowance, received) + timeout`.
-        let made_by = |stamp: u64| stamp.saturating_add(allowance);
+        let made_by = |stamp: u64| stamp_over_link(stamp, allowance);
         let step = match *event {
             Event::Tactile(t) => {
                 let stamp = made_by(t.header.stamp_ns);

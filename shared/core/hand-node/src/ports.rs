@@ -12,9 +12,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_msgs::{
-    control_mode, DeviceInfo, HandCommand, HandState, NodeHealth, Tactile, MAX_JOINTS,
-};
+use teleop_msgs::{DeviceInfo, HandCommand, HandState, NodeHealth, Tactile, MAX_JOINTS};
 use teleop_runtime::link::{LinkDelay, DEFAULT_MAX_LINK_DELAY_NS};
 use teleop_runtime::{
     now_ns, EStopInput, Health, NodeRuntime, Publisher, RuntimeError, Subscriber,
@@ -171,7 +169,7 @@ impl HandPorts {
                     self.logged = None;
                     tracing::info!("hand commands fresh: following them");
                 }
-                self.resume_toward(&mut cmd, dt);
+                self.resume.follow_command(&mut cmd, dt);
                 Some(cmd)
             }
             Err(why) => {
@@ -210,29 +208,6 @@ impl HandPorts {
         if !again {
             tracing::warn!("hand command refused: {why}; the hand holds its last target");
             self.logged = Some((why, now));
-        }
-    }
-
-    /// Limits the position targets of `cmd` by the ramp after a hold.
-    fn resume_toward(&mut self, cmd: &mut HandCommand, dt: f64) {
-        if !matches!(
-            cmd.control_mode,
-            control_mode::POSITION | control_mode::POSITION_TIME
-        ) {
-            // No position target: the hand moves freely, and a later hold is where it is.
-            self.resume.forget();
-            self.resume.hold();
-            return;
-        }
-        let n = usize::from(cmd.joint_count).min(MAX_JOINTS);
-        let mut targets = [0.0f64; MAX_JOINTS];
-        for (t, j) in targets.iter_mut().zip(&cmd.joints[..n]) {
-            *t = f64::from(j.target);
-        }
-        if self.resume.follow(&mut targets[..n], dt) {
-            for (j, t) in cmd.joints[..n].iter_mut().zip(&targets) {
-                j.target = *t as f32;
-            }
         }
     }
 

@@ -119,6 +119,31 @@ impl Resume {
         self.len = n;
         self.resuming
     }
+
+    /// [`follow`](Self::follow) for a hand command: its position targets (modes position and
+    /// position + time) limited in place; a command of another mode has no position target to
+    /// ramp, so the hand moves freely and a later hold is where it is.
+    pub fn follow_command(&mut self, cmd: &mut teleop_msgs::HandCommand, dt: f64) {
+        use teleop_msgs::control_mode;
+        if !matches!(
+            cmd.control_mode,
+            control_mode::POSITION | control_mode::POSITION_TIME
+        ) {
+            self.forget();
+            self.hold();
+            return;
+        }
+        let n = usize::from(cmd.joint_count).min(MAX_JOINTS);
+        let mut targets = [0.0f64; MAX_JOINTS];
+        for (t, j) in targets.iter_mut().zip(&cmd.joints[..n]) {
+            *t = f64::from(j.target);
+        }
+        if self.follow(&mut targets[..n], dt) {
+            for (j, t) in cmd.joints[..n].iter_mut().zip(&targets) {
+                j.target = *t as f32;
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -19,6 +19,18 @@ pub const LINK_REPORT_NS: u64 = 3_000_000_000;
 /// Most link delay allowed for unless configured otherwise, ns.
 pub const DEFAULT_MAX_LINK_DELAY_NS: u64 = 1_000_000_000;
 
+/// A sample's stamp as freshness judges it after it crossed a link with this measured one-way
+/// delay: moved later by the delay (an unstamped sample, 0, stays as old as can be). With
+/// [`sample_time`](crate::sample_time) and the receipt this is the one rule of the module's
+/// documentation: `made = min(stamp + delay, received)`.
+pub fn stamp_over_link(stamp_ns: u64, link_delay_ns: u64) -> u64 {
+    if stamp_ns == 0 {
+        0
+    } else {
+        stamp_ns.saturating_add(link_delay_ns)
+    }
+}
+
 /// The newest link report of a station's bridge.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkDelay {

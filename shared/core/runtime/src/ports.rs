@@ -187,9 +187,9 @@ impl<M: Message> Subscriber<M> {
         };
         let received_ns = self.received_ns.get();
         let made = sample_time(
-            self.latest
-                .get()
-                .map_or(0, |m| m.header().stamp_ns.saturating_add(link_delay_ns)),
+            self.latest.get().map_or(0, |m| {
+                crate::link::stamp_over_link(m.header().stamp_ns, link_delay_ns)
+            }),
             received_ns,
         );
         age + Duration::from_nanos(received_ns - made) <= timeout
