@@ -166,7 +166,7 @@ fn bench() -> Result<(), String> {
     println!(
         "- link: a delay line each way, one way = round trip / 2, the bridges' max_age_ms \
          (plus the measured one-way delay) applied on arrival; each station's bridge's health \
-         report (link up, latency_p99_ms = one way) once a second to the hand node and to \
+         report (link up, latency_p50_ms = one way) once a second to the hand node and to \
          force feedback;"
     );
     println!(

@@ -29,7 +29,9 @@ use teleop_msgs::{
     GloveForceCommand, GloveState, HandCommand, HandState, JointState, NodeHealth, Tactile,
 };
 use teleop_retarget::RetargetEngine;
-use teleop_runtime::link::{stamp_over_link, LinkDelay, DEFAULT_MAX_LINK_DELAY_NS, LINK_NODE};
+use teleop_runtime::link::{
+    stamp_over_link, LinkDelay, DEFAULT_MAX_LINK_DELAY_NS, LINK_DELAY_DETAIL, LINK_NODE,
+};
 use teleop_runtime::sample_time;
 use teleop_sim_glove::hand::{self as glove_sim, Drive, HandModel, Script};
 use teleop_sim_revo2::hand::{self as revo2_sim, HandParams, ObjectModel, ShapeObject};
@@ -713,7 +715,7 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
             health.set_name(LINK_NODE);
             health.header.stamp_ns = now;
             health.set_detail("link_state", 1.0);
-            health.set_detail("latency_p99_ms", case.one_way_ns() as f64 / 1e6);
+            health.set_detail(LINK_DELAY_DETAIL, case.one_way_ns() as f64 / 1e6);
             bridge_allowance = case.one_way_ns();
             robot.link.report(&health, now);
             take(
@@ -772,7 +774,7 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
             health.set_name("bridge");
             health.header.stamp_ns = now;
             health.set_detail("link_state", 1.0);
-            health.set_detail("latency_p99_ms", case.one_way_ns() as f64 / 1e6);
+            health.set_detail(LINK_DELAY_DETAIL, case.one_way_ns() as f64 / 1e6);
             take(
                 feedback.handle(&Event::Health(health), now),
                 now,

@@ -588,6 +588,7 @@ pub fn reprocess_cmd(
     let state_id = rec.add_message_type::<HandState>()?;
     let tactile_id = rec.add_message_type::<Tactile>()?;
     let estop_id = rec.add_message_type::<EStop>()?;
+    let health_id = rec.add_message_type::<NodeHealth>()?;
     let mut outputs = Outputs::new(&mut rec, &messages)?;
 
     for msg in &messages {
@@ -628,10 +629,7 @@ pub fn reprocess_cmd(
                 continue;
             }
             // The bridge's health gives the link's delay (freshness, passivity's `auto`).
-            "health" => Event::Health(
-                msg.decode()
-                    .ok_or_else(|| anyhow::anyhow!("bad {} payload", NodeHealth::TOPIC))?,
-            ),
+            "health" => Event::Health(copy_input(&mut rec, health_id, msg)?),
             "hand/state" => Event::State(copy_input(&mut rec, state_id, msg)?),
             "hand/tactile" => Event::Tactile(copy_input(&mut rec, tactile_id, msg)?),
             "estop" => Event::EStop(copy_input(&mut rec, estop_id, msg)?),

@@ -40,7 +40,9 @@ pub struct TopicConfig {
     /// Which way it crosses.
     pub direction: Direction,
     /// `in` only: samples older than this on arrival (by their own stamp, in this station's
-    /// clock) are not published here, and counted.
+    /// clock) plus the link's measured one-way delay (the median of the frames' transit, at
+    /// most 1 s; 0 until measured and after the link went down) are not published here, and
+    /// counted.
     pub max_age_ms: Option<u64>,
 }
 

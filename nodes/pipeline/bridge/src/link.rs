@@ -205,6 +205,13 @@ impl LatencyWindow {
         }
     }
 
+    /// Forgets every value (the link went down, or the peer restarted: what comes next is
+    /// another link's delay).
+    pub fn clear(&mut self) {
+        self.next = 0;
+        self.filled = false;
+    }
+
     /// Adds one latency.
     pub fn push(&mut self, us: u32) {
         self.values[self.next] = us;

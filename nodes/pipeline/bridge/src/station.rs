@@ -14,6 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use teleop_msgs::{EStop, CONTRACT_VERSION};
+use teleop_runtime::link::LINK_DELAY_DETAIL;
 use teleop_runtime::{
     control, latch_engaged, latch_holder, now_ns, qualified, release_latch_held_by, set_latch_by,
     EventLoop, Flow, Health, Input, IpcSettings, Namespace, NodeRuntime, Subscriber, Wake,
@@ -64,8 +65,9 @@ struct Shared {
     /// The send stamps of the heartbeats sent: only their echoes make exchanges.
     sent_beats: Mutex<SentBeats>,
     latency: Mutex<Option<LatencyWindow>>,
-    /// The link's measured one-way delay (p99 of the window, at most [`MAX_LINK_ALLOWANCE_NS`])
-    /// that `max_age_ms` allows for, updated with the health report.
+    /// The link's measured one-way delay (the window's median, at most
+    /// [`MAX_LINK_ALLOWANCE_NS`]) that `max_age_ms` allows for, updated with the health report
+    /// and forgotten when the link goes down.
     allowance_ns: AtomicU64,
 }
 
@@ -78,6 +80,16 @@ impl Shared {
             delay_ns: self.delay_ns.load(Ordering::Relaxed),
             loss_ppm: self.loss_ppm.load(Ordering::Relaxed),
         }
+    }
+
+    /// Forgets the link's measured delay: the window and the allowance it gave.
+    fn forget_latency(&self) {
+        if let Ok(mut window) = self.latency.lock() {
+            if let Some(window) = window.as_mut() {
+                window.clear();
+            }
+        }
+        self.allowance_ns.store(0, Ordering::Relaxed);
     }
 
     fn percentiles(&self) -> Option<(u32, u32, u32)> {
@@ -413,6 +425,9 @@ fn outgoing(
                 ),
                 LinkState::Down => {
                     health.count_timeout();
+                    // What arrives after the outage (a backlog, then the link as it is then)
+                    // is measured afresh.
+                    shared.forget_latency();
                     tracing::warn!(
                         peer = %config.peer,
                         timeout_ms = config.link_timeout_ms,
@@ -442,11 +457,17 @@ fn outgoing(
             let ms = |ns: u64| ns as f64 / 1e6;
             health.set_detail("link_state", f64::from(state as u8));
             health.set_detail("rtt_ms", ms(shared.rtt_ns.load(Ordering::Relaxed)));
-            let p99 = shared.percentiles().map_or(0, |(_, p99, _)| u64::from(p99) * 1000);
+            let (p50, p99) = shared
+                .percentiles()
+                .map_or((0, 0), |(p50, p99, _)| (u64::from(p50) * 1000, u64::from(p99) * 1000));
             health.set_detail("latency_p99_ms", ms(p99));
+            // The delay the nodes behind this bridge, and its own `max_age_ms`, allow for: the
+            // median (the timeouts cover the jitter above it; a late backlog moves it only when
+            // it is half the window).
+            health.set_detail(LINK_DELAY_DETAIL, ms(p50));
             shared
                 .allowance_ns
-                .store(p99.min(MAX_LINK_ALLOWANCE_NS), Ordering::Relaxed);
+                .store(p50.min(MAX_LINK_ALLOWANCE_NS), Ordering::Relaxed);
             let since_beat = (received != 0).then(|| Duration::from_nanos(now.saturating_sub(received)));
             if let Err(e) = health.publish(&[since_beat]) {
                 tracing::warn!("health: {e}");
@@ -639,6 +660,7 @@ fn incoming(
                     if run.restarted(beat.seq) {
                         // Its clock may have restarted with it (another machine's reboot).
                         clock.restart();
+                        shared.forget_latency();
                         tracing::info!(
                             peer = %config.peer,
                             "the peer's bridge restarted: its clock is estimated afresh"

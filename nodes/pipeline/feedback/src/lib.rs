@@ -553,12 +553,14 @@ mod tests {
         assert_eq!(engaged.command.unwrap().force, [0; 5]);
     }
 
-    /// The bridge's health report: the link up with this one-way p99.
-    fn bridge(name: &str, one_way_ms: f64, up: bool) -> Event {
+    /// The bridge's health report made at `made_ns`: the link up (or not) with this one-way
+    /// delay.
+    fn bridge(name: &str, one_way_ms: f64, up: bool, made_ns: u64) -> Event {
         let mut h = NodeHealth::default();
+        h.header.stamp_ns = made_ns;
         h.set_name(name);
         h.set_detail("link_state", if up { 1.0 } else { 0.0 });
-        h.set_detail("latency_p99_ms", one_way_ms);
+        h.set_detail(teleop_runtime::link::LINK_DELAY_DETAIL, one_way_ms);
         Event::Health(h)
     }
 
@@ -592,7 +594,7 @@ mod tests {
         // With it (a report names the link's one-way p99), they drive the glove.
         let mut e = FeedbackEngine::new(&NodeConfig::default(), &revo2()).unwrap();
         e.start(10_000 * ms);
-        e.handle(&bridge("bridge", 252.0, true), 10_000 * ms);
+        e.handle(&bridge("bridge", 252.0, true, 10_000 * ms), 10_000 * ms);
         assert!(e.link_up(10_000 * ms));
         assert!(!run(&mut e, 0, 50), "delayed samples judged stale");
         // The link stops after the sample received at 10 490 ms: stale 100 ms (the timeout)
@@ -630,7 +632,7 @@ mod tests {
         let report = last.unwrap();
         assert!(report.energy[3] > 0.0, "{report:?}");
         assert!(!report.active, "auto without a link: off");
-        e.handle(&bridge("bridge", 20.0, true), 300 * ms);
+        e.handle(&bridge("bridge", 20.0, true, 300 * ms), 300 * ms);
         t.header.stamp_ns = 300 * ms;
         let report = e.handle(&Event::Tactile(t), 300 * ms).passivity.unwrap();
         assert!(report.active, "auto with a link: on");

@@ -562,11 +562,24 @@ impl NodeHealth {
             .map(|d| (text_of(&d.name), d.value))
     }
 
-    /// The value of the detail called `name`, if the report has it.
+    /// The value of the detail called `name`, if the report has it. Allocates nothing (a
+    /// control loop reads the bridge's report with it).
     pub fn detail(&self, name: &str) -> Option<f64> {
-        self.details()
-            .find(|(n, _)| n.as_str() == name)
-            .map(|(_, v)| v)
+        let key: [u8; 24] = fixed_text(name);
+        self.details[..usize::from(self.detail_count).min(MAX_HEALTH_DETAILS)]
+            .iter()
+            .find(|d| d.name == key)
+            .map(|d| d.value)
+    }
+
+    /// The node name's bytes, without the zero padding. Allocates nothing.
+    pub fn name_bytes(&self) -> &[u8] {
+        let end = self
+            .node_name
+            .iter()
+            .position(|&b| b == 0)
+            .unwrap_or(self.node_name.len());
+        &self.node_name[..end]
     }
 }
 

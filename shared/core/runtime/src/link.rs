@@ -1,6 +1,6 @@
 //! The link between stations as the nodes downstream of a bridge see it: the bridge's health
 //! report names the link's state and its measured one-way delay (`link_state`, and
-//! `latency_p99_ms`, the p99 of the frames' transit), and a node that judges the freshness of
+//! `latency_p50_ms`, the median of the frames' transit), and a node that judges the freshness of
 //! samples that crossed it allows for that delay. A sample is then fresh while
 //! `now <= min(stamp + delay, received) + timeout`: delayed but continuing samples stay fresh,
 //! a link that stops is stale a timeout after its last sample, and a sample made long ago (a
@@ -15,6 +15,10 @@ pub const LINK_NODE: &str = "bridge";
 /// How long a bridge's report counts: three of its one-second health periods. Without a newer
 /// one the link gives no allowance (the bridge stopped).
 pub const LINK_REPORT_NS: u64 = 3_000_000_000;
+
+/// The bridge's health detail that gives the link's delay: the one-way median of its frames'
+/// transit, ms.
+pub const LINK_DELAY_DETAIL: &str = "latency_p50_ms";
 
 /// Most link delay allowed for unless configured otherwise, ns.
 pub const DEFAULT_MAX_LINK_DELAY_NS: u64 = 1_000_000_000;
@@ -49,21 +53,25 @@ impl LinkDelay {
     }
 
     /// Takes a health report received at `now_ns`: only the bridge's ([`LINK_NODE`], or
-    /// `<namespace>/bridge`) counts. Returns whether it was the bridge's.
+    /// `<namespace>/bridge`) counts, dated when it was made (its stamp, never after its
+    /// receipt: a report from a topic's history is old). Returns whether it was the bridge's.
+    /// Allocates nothing: a hand node's control loop takes the reports.
     pub fn report(&mut self, health: &NodeHealth, now_ns: u64) -> bool {
-        let name = health.name();
-        let bridge = name == LINK_NODE
+        let name = health.name_bytes();
+        let bridge = name == LINK_NODE.as_bytes()
             || name
-                .strip_suffix(LINK_NODE)
-                .is_some_and(|ns| ns.ends_with('/'));
+                .strip_suffix(LINK_NODE.as_bytes())
+                .is_some_and(|ns| ns.ends_with(b"/"));
         if !bridge {
             return false;
         }
         // A link that is down gives no allowance: nothing arrives over it anyway. An up link
-        // counts at least 1 ns, so it is seen as up however short its delay.
+        // counts at least 1 ns, so it is seen as up however short its delay. The median, not
+        // the p99: the timeout covers the jitter above it, and a backlog that a stalled link
+        // delivers late moves a median only when it is half the bridge's window.
         let up = health.detail("link_state") == Some(1.0);
         let delay = if up {
-            let ms = health.detail("latency_p99_ms").unwrap_or(0.0);
+            let ms = health.detail(LINK_DELAY_DETAIL).unwrap_or(0.0);
             let ns = if ms.is_finite() {
                 ms.max(0.0) * 1e6
             } else {
@@ -73,11 +81,11 @@ impl LinkDelay {
         } else {
             0
         };
-        self.latest = Some((delay, now_ns));
+        self.latest = Some((delay, crate::sample_time(health.header.stamp_ns, now_ns)));
         true
     }
 
-    /// The delay to allow for at `now_ns` (ns): the bridge's newest one-way p99 while its
+    /// The delay to allow for at `now_ns` (ns): the bridge's newest one-way median while its
     /// reports keep coming and say the link is up, else 0.
     pub fn allowance_ns(&self, now_ns: u64) -> u64 {
         match self.latest {
@@ -100,7 +108,8 @@ mod tests {
         let mut h = NodeHealth::default();
         h.set_name(name);
         h.set_detail("link_state", if up { 1.0 } else { 0.0 });
-        h.set_detail("latency_p99_ms", one_way_ms);
+        h.set_detail(LINK_DELAY_DETAIL, one_way_ms);
+        h.header.stamp_ns = 1;
         h
     }
 

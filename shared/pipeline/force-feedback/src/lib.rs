@@ -436,8 +436,10 @@ impl ForceFeedback {
                 passivity: PassivityReport::default(),
             };
         }
-        if let Some(operator) = &inputs.operator {
-            self.passivity.observe(operator);
+        match &inputs.operator {
+            Some(operator) => self.passivity.observe(operator),
+            // The glove's positions are stale: no motion known, nothing to act on.
+            None => self.passivity.no_operator(),
         }
 
         let max = f32::from(self.config.max_force);
@@ -521,8 +523,10 @@ impl ForceFeedback {
             PassivityMode::Auto => inputs.remote,
         };
         let (force, report) = self.passivity.control(self.output, demand, max, dt, active);
-        for ((slot, value), state) in out.force.iter_mut().zip(force).zip(&mut self.output) {
-            *state = value.min(*state);
+        for (f, (slot, value)) in out.force.iter_mut().zip(force).enumerate() {
+            if report.acted[f] {
+                self.output[f] = value.min(self.output[f]);
+            }
             *slot = (value as i16).clamp(0, self.config.max_force);
         }
         out.passivity = report;

@@ -209,12 +209,19 @@ impl Passivity {
             } else {
                 0.0
             };
-            let v = closing / dt;
-            self.velocity[f] += alpha * (v - self.velocity[f]);
+            let v = self.velocity[f] + alpha * (closing / dt - self.velocity[f]);
+            // Positions far apart a few nanoseconds apart make no velocity (inf - inf).
+            self.velocity[f] = if v.is_finite() { v } else { 0.0 };
         }
         self.interval_s = dt;
         self.last = Some(*operator);
         self.latched = self.applied;
+    }
+
+    /// The glove's positions are stale or absent: the fingers' velocity is unknown, so the
+    /// controller has nothing to act on until the next sample (the sum is kept).
+    pub fn no_operator(&mut self) {
+        self.velocity = [0.0; GLOVE_FINGERS];
     }
 
     /// The force to command for each finger given the law's `force` (within `0..=max`), after
