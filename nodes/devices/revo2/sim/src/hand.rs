@@ -422,7 +422,8 @@ impl Hand {
 mod tests {
     use super::*;
 
-    fn run(hand: &mut Hand, seconds: f32) {
+    /// Advances `hand` by `seconds` in 1 ms steps.
+    pub(super) fn run(hand: &mut Hand, seconds: f32) {
         let start = hand.time();
         let mut t = start;
         while t < start + seconds {
@@ -567,16 +568,8 @@ mod shape_tests {
     use teleop_hand_profile::HandProfile;
     use teleop_kinematics::Chains;
 
+    use super::tests::run;
     use super::*;
-
-    fn run(hand: &mut Hand, seconds: f32) {
-        let start = hand.time();
-        let mut t = start;
-        while t < start + seconds {
-            t += 0.001;
-            hand.advance_to(t);
-        }
-    }
 
     /// Fingertip `f`'s pad centre and radius with the joints at `positions`, by the profile's
     /// kinematics and the Revo2 node's map (per mille of travel = normalised position).
