@@ -158,6 +158,10 @@ pub struct FeedbackEngine {
     /// The station's bridge's newest report of the link.
     link: LinkDelay,
     glove_timeout_ns: u64,
+    /// Steps at which the passivity controller changed a force, and the lowest finger's
+    /// observed energy at the newest step (health details).
+    passivity_acted: u64,
+    passivity_energy: f32,
     estop: bool,
     stale: bool,
     /// The tick (`tick_ms`) and the watchdogs of tactile (`tactile_timeout_ms`) and hand state
@@ -182,6 +186,8 @@ impl FeedbackEngine {
             glove: None,
             link: LinkDelay::new(config.max_link_delay_ms.saturating_mul(1_000_000)),
             glove_timeout_ns: config.glove_timeout_ms.saturating_mul(1_000_000),
+            passivity_acted: 0,
+            passivity_energy: 0.0,
             estop: false,
             stale: false,
             schedule: {
@@ -230,6 +236,17 @@ impl FeedbackEngine {
     /// controller's `auto` mode).
     pub fn link_up(&self, now_ns: u64) -> bool {
         self.link.up(now_ns)
+    }
+
+    /// Steps at which the passivity controller changed a force, since the engine started.
+    pub fn passivity_acted(&self) -> u64 {
+        self.passivity_acted
+    }
+
+    /// The lowest finger's observed energy at the newest step (glove units × travel; negative:
+    /// the channel generated that much before the controller took it out).
+    pub fn passivity_energy(&self) -> f32 {
+        self.passivity_energy
     }
 
     /// Takes `event`, received at `now_ns` (CLOCK_MONOTONIC, or the log time when reprocessing).
@@ -298,7 +315,15 @@ impl FeedbackEngine {
             force: law.force,
             ..Default::default()
         };
-        let passivity = Some(law.passivity);
+        if law.passivity.acted.iter().any(|&a| a) {
+            self.passivity_acted += 1;
+        }
+        self.passivity_energy = law
+            .passivity
+            .energy
+            .iter()
+            .copied()
+            .fold(f32::INFINITY, f32::min);
         msg.header.origin_ns = origin;
         for (slot, source) in msg.source.iter_mut().zip(law.source) {
             *slot = source as u8;
@@ -318,7 +343,7 @@ impl FeedbackEngine {
             became_fresh,
             estop_changed: None,
             clamped: law.clamped,
-            passivity,
+            passivity: Some(law.passivity),
         }
     }
 

@@ -46,19 +46,11 @@ fn main() -> ExitCode {
     node_main("feedback", start)
 }
 
-/// What the passivity layer did, counted for health: the steps at which its controller changed
-/// a force, since the node started.
-#[derive(Default)]
-struct PassivityCount {
-    acted: u64,
-}
-
 /// Logs, counts and publishes what one event did.
 fn emit(
     out: Output,
     forces: &mut Publisher<GloveForceCommand>,
     health: &mut Health,
-    passivity: &mut PassivityCount,
 ) -> anyhow::Result<()> {
     match out.estop_changed {
         Some(true) => tracing::warn!("e-stop engaged: all glove forces zero"),
@@ -79,14 +71,6 @@ fn emit(
         for (name, source) in SOURCE_DETAILS.iter().zip(cmd.source) {
             health.set_detail(name, f64::from(source));
         }
-    }
-    if let Some(report) = out.passivity {
-        if report.acted.iter().any(|&a| a) {
-            passivity.acted += 1;
-        }
-        health.set_detail("passivity_acted", passivity.acted as f64);
-        let lowest = report.energy.iter().copied().fold(f32::INFINITY, f32::min);
-        health.set_detail("passivity_energy", f64::from(lowest));
     }
     Ok(())
 }
@@ -125,13 +109,11 @@ fn run(
     let mut health = Health::new(runtime)?;
     let health_period = Duration::from_millis(config.health_period_ms.max(10));
     let mut last_health = Instant::now();
-    let mut passivity = PassivityCount::default();
     if estop.engaged() {
         emit(
             engine.handle(&Event::EStop(estop_sample(true)), now_ns()),
             &mut forces,
             &mut health,
-            &mut passivity,
         )?;
     }
     tracing::info!("force feedback hand/tactile + hand/state -> glove/force_command");
@@ -143,7 +125,7 @@ fn run(
         // The engine's ticks and watchdogs, whatever woke the loop: what fell due by now, in
         // time order, before any newer sample.
         while let Some((_, out)) = engine.poll(now_ns()) {
-            emit(out, &mut forces, &mut health, &mut passivity)?;
+            emit(out, &mut forces, &mut health)?;
         }
         let mut events = Vec::new();
         // The e-stop on every wake: its doorbell, or its latch read every LATCH_POLL when the
@@ -160,18 +142,15 @@ fn run(
             Wake::Input(_) | Wake::Timeout(_) | Wake::Tick => 0,
         };
         for event in &events {
-            emit(
-                engine.handle(event, now_ns()),
-                &mut forces,
-                &mut health,
-                &mut passivity,
-            )?;
+            emit(engine.handle(event, now_ns()), &mut forces, &mut health)?;
         }
         if last_health.elapsed() >= health_period {
             last_health = Instant::now();
-            health.set_dropped(tactile.dropped() + state.dropped());
+            health.set_dropped(tactile.dropped() + state.dropped() + glove.dropped());
             let allowance = engine.link_allowance_ns(now_ns());
             health.set_detail("link_delay_ms", allowance as f64 / 1e6);
+            health.set_detail("passivity_acted", engine.passivity_acted() as f64);
+            health.set_detail("passivity_energy", f64::from(engine.passivity_energy()));
             let now = Instant::now();
             health.publish(&[tactile.age(now), state.age(now)])?;
         }

@@ -305,7 +305,6 @@ impl FeedbackConfig {
         check_non_negative("passivity.max_damping", p.max_damping)?;
         check_positive("passivity.reset_after_s", p.reset_after_s)?;
         check_non_negative("passivity.max_stored", p.max_stored)?;
-        check_non_negative("passivity.velocity_tau_s", p.velocity_tau_s)?;
         check_non_negative("passivity.tolerance", p.tolerance)?;
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {

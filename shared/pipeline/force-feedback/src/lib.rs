@@ -69,7 +69,6 @@
 //! max_damping = 20000.0       # glove units per (travel per second)
 //! reset_after_s = 0.2         # s without demand before a finger's energy sum restarts
 //! max_stored = 50.0           # glove units x travel the observer keeps at most
-//! velocity_tau_s = 0.0        # s, low-pass of the finger's velocity (0: none)
 //! tolerance = 10.0            # the deficit (glove units x travel) the controller lets pass
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;

@@ -30,9 +30,9 @@
 //! When the energy at the end of the next glove sample would fall below the tolerance `-T`,
 //! `E + f v Δt < -T` (`Δt` the glove's sample interval), it adds a damper `alpha` to the
 //! commanded force, `f + alpha × v`, with `alpha = -(E + f v Δt + T) / (v² Δt)`, capped at
-//! `max_damping`: the sample then ends with the energy at `-T`. It acts only while the push drives the finger open, where
-//! the channel gives energy back: there the damper lowers the push, at most to zero, so the push
-//! gives back no more than the channel holds. Closing, the push absorbs energy by itself and the
+//! `max_damping`: the sample then ends with the energy at `-T`. It acts only while the push
+//! drives the finger open, where the channel gives energy back: there the damper lowers the
+//! push, at most to zero, so the push gives back no more than the channel holds. Closing, the push absorbs energy by itself and the
 //! controller leaves it alone (a two-sided damper would have to push harder on a closing
 //! finger, and a glove that slams to full force throws the finger open again). The change
 //! always opposes the motion (`Δf × v >= 0`) and only lowers the force, so the controller
@@ -80,11 +80,6 @@ pub struct PassivityConfig {
     /// Most energy the observer keeps (glove units × travel). Default 50: full-scale force over
     /// a twentieth of the travel, more than a firm grasp stores.
     pub max_stored: f32,
-    /// Time constant of the low-pass on the finger's velocity (s). Default 0: none. The glove's
-    /// whole-unit positions make the velocity noisy, but a filter's lag makes the controller
-    /// cut the push a fraction of the finger's oscillation late, which feeds it (bench_haptics
-    /// with 10 ms: the felt force swinging full scale at 20-40 ms periods).
-    pub velocity_tau_s: f32,
     /// The deficit the controller lets pass (glove units × travel). Default 10: full-scale
     /// force over 1.25 % of the travel, about 5 mJ. A contact force rising against a finger
     /// that gives way under it does a little work on the finger, which the observer counts;
@@ -101,7 +96,6 @@ impl Default for PassivityConfig {
             max_damping: 20_000.0,
             reset_after_s: 0.2,
             max_stored: 50.0,
-            velocity_tau_s: 0.0,
             tolerance: 10.0,
         }
     }
@@ -136,7 +130,10 @@ pub struct Passivity {
     last: Option<OperatorInput>,
     /// Observed energy per finger.
     energy: [f32; GLOVE_FINGERS],
-    /// Filtered closing velocity per finger, travel per second.
+    /// Closing velocity per finger over the last glove sample interval, travel per second. Not
+    /// filtered: the glove's whole-unit positions make it noisy, but a filter's lag made the
+    /// controller cut the push a fraction of the finger's oscillation late, which fed it
+    /// (bench_haptics with a 10 ms low-pass: the felt force swinging full scale at 20-40 ms).
     velocity: [f32; GLOVE_FINGERS],
     /// The glove's sample interval, s (the controller's `Δt`).
     interval_s: f32,
@@ -192,12 +189,6 @@ impl Passivity {
             return;
         }
         let dt = (operator.t_ns - last.t_ns) as f32 * 1e-9;
-        let tau = self.config.velocity_tau_s;
-        let alpha = if tau > 0.0 {
-            1.0 - (-dt / tau).exp()
-        } else {
-            1.0
-        };
         for f in 0..GLOVE_FINGERS {
             let closing = last.position[f] - operator.position[f];
             if !closing.is_finite() {
@@ -209,8 +200,8 @@ impl Passivity {
             } else {
                 0.0
             };
-            let v = self.velocity[f] + alpha * (closing / dt - self.velocity[f]);
-            // Positions far apart a few nanoseconds apart make no velocity (inf - inf).
+            let v = closing / dt;
+            // Positions far apart a few nanoseconds apart make no velocity.
             self.velocity[f] = if v.is_finite() { v } else { 0.0 };
         }
         self.interval_s = dt;
@@ -225,8 +216,9 @@ impl Passivity {
     }
 
     /// The force to command for each finger given the law's `force` (within `0..=max`), after
-    /// `dt` seconds since the previous step: the controller's damper where the observed energy
-    /// is negative and `active`, the force unchanged elsewhere (only ever lowered, so a finger
+    /// `dt` seconds since the previous step: the controller's damper where the energy would
+    /// fall below the tolerance while the push opens the finger, if `active`; the force
+    /// unchanged elsewhere (only ever lowered, so a finger
     /// ramping to zero on stale inputs still does). `demand` is the law's demand per finger,
     /// for the reset. The result is rounded to whole glove units, as commanded.
     pub fn control(
@@ -286,12 +278,10 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    /// A layer that keeps whatever energy it sees, tolerates no deficit and does not filter
-    /// the velocity.
+    /// A layer that keeps whatever energy it sees and tolerates no deficit.
     fn exact() -> Passivity {
         Passivity::new(PassivityConfig {
             max_stored: f32::MAX,
-            velocity_tau_s: 0.0,
             tolerance: 0.0,
             ..PassivityConfig::default()
         })

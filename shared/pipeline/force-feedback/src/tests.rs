@@ -384,6 +384,59 @@ fn saturate(ff: &mut ForceFeedback, t: &mut u64) {
     assert_eq!(out.force, [max; 5]);
 }
 
+/// The passivity controller inside the law: a saturated push that drives the fingers open
+/// generates energy, so the controller (on) cuts it; once the fingers stop, the force climbs
+/// back at the law's rate limit, not at once; with the controller off the same motion leaves the
+/// force alone.
+#[test]
+fn the_passivity_controller_cuts_a_push_that_opens_the_finger_and_the_rate_limit_brings_it_back() {
+    for mode in [PassivityMode::On, PassivityMode::Off] {
+        let config = FeedbackConfig {
+            passivity: PassivityConfig {
+                mode,
+                ..PassivityConfig::default()
+            },
+            ..FeedbackConfig::default()
+        };
+        let max = config.max_force;
+        let step_limit = config.rate_limit_per_s * 0.001;
+        let mut ff = law(config);
+        let mut t = 0;
+        saturate(&mut ff, &mut t);
+        // Every finger pushed open at 1 travel/s under full force, sampled every millisecond.
+        let at = |t: u64, p: f32| Inputs {
+            operator: Some(OperatorInput {
+                t_ns: t,
+                position: [p; GLOVE_FINGERS],
+            }),
+            ..inputs(t, fresh([25.0; 5]), Some(quiet_hand()))
+        };
+        let mut lowest = max;
+        for k in 0..40 {
+            let out = ff.step(&at(t, 0.5 + k as f32 * 0.001));
+            lowest = lowest.min(out.force[3]);
+            t += MS;
+        }
+        if mode == PassivityMode::Off {
+            assert_eq!(lowest, max, "off: the push is left alone");
+            continue;
+        }
+        assert_eq!(lowest, 0, "on: the push that throws the finger open is cut");
+        // The fingers stop: the force climbs back at the rate limit.
+        let mut before = ff.step(&at(t, 0.54)).force[3];
+        for _ in 0..100 {
+            t += MS;
+            let now = ff.step(&at(t, 0.54)).force[3];
+            assert!(
+                f32::from(now - before) <= step_limit + 1.0,
+                "{before} -> {now} in 1 ms"
+            );
+            before = now;
+        }
+        assert_eq!(before, max, "back to the law's force");
+    }
+}
+
 /// Feeds `make` until all forces are 0 (at most 10 s); checks the ramp
 /// decreases, is not instantaneous, reports Ramping/stale, and returns the
 /// number of steps it took.
