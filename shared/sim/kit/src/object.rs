@@ -8,7 +8,8 @@
 pub enum Object {
     /// A ball about a third of a fist, under the fingers.
     Ball,
-    /// A bar across the palm that the fingers wrap.
+    /// A bar across the fingers (across the palm, wrapped, where a simulator gives it that
+    /// place).
     Bar,
 }
 

@@ -593,10 +593,19 @@ mod shape_tests {
         }
     }
 
+    /// The radius of [`sphere_on_index_path`]'s sphere, m.
+    const SPHERE_RADIUS: f64 = 0.030;
+
+    /// Where the index pad's centre stops against [`sphere_on_index_path`]'s sphere: the
+    /// sphere's radius plus the pad's (from the profile), m from the sphere's centre.
+    fn index_surface() -> f64 {
+        SPHERE_RADIUS + pad([0.0; JOINTS], 1).1
+    }
+
     /// A sphere of radius 30 mm placed by its centre so that the index pad's surface meets it
     /// at 40 % of the index's travel, pressing straight into it (the centre on the pad's path).
     fn sphere_on_index_path(stiffness_n_per_m: f32) -> ShapeObject {
-        let radius = 0.030;
+        let radius = SPHERE_RADIUS;
         let mut at = [0.0; JOINTS];
         at[2] = 400.0;
         let (touch, pad_radius) = pad(at, 1);
@@ -628,8 +637,8 @@ mod shape_tests {
         let mut h = Hand::new(HandParams::default(), Some(ObjectModel::Shape(object)));
         h.command(2, mode::POSITION_SPEED, 700.0, 1000.0);
         run(&mut h, 1.0);
-        let (p, pad_radius) = pad(h.positions(), 1);
-        let surface = 0.030 + pad_radius;
+        let (p, _) = pad(h.positions(), 1);
+        let surface = index_surface();
         let distance = p.distance(centre(object.shape));
         assert!(
             (surface - 0.001..=surface).contains(&distance),
@@ -659,7 +668,7 @@ mod shape_tests {
         let push_n = 300.0 / HandParams::default().ma_per_n;
         let (rigid, rigid_n) = press_index(sphere_on_index_path(1e5), 300.0);
         let (sponge, sponge_n) = press_index(sphere_on_index_path(300.0), 300.0);
-        let surface = 0.030 + 0.008;
+        let surface = index_surface();
         assert!(surface - rigid < 0.001, "rigid: {} m deep", surface - rigid);
         assert!(
             surface - sponge > 0.008,
@@ -710,7 +719,7 @@ mod shape_tests {
             h.command(2, mode::CURRENT, 600.0, 0.0);
             run(&mut h, seconds);
             let (p, _) = pad(h.positions(), 1);
-            0.038 - p.distance(centre(object.shape))
+            index_surface() - p.distance(centre(object.shape))
         };
         let (quick, slow) = (depth_after(springy, 0.02), depth_after(damped, 0.02));
         assert!(

@@ -62,8 +62,9 @@ fn main() -> ExitCode {
     process::main(run)
 }
 
-fn run(args: Args) -> anyhow::Result<()> {
-    let contact = match (args.contact, args.stiffness) {
+/// The contact model the arguments choose; `--stiffness` only with `--contact geometric`.
+fn contact(args: &Args) -> anyhow::Result<Contact> {
+    Ok(match (args.contact, args.stiffness) {
         (ContactArg::Geometric, k) => Contact::Geometric {
             stiffness_n_per_m: k.unwrap_or(DEFAULT_STIFFNESS_N_PER_M),
         },
@@ -71,7 +72,11 @@ fn run(args: Args) -> anyhow::Result<()> {
         (ContactArg::Joint, Some(_)) => {
             anyhow::bail!("--stiffness applies to --contact geometric, not joint")
         }
-    };
+    })
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    let contact = contact(&args)?;
     let object = object_model(args.object.object()?, contact).map_err(anyhow::Error::msg)?;
     let mut device = revo2_subdevice_with_loop(None, args.serial, args.ethercat.firmware_loop());
     device.app_mut().hand_mut().set_object(object);
@@ -106,5 +111,20 @@ mod tests {
             assert!(parse(&["--stiffness", bad]).is_err(), "{bad}");
         }
         assert!(parse(&["--contact", "pad"]).is_err());
+        // What the arguments choose.
+        assert_eq!(
+            contact(&parse(&[]).unwrap()).unwrap(),
+            Contact::Geometric {
+                stiffness_n_per_m: DEFAULT_STIFFNESS_N_PER_M
+            }
+        );
+        assert_eq!(
+            contact(&parse(&["--contact", "joint"]).unwrap()).unwrap(),
+            Contact::Joint
+        );
+        let e = contact(&parse(&["--contact", "joint", "--stiffness", "300"]).unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--stiffness") && e.contains("joint"), "{e}");
     }
 }
