@@ -12,9 +12,7 @@
 //!
 //! Options: `--delays 0,10,50` (round trips, ms), `--grasps N` (grasp cycles per case), and to
 //! run one operator of your own instead (the default one so changed): `--operator-stiffness
-//! N_PER_M`, `--operator-stiffening PER_M`, `--operator-damping N_S_PER_M`, `--operator-mass KG`;
-//! `--glove-forces-every-exchange`: `glove/state` carries the glove's measured forces with every
-//! exchange (today's glove node reads them in its diagnostic slots only, twice a second).
+//! N_PER_M`, `--operator-stiffening PER_M`, `--operator-damping N_S_PER_M`, `--operator-mass KG`.
 //!
 //! Run: `cargo run --release -p teleop-e2e --example bench_haptics`
 #![allow(clippy::print_stdout)]
@@ -49,9 +47,6 @@ struct Args {
     grasps: u32,
     /// The operators to run every case with, by name.
     operators: Vec<(&'static str, HandModel)>,
-    /// A glove node that reads the measured forces with every exchange
-    /// (`--glove-forces-every-exchange`).
-    forces_every_exchange: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -62,16 +57,11 @@ fn parse_args() -> Result<Args, String> {
             ("default", HandModel::default()),
             ("loose", loose_operator()),
         ],
-        forces_every_exchange: false,
     };
     // Any --operator-* option runs one operator instead: the default one so changed.
     let mut custom: Option<HandModel> = None;
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
-        if flag == "--glove-forces-every-exchange" {
-            args.forces_every_exchange = true;
-            continue;
-        }
         let value = it
             .next()
             .ok_or_else(|| format!("{flag}: expected a value after it"))?;
@@ -113,8 +103,7 @@ fn parse_args() -> Result<Args, String> {
             _ => {
                 return Err(format!(
                     "{flag}: unknown option (--delays, --grasps, --operator-stiffness, \
-                     --operator-stiffening, --operator-damping, --operator-mass, \
-                     --glove-forces-every-exchange)"
+                     --operator-stiffening, --operator-damping, --operator-mass)"
                 ))
             }
         }
@@ -127,10 +116,7 @@ fn parse_args() -> Result<Args, String> {
 
 fn bench() -> Result<(), String> {
     let args = parse_args()?;
-    let mut stations = Stations::repository()?;
-    if args.forces_every_exchange {
-        stations = stations.forces_every_exchange();
-    }
+    let stations = Stations::repository()?;
     let template = Case::new(0, Object::RIGID, Feedback::Plain);
     let law = stations.feedback();
     println!(

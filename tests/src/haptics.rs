@@ -192,10 +192,6 @@ struct GloveNode {
     /// One diagnostic register read takes the place of a force exchange this often, ns
     /// (`None`: never).
     diagnostic_ns: Option<u64>,
-    /// Whether `glove/state`'s forces are read with every exchange instead of from the
-    /// diagnostic reads (a glove node that does not exist yet; see
-    /// [`Stations::forces_every_exchange`]).
-    forces_every_exchange: bool,
 }
 
 /// The registers the glove node reads in turn in its diagnostic slots; the first, the actual
@@ -308,7 +304,6 @@ impl Stations {
                 diagnostic_ns: (glove.diagnostics_hz > 0.0).then(|| {
                     (1e9 / (f64::from(glove.diagnostics_hz) * DIAGNOSTIC_REGISTERS as f64)) as u64
                 }),
-                forces_every_exchange: false,
             },
             revo2: Revo2Node {
                 cycle_ns: (1e9 / revo2.cycle_hz) as u64,
@@ -327,16 +322,6 @@ impl Stations {
     /// The repository's own configuration (this crate's parent folder).
     pub fn repository() -> Result<Self, String> {
         Self::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(".."))
-    }
-
-    /// The same stations with a glove node that reports the glove's measured forces in every
-    /// `glove/state` (as if it read them with each exchange), instead of today's node, whose
-    /// `force` is the actual-force register read in its diagnostic slots (`diagnostics_hz`
-    /// complete sets a second): what the passivity observer would see with forces as fresh as
-    /// the positions.
-    pub fn forces_every_exchange(mut self) -> Self {
-        self.glove.forces_every_exchange = true;
-        self
     }
 
     /// The force-feedback configuration (gain, threshold, saturation, per-finger gains).
@@ -358,15 +343,14 @@ impl Stations {
             ms(self.glove.exchange_ns),
             ms(self.glove.force_timeout_ns),
             self.glove.max_force,
-            match (self.glove.forces_every_exchange, self.glove.diagnostic_ns) {
-                (true, _) => "read with every exchange (not today's glove node)".to_string(),
-                (false, Some(ns)) => format!(
+            match self.glove.diagnostic_ns {
+                Some(ns) => format!(
                     "from the actual-force register read every {} ms (a diagnostic read takes \
                      an exchange's place every {} ms)",
                     ms(ns * DIAGNOSTIC_REGISTERS as u64),
                     ms(ns)
                 ),
-                (false, None) => "never read (diagnostics off)".to_string(),
+                None => "never read (diagnostics off)".to_string(),
             },
             ms(self.revo2.cycle_ns),
             ms(self.revo2.stale_command_ns),
@@ -508,7 +492,11 @@ impl RobotStation {
             })
             .map(|(c, _)| c);
         let follow = fresh.and_then(|mut cmd| {
-            self.admission.admit(&mut cmd, Some(&measured)).ok()?;
+            if self.admission.admit(&mut cmd, Some(&measured)).is_err() {
+                // `HandPorts::refused`: a refused command leaves nothing to ramp from.
+                self.resume.forget();
+                return None;
+            }
             self.resume.follow_command(&mut cmd, dt);
             Some(cmd)
         });
@@ -767,20 +755,6 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
         while let Some((_, out)) = feedback.poll(now) {
             take(out, now, &mut force);
         }
-        // The bridge's health report, once a second: the link up, its one-way delay.
-        if now >= next_report {
-            next_report += REPORT_NS;
-            let mut health = NodeHealth::default();
-            health.set_name("bridge");
-            health.header.stamp_ns = now;
-            health.set_detail("link_state", 1.0);
-            health.set_detail(LINK_DELAY_DETAIL, case.one_way_ns() as f64 / 1e6);
-            take(
-                feedback.handle(&Event::Health(health), now),
-                now,
-                &mut force,
-            );
-        }
 
         // The glove node's exchange: in a diagnostic slot a register read (the actual forces,
         // then four others, in turn), else the force to send (fresh by its stamp, else zero;
@@ -812,13 +786,10 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
             let raw = operator.positions();
             let mut sample = GloveState {
                 raw_position: raw,
-                // The forces the glove measures between finger and actuator, as the node
-                // reports them (the passivity observer's force).
-                force: if stations.glove.forces_every_exchange {
-                    operator.forces()
-                } else {
-                    glove_force
-                },
+                // The forces the glove measured at its last actual-force read, as the node
+                // reports them (force feedback does not read them: the passivity observer
+                // counts the force commanded).
+                force: glove_force,
                 position: raw.map(|p| (f32::from(p) / 1000.0).clamp(0.0, 1.0)),
                 link_up: 1,
                 exchanges: glove_seq as u32,
@@ -842,6 +813,8 @@ pub fn run(stations: &Stations, case: &Case) -> Result<Vec<Tick>, String> {
                 command_seq += 1;
                 cmd.header.seq = command_seq;
                 cmd.header.stamp_ns = now;
+                // The feedback node sees every hand/command, as from a glove sample above.
+                take(feedback.handle(&Event::Command(cmd), now), now, &mut force);
                 to_robot.push(now, cmd);
             }
         }

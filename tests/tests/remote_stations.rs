@@ -157,7 +157,9 @@ fn two_stations_across_a_veth_pair() {
     for (station, name) in [(&operator, "operator"), (&robot, "robot")] {
         until(
             both,
-            Duration::from_secs(10),
+            // The median of the bridge's 4096-frame window must turn over: about 2000 frames at
+            // some 300 a second on the robot's side, then the next report (each second).
+            Duration::from_secs(40),
             &format!("the {name} bridge reports the 250 ms it measures"),
             || {
                 let mut median = 0.0;
