@@ -19,6 +19,13 @@
 //! predecessor's newest file in the same folder, and counts the samples published in between
 //! (while no recorder ran) as drops of its first file.
 //!
+//! Episodes: the operator's marks on the `episode` topic (`teleop episode`, the console) are
+//! recorded like any sample (channel `episode`, once, without a namespace); when an episode
+//! closes or is discarded the recorder writes its record `episode.<n>` with its health (see
+//! `episode`) and syncs the chunk, so a killed recorder keeps every closed episode. Its own
+//! `health` report (every 500 ms and at once after a mark) says the current episode
+//! (`episode`, `episode_open`, `episode_s`), the episodes kept and the marks received.
+//!
 //! Every file is announced (`recorded PATH` on stderr) as soon as it is started, so that the
 //! launcher's summary lists a killed recorder's file too. A recorder that cannot go on (a full
 //! disk) keeps the first error, finishes what can be finished, and says `recording stopped:
@@ -31,14 +38,18 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use iceoryx2::port::listener::Listener;
 use teleop_msgs::Message;
-use teleop_msgs::{device_model, topics, visit_topic, DeviceInfo, TopicVisitor};
+use teleop_msgs::{device_model, topics, visit_topic, DeviceInfo, Episode, TopicVisitor};
 use teleop_recording::{
     RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
 };
 use teleop_runtime::{
     now_ns, qualified, EventLoop, Flow, Input, Namespace, NodeRuntime, Service, StopReason,
-    Subscriber, Wake,
+    Health, Subscriber, Wake,
 };
+
+mod episode;
+pub use episode::record_name as episode_record_name;
+use episode::Book;
 
 /// Where a recording goes (rotated parts get `_1`, `_2`, ... before `.mcap`).
 #[derive(Debug, Clone)]
@@ -261,8 +272,14 @@ trait Tap {
     /// The channel: the topic's qualified name.
     fn channel(&self) -> &str;
     fn listener(&self) -> &Listener<Service>;
-    /// Writes every queued sample; returns how many.
-    fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>>;
+    /// Writes every queued sample, showing each to the episode book as tap `index`; returns
+    /// how many.
+    fn drain(
+        &self,
+        rec: &mut Recorder,
+        book: &mut Book,
+        index: usize,
+    ) -> Result<usize, Box<RecordingError>>;
     fn dropped(&self) -> u64;
 }
 
@@ -282,7 +299,12 @@ impl<M: Message> Tap for TopicTap<M> {
     fn listener(&self) -> &Listener<Service> {
         self.sub.listener()
     }
-    fn drain(&self, rec: &mut Recorder) -> Result<usize, Box<RecordingError>> {
+    fn drain(
+        &self,
+        rec: &mut Recorder,
+        book: &mut Book,
+        index: usize,
+    ) -> Result<usize, Box<RecordingError>> {
         let mut result = Ok(());
         let mut previous = self.previous.borrow_mut();
         let n = self.sub.drain(|m| {
@@ -307,6 +329,7 @@ impl<M: Message> Tap for TopicTap<M> {
                     ..RecordedMessage::from_sample(m, now_ns())
                 };
                 result = rec.write(self.id, &msg);
+                book.observe(index, M::TOPIC, m.as_bytes());
             }
         });
         result.map(|()| n).map_err(Box::new)
@@ -337,6 +360,9 @@ impl TopicVisitor for MakeTap<'_> {
         }))
     }
 }
+
+/// How often the recorder reports its health (and at once when an episode changes).
+const HEALTH_PERIOD: Duration = Duration::from_millis(500);
 
 /// Records until SIGINT/SIGTERM or the end of `options.duration`, then finishes the file
 /// properly and returns what was written (drops included). An error while recording (a full
@@ -385,8 +411,17 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         options.namespaces.iter().map(Some).collect()
     };
     let mut taps: Vec<Box<dyn Tap>> = Vec::new();
-    for &namespace in &namespaces {
+    for (n, &namespace) in namespaces.iter().enumerate() {
         for &name in &names {
+            // Episodes are the operator's, on the topic without a namespace: recorded once.
+            let namespace = if name == Episode::TOPIC {
+                if n > 0 {
+                    continue;
+                }
+                None
+            } else {
+                namespace
+            };
             let tap = visit_topic(
                 name,
                 MakeTap {
@@ -418,14 +453,38 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
     let mut failure: Option<anyhow::Error> = None;
+    let mut book = Book::default();
+    let mut health = Health::new(runtime)?;
+    let mut last_health = std::time::Instant::now();
+    let channels: Vec<String> = taps.iter().map(|t| t.channel().to_string()).collect();
+    let channels: Vec<&str> = channels.iter().map(String::as_str).collect();
     let mut inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
     inputs.extend(devices.iter().map(|d| Input::new(d.sub.listener())));
     let stop = EventLoop::new(Duration::from_millis(20)).run(&inputs, |wake| {
         let result = match wake {
             Wake::Input(i) if i >= taps.len() => devices[i - taps.len()].drain(&mut rec),
-            Wake::Input(i) => taps[i].drain(&mut rec).map(|_| ()),
+            Wake::Input(i) => taps[i].drain(&mut rec, &mut book, i).map(|_| ()),
             Wake::Timeout(_) | Wake::Tick => rec.flush_if_due(now_ns()).map_err(Box::new),
         };
+        // An episode that closed is written (and its chunk synced) before anything else.
+        let dropped: Vec<u64> = taps.iter().map(|t| t.dropped()).collect();
+        let result = result.and_then(|()| {
+            book.settle(&channels, &dropped, &mut rec)
+                .map_err(Box::new)
+        });
+        let changed = matches!(result, Ok(true));
+        let result = result.map(|_| ());
+        health.count_loop();
+        if changed || last_health.elapsed() >= HEALTH_PERIOD {
+            last_health = std::time::Instant::now();
+            for (name, value) in book.details(now_ns()) {
+                health.set_detail(name, value);
+            }
+            health.set_dropped(dropped.iter().sum());
+            if let Err(e) = health.publish(&[]) {
+                tracing::warn!("cannot publish the recorder's health: {e}");
+            }
+        }
         if let Some(why) = rec.take_rotation_error() {
             tracing::warn!("cannot start the next file, recording goes on in this one: {why}");
         }
@@ -457,13 +516,19 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     })?;
     // What is still queued belongs in the file too (unless writing failed: the first error
     // is the one to report, not the refusals after it).
-    for tap in &taps {
+    for (i, tap) in taps.iter().enumerate() {
         if failure.is_none() {
-            if let Err(e) = tap.drain(&mut rec) {
+            if let Err(e) = tap.drain(&mut rec, &mut book, i) {
                 failure = Some((*e).into());
             }
         }
         rec.note_drops(tap.channel(), tap.dropped());
+    }
+    if failure.is_none() {
+        let dropped: Vec<u64> = taps.iter().map(|t| t.dropped()).collect();
+        if let Err(e) = book.settle(&channels, &dropped, &mut rec) {
+            failure = Some(e.into());
+        }
     }
     announce(&rec);
     let (summary, error) = rec.finish_all();

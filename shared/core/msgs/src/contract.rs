@@ -497,6 +497,60 @@ message! {
     }
 }
 
+/// What an [`Episode`] sample asks of the recorder.
+pub mod episode_event {
+    /// Begin an episode (its task in [`Episode::task`](super::Episode)); an episode still open
+    /// is first closed, unlabelled.
+    pub const START: u8 = 1;
+    /// End the open episode with [`Episode::outcome`](super::Episode).
+    pub const STOP: u8 = 2;
+    /// Throw away the open episode, or the last one closed when none is open.
+    pub const DISCARD: u8 = 3;
+}
+
+/// How an episode ended ([`Episode::outcome`]).
+pub mod episode_outcome {
+    /// Not said.
+    pub const UNLABELLED: u8 = 0;
+    /// The task was done.
+    pub const SUCCESS: u8 = 1;
+    /// The task was not done.
+    pub const FAILURE: u8 = 2;
+
+    /// The outcome's name (`unlabelled`, `success`, `failure`; `unlabelled` for any other
+    /// value): the recorder's episode records and the dataset export use it.
+    pub fn name(outcome: u8) -> &'static str {
+        match outcome {
+            SUCCESS => "success",
+            FAILURE => "failure",
+            _ => "unlabelled",
+        }
+    }
+}
+
+/// Bytes of an episode's task text.
+pub const EPISODE_TASK_BYTES: usize = 120;
+
+message! {
+    /// An operator's episode mark (`teleop episode`, the console): start an episode of a
+    /// task, stop it with its outcome, or discard it. The recorder records it where it
+    /// happens in the stream and closes an episode with its health; the dataset export cuts
+    /// the recording into episodes by these marks. Always on the topics without a namespace:
+    /// one operator's episode covers every side.
+    Episode("teleop_msgs/msg/Episode", topic "episode", nested [SampleHeader]) {
+        /// Common header.
+        header: SampleHeader => "teleop_msgs/SampleHeader",
+        /// See [`episode_event`].
+        event: u8 => "uint8",
+        /// See [`episode_outcome`] (with [`episode_event::STOP`]).
+        outcome: u8 => "uint8",
+        /// Zero.
+        reserved: [u8; 6] => "uint8[6]",
+        /// The task, in words (with [`episode_event::START`]), UTF-8, zero padded.
+        task: [u8; EPISODE_TASK_BYTES] => "uint8[120]",
+    }
+}
+
 /// Text into a zero-padded fixed field of any length (cut at a character boundary).
 pub fn fixed_text<const N: usize>(text: &str) -> [u8; N] {
     let mut out = [0u8; N];
@@ -525,7 +579,15 @@ topics!(
     EStop,
     DeviceInfo,
     EStopAck,
+    Episode,
 );
+
+impl Episode {
+    /// The task text (invalid UTF-8 replaced).
+    pub fn task(&self) -> String {
+        text_of(&self.task)
+    }
+}
 
 impl NodeHealth {
     /// Stores `name` (truncated to 32 bytes at a character boundary).

@@ -16,6 +16,8 @@
 //! - [`read_messages`] yields payloads in log-time order (finished) or file order (killed),
 //!   checked against the message contract.
 //! - [`read_samples`] decodes the messages of one contract type in one namespace.
+//! - [`Episodes`] turns the operator's episode marks into spans ([`read_episodes`]: a
+//!   recording's).
 //! - [`repair`] copies what a killed recorder left (or what reads of a damaged file) into a
 //!   finished file, skipping and reporting what does not read.
 //!
@@ -62,6 +64,7 @@
 //! Owns: the file format, its checks and its recovery. Must not depend on: iceoryx2 (beyond the
 //! message contract), threads, clocks (the caller provides every time).
 
+mod episodes;
 mod error;
 mod file;
 pub mod legacy;
@@ -69,6 +72,7 @@ mod read;
 mod repair;
 mod write;
 
+pub use episodes::{read_episodes, Change, EpisodeSpan, Episodes, OpenEpisode};
 pub use error::RecordingError;
 pub use read::{
     head_metadata, info, read_messages, read_samples, Filter, Messages, OwnedMessage,

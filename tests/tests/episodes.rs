@@ -1,0 +1,136 @@
+//! Episodes in a real session: `teleop episode` marks reach the session's recorder, which
+//! records them, closes each episode with its health record, and loses none it closed when it
+//! is killed (`teleop recordings repair` keeps them).
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use teleop_e2e::{wait_for, Sandbox};
+use teleop_msgs::{episode_outcome, GloveState};
+use teleop_runtime::NodeRuntime;
+
+/// Runs `teleop episode ARGS` and returns its output, failing the test when it fails.
+fn episode(sandbox: &Sandbox, args: &[&str]) -> String {
+    let mut all = vec!["episode"];
+    all.extend_from_slice(args);
+    let (ok, out) = sandbox.cli(&all);
+    assert!(ok, "teleop {all:?} failed:\n{out}");
+    out
+}
+
+/// The recording files in the session's `recordings` folder, oldest first.
+fn recordings(sandbox: &Sandbox) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(sandbox.dir.path().join("recordings"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    files.retain(|p| p.extension().is_some_and(|e| e == "mcap"));
+    files.sort();
+    files
+}
+
+#[test]
+fn three_episodes_through_the_cli_survive_a_killed_recorder() {
+    let sandbox = Sandbox::new();
+    let launch = sandbox.default_session(|text| text);
+    let mut session = sandbox.launch(&launch);
+    let recorder = wait_for(Duration::from_secs(30), "the recorder", || {
+        sandbox.pid_of("recorder")
+    });
+    // The operator's glove is moving: the session is up.
+    let node = NodeRuntime::new("episode-test", &sandbox.ipc).unwrap();
+    let glove = node.subscriber::<GloveState>().unwrap();
+    wait_for(Duration::from_secs(30), "glove samples", || glove.poll_latest());
+
+    let said = episode(&sandbox, &["start", "--task", "pick up the ball"]);
+    assert!(said.contains("episode 1 open"), "{said}");
+    std::thread::sleep(Duration::from_millis(1500));
+    let said = episode(&sandbox, &["stop", "--success"]);
+    assert!(said.contains("episode 1 closed"), "{said}");
+    episode(&sandbox, &["start", "--task", "pick up the ball"]);
+    std::thread::sleep(Duration::from_millis(1500));
+    episode(&sandbox, &["stop", "--failure"]);
+    episode(&sandbox, &["start", "--task", "drop the ball"]);
+    std::thread::sleep(Duration::from_millis(500));
+    let said = episode(&sandbox, &["discard"]);
+    assert!(said.contains("episode 3 closed"), "{said}");
+    assert!(said.contains("2 kept"), "{said}");
+    // A STOP with nothing open changes nothing, and the recorder still counts the mark.
+    episode(&sandbox, &["stop"]);
+
+    // Killed without warning: every closed episode is in its file.
+    // SAFETY: kill(2) on the recorder's pid.
+    unsafe {
+        libc::kill(recorder as libc::pid_t, libc::SIGKILL);
+    }
+    wait_for(Duration::from_secs(20), "the recorder's restart", || {
+        sandbox.pid_of("recorder").filter(|&p| p != recorder)
+    });
+    session.stop();
+    let files = recordings(&sandbox);
+    assert_eq!(files.len(), 2, "the killed recorder's file and its successor's: {files:?}");
+    let killed = &files[0];
+    assert!(!teleop_recording::info(killed).unwrap().complete);
+    let repaired = sandbox.dir.path().join("repaired.mcap");
+    let (ok, out) = sandbox.cli(&[
+        "recordings",
+        "repair",
+        killed.to_str().unwrap(),
+        "--out",
+        repaired.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}");
+
+    let episodes = teleop_recording::read_episodes(&[&repaired]).unwrap();
+    let closed: Vec<_> = episodes
+        .closed()
+        .iter()
+        .map(|e| (e.index, e.task.as_str(), e.label()))
+        .collect();
+    assert_eq!(
+        closed,
+        [
+            (1, "pick up the ball", "success"),
+            (2, "pick up the ball", "failure"),
+            (3, "drop the ball", "discarded"),
+        ]
+    );
+    assert!(episodes.open().is_none());
+    let first = &episodes.closed()[0];
+    assert_eq!(first.outcome, episode_outcome::SUCCESS);
+    assert!(
+        (1.3..5.0).contains(&first.duration_s()),
+        "{}",
+        first.duration_s()
+    );
+
+    // Each closed episode's record, with its health, readable by any MCAP tool.
+    let info = teleop_recording::info(&repaired).unwrap();
+    let record = |name: &str| {
+        info.metadata
+            .iter()
+            .rev()
+            .find(|(n, _)| n == name)
+            .map(|(_, f)| f.clone())
+            .unwrap_or_else(|| panic!("no {name} record: {:?}", info.metadata))
+    };
+    let one = record("episode.1");
+    assert_eq!(one["outcome"], "success");
+    assert_eq!(one["task"], "pick up the ball");
+    let rate: f64 = one["rate_hz.glove/state"].parse().unwrap();
+    assert!(rate > 10.0, "glove/state at {rate} Hz in episode 1: {one:?}");
+    assert!(one.contains_key("rate_hz.hand/state"), "{one:?}");
+    assert_eq!(one["estops"], "0");
+    assert_eq!(record("episode.2")["outcome"], "failure");
+    assert_eq!(record("episode.3")["outcome"], "discarded");
+}
+
+#[test]
+fn an_episode_mark_without_a_recorder_is_an_error() {
+    let sandbox = Sandbox::new();
+    let (ok, out) = sandbox.cli(&["episode", "start", "--task", "pour"]);
+    assert!(!ok);
+    assert!(out.contains("no recorder is running"), "{out}");
+    let (ok, out) = sandbox.cli(&["episode", "start", "--task", " "]);
+    assert!(!ok);
+    assert!(out.contains("the task is empty"), "{out}");
+}
