@@ -1,0 +1,318 @@
+//! Samples of several topics, each at its own rate, to frames at one fixed rate: zero-order
+//! hold without look-ahead, over the time windows of the episodes.
+//!
+//! Frame `k` of a window starting at `start_ns` is due at `start_ns + k / fps` (rounded to the
+//! nanosecond) while that instant is not after the window's end. It holds, per topic (a
+//! *slot*), the newest sample whose stamp is at or before that instant, and nothing newer.
+//! A frame due before every slot has had a sample is dropped: an episode's frames begin at the
+//! first due instant at which every topic has spoken, and its frames are numbered from there.
+//!
+//! Samples arrive in the recording's order (the recorder's log time), which is not exactly
+//! stamp order across topics: a sample may be logged after a later-stamped sample of another
+//! topic. A frame is therefore settled only when each slot has shown a sample stamped after it
+//! (its stamps only grow, so none older can follow), or when the log time has passed the frame
+//! by [`Resampler::late_ns`] (a topic that fell silent), or at the end of the input. Until then
+//! the slot keeps the samples stamped after the next due frame; older ones collapse into the
+//! one it holds. What is kept is bounded by that lateness, not by the recording's length.
+//!
+//! Pure: no I/O, no clock; the caller gives every time.
+
+use std::collections::VecDeque;
+
+/// One episode's time window (stamps, ns, both ends included).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Window {
+    /// The first frame is due here.
+    pub start_ns: u64,
+    /// No frame is due after this.
+    pub stop_ns: u64,
+}
+
+/// What the resampler hands out, in order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// One frame of window `window`: every slot's values, in slot order, concatenated.
+    Frame {
+        /// Index of the window in the list given to [`Resampler::new`].
+        window: usize,
+        /// When it is due (ns).
+        at_ns: u64,
+        /// The row.
+        values: Vec<f32>,
+    },
+    /// Window `window` has no more frames.
+    WindowEnd {
+        /// Index of the window.
+        window: usize,
+        /// Samples of each slot stamped within the window.
+        samples: Vec<u64>,
+    },
+}
+
+#[derive(Debug, Clone, Default)]
+struct Slot {
+    width: usize,
+    held: Option<(u64, Vec<f32>)>,
+    pending: VecDeque<(u64, Vec<f32>)>,
+}
+
+/// The zero-order-hold resampler (see the module's documentation).
+#[derive(Debug, Clone)]
+pub struct Resampler {
+    slots: Vec<Slot>,
+    windows: Vec<Window>,
+    period_ns: f64,
+    /// The window whose frames are being made, and the next frame's number in it.
+    window: usize,
+    k: u64,
+    /// Per window, per slot: samples stamped within it.
+    counts: Vec<Vec<u64>>,
+    newest_log_ns: u64,
+    finished: bool,
+    /// How long after a frame's instant (in log time) it is settled even if a slot has not yet
+    /// shown a later sample.
+    pub late_ns: u64,
+}
+
+impl Resampler {
+    /// A resampler for slots of `widths` values each, making frames at `fps` over `windows`
+    /// (sorted by start, not overlapping). `late_ns` defaults to one second.
+    pub fn new(widths: &[usize], fps: u32, windows: Vec<Window>) -> Self {
+        let counts = vec![vec![0; widths.len()]; windows.len()];
+        Self {
+            slots: widths
+                .iter()
+                .map(|&width| Slot {
+                    width,
+                    ..Slot::default()
+                })
+                .collect(),
+            windows,
+            period_ns: 1e9 / f64::from(fps.max(1)),
+            window: 0,
+            k: 0,
+            counts,
+            newest_log_ns: 0,
+            finished: false,
+            late_ns: 1_000_000_000,
+        }
+    }
+
+    /// Values of one row (the sum of the slots' widths).
+    pub fn row_width(&self) -> usize {
+        self.slots.iter().map(|s| s.width).sum()
+    }
+
+    /// When the next frame is due, if any window is left.
+    fn due(&self) -> Option<u64> {
+        let w = self.windows.get(self.window)?;
+        Some(w.start_ns + (self.k as f64 * self.period_ns).round() as u64)
+    }
+
+    /// One sample of `slot` stamped `stamp_ns`, logged at `log_ns`; `values` must be the
+    /// slot's width (shorter is padded with NaN, longer cut).
+    pub fn push(&mut self, slot: usize, stamp_ns: u64, log_ns: u64, values: &[f32]) {
+        self.newest_log_ns = self.newest_log_ns.max(log_ns);
+        let due = self.due();
+        let Some(s) = self.slots.get_mut(slot) else {
+            return;
+        };
+        let mut row = vec![f32::NAN; s.width];
+        for (out, v) in row.iter_mut().zip(values) {
+            *out = *v;
+        }
+        // Count it in the window its stamp falls in (windows are sorted).
+        let at = self.windows.partition_point(|w| w.start_ns <= stamp_ns);
+        if at > 0 && stamp_ns <= self.windows[at - 1].stop_ns {
+            self.counts[at - 1][slot] += 1;
+        }
+        // Keep pending in stamp order (a publisher's stamps only grow; tolerate one that
+        // does not).
+        let pos = s.pending.partition_point(|(t, _)| *t <= stamp_ns);
+        s.pending.insert(pos, (stamp_ns, row));
+        if let Some(due) = due {
+            collapse(s, due);
+        } else {
+            // No frame is due any more: only the newest sample could matter.
+            while s.pending.len() > 1 {
+                s.pending.pop_front();
+            }
+        }
+    }
+
+    /// No more samples: every frame left can be settled.
+    pub fn finish(&mut self) {
+        self.finished = true;
+    }
+
+    /// The next event, if one is settled.
+    pub fn next_event(&mut self) -> Option<Event> {
+        loop {
+            let w = *self.windows.get(self.window)?;
+            let due = self.due()?;
+            if due > w.stop_ns {
+                let samples = self.counts[self.window].clone();
+                let window = self.window;
+                self.window += 1;
+                self.k = 0;
+                if let Some(next) = self.due() {
+                    for s in &mut self.slots {
+                        collapse(s, next);
+                    }
+                }
+                return Some(Event::WindowEnd { window, samples });
+            }
+            let late = self.newest_log_ns > due.saturating_add(self.late_ns);
+            let settled = self.finished
+                || late
+                || self
+                    .slots
+                    .iter()
+                    .all(|s| s.pending.front().is_some_and(|(t, _)| *t > due));
+            if !settled {
+                return None;
+            }
+            let mut values = Vec::with_capacity(self.row_width());
+            let complete = self.slots.iter().all(|s| s.held.is_some());
+            if complete {
+                for s in &self.slots {
+                    if let Some((_, v)) = &s.held {
+                        values.extend_from_slice(v);
+                    }
+                }
+            }
+            let window = self.window;
+            self.k += 1;
+            if let Some(next) = self.due() {
+                for s in &mut self.slots {
+                    collapse(s, next);
+                }
+            }
+            if complete {
+                return Some(Event::Frame {
+                    window,
+                    at_ns: due,
+                    values,
+                });
+            }
+            // Dropped: not every topic has spoken yet.
+        }
+    }
+}
+
+/// Moves the samples stamped at or before `due` into the held one (only the newest counts).
+fn collapse(s: &mut Slot, due: u64) {
+    while s.pending.front().is_some_and(|(t, _)| *t <= due) {
+        s.held = s.pending.pop_front();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: u64 = 1_000_000;
+
+    fn drain(r: &mut Resampler) -> Vec<Event> {
+        std::iter::from_fn(|| r.next_event()).collect()
+    }
+
+    fn frames(events: &[Event]) -> Vec<(u64, Vec<f32>)> {
+        events
+            .iter()
+            .filter_map(|e| match e {
+                Event::Frame { at_ns, values, .. } => Some((*at_ns / MS, values.clone())),
+                Event::WindowEnd { .. } => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn zero_order_hold_takes_the_newest_sample_at_or_before_each_frame() {
+        // 10 fps over [100, 400] ms; slot 0 at 7 ms steps, slot 1 at 50 ms steps.
+        let mut r = Resampler::new(
+            &[1, 1],
+            10,
+            vec![Window {
+                start_ns: 100 * MS,
+                stop_ns: 400 * MS,
+            }],
+        );
+        let mut samples: Vec<(u64, usize)> = (0..80).map(|i| (i * 7, 0)).collect();
+        samples.extend((0..12).map(|i| (i * 50, 1)));
+        samples.sort();
+        let mut events = Vec::new();
+        for (t, slot) in samples {
+            // Logged 2 ms after its stamp.
+            r.push(slot, t * MS, (t + 2) * MS, &[t as f32]);
+            events.extend(drain(&mut r));
+        }
+        r.finish();
+        events.extend(drain(&mut r));
+        let got = frames(&events);
+        // Frame at 100: slot 0's newest at or before 100 is 98, slot 1's is 100 (no look-ahead
+        // past it: 105 and 150 came later).
+        assert_eq!(got[0], (100, vec![98.0, 100.0]));
+        assert_eq!(got[1], (200, vec![196.0, 200.0]));
+        assert_eq!(got[2], (300, vec![294.0, 300.0]));
+        assert_eq!(got[3], (400, vec![399.0, 400.0]));
+        assert_eq!(got.len(), 4);
+        assert!(matches!(
+            events.last(),
+            Some(Event::WindowEnd { window: 0, samples }) if samples == &vec![43, 7]
+        ));
+    }
+
+    #[test]
+    fn frames_before_every_topic_has_spoken_are_dropped() {
+        let mut r = Resampler::new(
+            &[1, 2],
+            100,
+            vec![Window {
+                start_ns: 0,
+                stop_ns: 50 * MS,
+            }],
+        );
+        r.push(0, 0, 0, &[1.0]);
+        r.push(1, 25 * MS, 25 * MS, &[2.0, 3.0]);
+        r.push(0, 60 * MS, 60 * MS, &[9.0]);
+        r.push(1, 60 * MS, 60 * MS, &[9.0, 9.0]);
+        let got = frames(&drain(&mut r));
+        assert_eq!(
+            got.iter().map(|(t, _)| *t).collect::<Vec<_>>(),
+            [30, 40, 50]
+        );
+        assert_eq!(got[0].1, [1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_sample_logged_late_still_counts_and_a_silent_topic_does_not_stall() {
+        let mut r = Resampler::new(
+            &[1, 1],
+            10,
+            vec![Window {
+                start_ns: 0,
+                stop_ns: 2_000 * MS,
+            }],
+        );
+        r.push(0, 0, 0, &[0.0]);
+        r.push(1, 0, 0, &[0.0]);
+        // Slot 0 runs on; slot 1's sample stamped 95 ms is logged after slot 0's 150 ms.
+        r.push(0, 150 * MS, 150 * MS, &[150.0]);
+        assert!(
+            frames(&drain(&mut r)).is_empty(),
+            "slot 1 may still say something"
+        );
+        r.push(1, 95 * MS, 160 * MS, &[95.0]);
+        r.push(1, 180 * MS, 180 * MS, &[180.0]);
+        let got = frames(&drain(&mut r));
+        assert_eq!(got, [(0, vec![0.0, 0.0]), (100, vec![0.0, 95.0])]);
+        // Slot 1 falls silent: frames settle once the log time is a second past them.
+        for t in (200..1_500).step_by(10) {
+            r.push(0, t * MS, t * MS, &[t as f32]);
+        }
+        let got = frames(&drain(&mut r));
+        assert_eq!(got.first(), Some(&(200, vec![200.0, 180.0])));
+        assert_eq!(got.last().map(|f| f.0), Some(400));
+    }
+}
