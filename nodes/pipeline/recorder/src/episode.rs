@@ -72,10 +72,9 @@ impl Book {
                 };
                 *last = h.timeouts;
             }
-        } else if topic == EStop::TOPIC {
-            if EStop::from_bytes(payload).is_ok_and(|e| e.engaged == 1) {
-                self.estops += 1;
-            }
+        } else if topic == EStop::TOPIC && EStop::from_bytes(payload).is_ok_and(|e| e.engaged == 1)
+        {
+            self.estops += 1;
         }
     }
 
@@ -87,7 +86,7 @@ impl Book {
         channels: &[&str],
         dropped: &[u64],
         rec: &mut Recorder,
-    ) -> Result<bool, RecordingError> {
+    ) -> Result<bool, Box<RecordingError>> {
         if self.pending.is_empty() {
             return Ok(false);
         }
@@ -139,7 +138,7 @@ impl Book {
         rec: &mut Recorder,
         index: u32,
         fields: BTreeMap<String, String>,
-    ) -> Result<(), RecordingError> {
+    ) -> Result<(), Box<RecordingError>> {
         rec.add_metadata(&record_name(index), fields.clone())?;
         rec.flush()?;
         self.last_written = Some((index, fields));
@@ -154,7 +153,10 @@ impl Book {
             ("outcome".to_string(), span.label().to_string()),
             ("start_ns".to_string(), span.start_ns.to_string()),
             ("stop_ns".to_string(), span.stop_ns.to_string()),
-            ("duration_s".to_string(), format!("{:.3}", span.duration_s())),
+            (
+                "duration_s".to_string(),
+                format!("{:.3}", span.duration_s()),
+            ),
         ])
     }
 

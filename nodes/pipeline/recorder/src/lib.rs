@@ -43,8 +43,8 @@ use teleop_recording::{
     RecordedMessage, Recorder, RecordingError, RecordingSummary, TopicId, WriterOptions,
 };
 use teleop_runtime::{
-    now_ns, qualified, EventLoop, Flow, Input, Namespace, NodeRuntime, Service, StopReason,
-    Health, Subscriber, Wake,
+    now_ns, qualified, EventLoop, Flow, Health, Input, Namespace, NodeRuntime, Service, StopReason,
+    Subscriber, Wake,
 };
 
 mod episode;
@@ -468,10 +468,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         };
         // An episode that closed is written (and its chunk synced) before anything else.
         let dropped: Vec<u64> = taps.iter().map(|t| t.dropped()).collect();
-        let result = result.and_then(|()| {
-            book.settle(&channels, &dropped, &mut rec)
-                .map_err(Box::new)
-        });
+        let result = result.and_then(|()| book.settle(&channels, &dropped, &mut rec));
         let changed = matches!(result, Ok(true));
         let result = result.map(|_| ());
         health.count_loop();
@@ -527,7 +524,7 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     if failure.is_none() {
         let dropped: Vec<u64> = taps.iter().map(|t| t.dropped()).collect();
         if let Err(e) = book.settle(&channels, &dropped, &mut rec) {
-            failure = Some(e.into());
+            failure = Some((*e).into());
         }
     }
     announce(&rec);
