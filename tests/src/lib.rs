@@ -5,7 +5,8 @@
 //! One rig and one watcher serve every test: [`rig`] starts processes (a simulator, a node, the
 //! CLI) in a [`Sandbox`] and keeps their logs, [`watch`] waits on a session's topics and says
 //! what it saw, [`hand`] is a hand node under test on a rig, [`ecat`] an emulated EtherCAT bus
-//! served from the test's own process.
+//! served from the test's own process, [`dataset`] the independent check of an exported LeRobot
+//! dataset.
 //!
 //! The executables must be built first (`cargo build --workspace --bins`, which the README's
 //! test command does); [`bin`] says so when one is missing.
@@ -14,6 +15,7 @@
 //! its command line, as a user would; the one exception, [`haptics`], runs the stages' library
 //! code in one process on a simulated clock (a closed loop across a delay, deterministic).
 
+pub mod dataset;
 pub mod ecat;
 pub mod hand;
 pub mod haptics;

@@ -448,7 +448,7 @@ pub struct ReprocessOptions {
 /// The hand a recording was made with: `--profile` when given; else the profile embedded in the
 /// recording's metadata; else (recordings made before profiles existed) the shipped profile of
 /// the recorded hand commands' model. Says which on stderr.
-fn recording_profile(
+pub(crate) fn recording_profile(
     input: &Path,
     explicit: Option<&Path>,
     messages: &[OwnedMessage],

@@ -52,7 +52,7 @@ impl FeatureStats {
     /// The statistics of an episode's `rows` of `width` values each (`values.len() = rows ×
     /// width`, row-major). `None` for an episode without frames.
     pub fn of_episode(values: &[f64], width: usize) -> Option<Self> {
-        if width == 0 || values.is_empty() || values.len() % width != 0 {
+        if width == 0 || values.is_empty() || !values.len().is_multiple_of(width) {
             return None;
         }
         let rows = values.len() / width;

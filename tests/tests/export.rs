@@ -1,0 +1,382 @@
+//! `teleop export --format lerobot`: a recording with five episodes (a success, a failure, one
+//! discarded, one whose hand/state stalled, one never stopped) becomes a dataset of the first
+//! two, which an independent reader (pyarrow, `tests/python/check_lerobot.py`) reads whole and
+//! finds consistent; a frame's values are the recorded samples at its instant (zero-order
+//! hold); appending works and appending other features is refused.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use teleop_e2e::{dataset::check_lerobot, Sandbox};
+use teleop_msgs::{
+    device_model, episode_event, episode_outcome, fixed_text, units, Episode, GloveForceCommand,
+    GloveState, HandCommand, HandState, Tactile,
+};
+use teleop_recording::{RecordedMessage, Recorder, TopicId, WriterOptions};
+
+const T0: u64 = 1_000_000_000_000;
+const MS: u64 = 1_000_000;
+const S: u64 = 1_000_000_000;
+const JOINTS: usize = 6;
+
+/// A periodic topic of the synthetic session: sample `seq` is stamped `T0 + phase + seq ×
+/// period` and logged `delay` later.
+#[derive(Clone, Copy)]
+struct Stream {
+    period: u64,
+    phase: u64,
+    delay: u64,
+}
+
+const GLOVE: Stream = Stream {
+    period: 10 * MS,
+    phase: MS,
+    delay: 3 * MS,
+};
+const STATE: Stream = Stream {
+    period: 2 * MS,
+    phase: MS / 2,
+    delay: MS / 5,
+};
+const TACTILE: Stream = Stream {
+    period: 20 * MS,
+    phase: 7 * MS,
+    delay: MS,
+};
+const COMMAND: Stream = Stream {
+    period: 10 * MS,
+    phase: 4 * MS,
+    delay: MS,
+};
+const FORCE: Stream = Stream {
+    period: 10 * MS,
+    phase: 6 * MS,
+    delay: MS / 2,
+};
+/// hand/state is silent over this span (relative to T0): the stalled episode's.
+const STALL: (u64, u64) = (11 * S, 11 * S + 600 * MS);
+const END: u64 = 14 * S;
+
+impl Stream {
+    fn stamp(self, seq: u64) -> u64 {
+        T0 + self.phase + seq * self.period
+    }
+    /// The newest sample at or before `at`.
+    fn newest(self, at: u64) -> u64 {
+        (at - T0 - self.phase) / self.period
+    }
+}
+
+fn glove_position(seq: u64, c: usize) -> f32 {
+    ((seq * 7 + c as u64 * 13) % 1000) as f32 / 1000.0
+}
+fn joint_position(seq: u64, j: usize) -> f32 {
+    seq as f32 * 0.001 + j as f32
+}
+fn joint_speed(seq: u64, j: usize) -> f32 {
+    -(seq as f32) * 0.01 - j as f32
+}
+fn tip_normal(seq: u64, i: usize) -> f32 {
+    seq as f32 * 0.1 + i as f32
+}
+fn tip_tangential(i: usize) -> f32 {
+    i as f32 * 2.0 + 0.5
+}
+fn target(seq: u64, j: usize) -> f32 {
+    seq as f32 * 0.002 + j as f32 * 0.1
+}
+fn force(seq: u64, i: usize) -> i16 {
+    ((seq % 500) + i as u64 * 10) as i16
+}
+
+/// The episode marks: (relative time, event, outcome, task).
+fn marks() -> Vec<(u64, u8, u8, &'static str)> {
+    use episode_event::{DISCARD, START, STOP};
+    use episode_outcome::{FAILURE, SUCCESS, UNLABELLED};
+    vec![
+        (S, START, UNLABELLED, "pick up the cube"),
+        (3 * S, STOP, SUCCESS, ""),
+        (4 * S, START, UNLABELLED, "pick up the cube"),
+        (6 * S, STOP, FAILURE, ""),
+        (7 * S, START, UNLABELLED, "pour the water"),
+        (8 * S + 500 * MS, DISCARD, UNLABELLED, ""),
+        (10 * S + 500 * MS, START, UNLABELLED, "stack the blocks"),
+        (12 * S, STOP, SUCCESS, ""),
+        (13 * S, START, UNLABELLED, "wave"),
+    ]
+}
+
+/// Writes the session: every topic's samples and the marks, in log-time order, with the Revo2
+/// profile embedded as the recorder embeds it.
+fn write_recording(path: &Path) {
+    let profile = Sandbox::repo().join("config/hands/revo2.toml");
+    let metadata = vec![(
+        "hand_profile".to_string(),
+        BTreeMap::from([
+            ("file".to_string(), profile.display().to_string()),
+            (
+                "text".to_string(),
+                std::fs::read_to_string(&profile).unwrap(),
+            ),
+        ]),
+    )];
+    let mut rec = Recorder::create(path, WriterOptions::default(), &metadata).unwrap();
+    let ids: [TopicId; 6] = [
+        rec.add_message_type::<GloveState>().unwrap(),
+        rec.add_message_type::<HandState>().unwrap(),
+        rec.add_message_type::<Tactile>().unwrap(),
+        rec.add_message_type::<HandCommand>().unwrap(),
+        rec.add_message_type::<GloveForceCommand>().unwrap(),
+        rec.add_message_type::<Episode>().unwrap(),
+    ];
+    // (log time, topic, seq) of every sample, then written in log order.
+    let mut due: Vec<(u64, usize, u64)> = Vec::new();
+    for (topic, stream) in [GLOVE, STATE, TACTILE, COMMAND, FORCE]
+        .into_iter()
+        .enumerate()
+    {
+        let mut seq = 0;
+        while stream.stamp(seq) < T0 + END {
+            let rel = stream.stamp(seq) - T0;
+            let stalled = topic == 1 && (STALL.0..STALL.1).contains(&rel);
+            if !stalled {
+                due.push((stream.stamp(seq) + stream.delay, topic, seq));
+            }
+            seq += 1;
+        }
+    }
+    for (i, (at, ..)) in marks().into_iter().enumerate() {
+        due.push((T0 + at + MS / 2, 5, i as u64));
+    }
+    due.sort();
+    for (log, topic, seq) in due {
+        match topic {
+            0 => {
+                let mut s = GloveState::default();
+                s.header.stamp_ns = GLOVE.stamp(seq);
+                s.position = std::array::from_fn(|c| glove_position(seq, c));
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+            1 => {
+                let mut s = HandState {
+                    hand_model: device_model::REVO2,
+                    joint_count: JOINTS as u8,
+                    units: units::NORMALISED,
+                    ..HandState::default()
+                };
+                s.header.stamp_ns = STATE.stamp(seq);
+                for (j, joint) in s.joints.iter_mut().enumerate().take(JOINTS) {
+                    joint.position = joint_position(seq, j);
+                    joint.speed = joint_speed(seq, j);
+                    joint.effort = f32::NAN; // the Revo2 measures none
+                }
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+            2 => {
+                let mut s = Tactile {
+                    hand_model: device_model::REVO2,
+                    fingertip_count: 5,
+                    ..Tactile::default()
+                };
+                s.header.stamp_ns = TACTILE.stamp(seq);
+                for (i, tip) in s.fingertips.iter_mut().enumerate() {
+                    tip.normal_n = tip_normal(seq, i);
+                    tip.tangential_n = tip_tangential(i);
+                }
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+            3 => {
+                let mut s = HandCommand {
+                    hand_model: device_model::REVO2,
+                    joint_count: JOINTS as u8,
+                    ..HandCommand::default()
+                };
+                s.header.stamp_ns = COMMAND.stamp(seq);
+                for (j, joint) in s.joints.iter_mut().enumerate().take(JOINTS) {
+                    joint.target = target(seq, j);
+                }
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+            4 => {
+                let mut s = GloveForceCommand::default();
+                s.header.stamp_ns = FORCE.stamp(seq);
+                s.force = std::array::from_fn(|i| force(seq, i));
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+            _ => {
+                let (at, event, outcome, task) = marks()[seq as usize];
+                let mut s = Episode {
+                    event,
+                    outcome,
+                    task: fixed_text(task),
+                    ..Episode::default()
+                };
+                s.header.stamp_ns = T0 + at;
+                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                    .unwrap();
+            }
+        }
+    }
+    rec.finish().unwrap();
+}
+
+/// The frame at `at` as the recording's samples give it (newest at or before, every topic):
+/// observation.state, action, glove.force_command.
+fn expected_frame(at: u64) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+    let (g, s, t, c, f) = (
+        GLOVE.newest(at),
+        STATE.newest(at),
+        TACTILE.newest(at),
+        COMMAND.newest(at),
+        FORCE.newest(at),
+    );
+    let mut state: Vec<f32> = (0..6).map(|ch| glove_position(g, ch)).collect();
+    state.extend((0..JOINTS).map(|j| joint_position(s, j)));
+    state.extend((0..JOINTS).map(|j| joint_speed(s, j)));
+    for i in 0..5 {
+        state.extend([tip_normal(t, i), tip_tangential(i)]);
+    }
+    let action = (0..JOINTS).map(|j| target(c, j)).collect();
+    let forces = (0..5).map(|i| f32::from(force(f, i))).collect();
+    (state, action, forces)
+}
+
+fn floats(v: &serde_json::Value) -> Vec<f32> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not a list: {v}"))
+        .iter()
+        .map(|x| x.as_f64().unwrap() as f32)
+        .collect()
+}
+
+fn export(sandbox: &Sandbox, rec: &Path, out: &Path, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec![
+        "export",
+        rec.to_str().unwrap(),
+        "--format",
+        "lerobot",
+        "--fps",
+        "30",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let r = sandbox.run_teleop(&args);
+    (
+        r.status.success(),
+        String::from_utf8_lossy(&r.stdout).into_owned(),
+        String::from_utf8_lossy(&r.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
+    let sandbox = Sandbox::new();
+    let rec: PathBuf = sandbox.dir.path().join("session.mcap");
+    write_recording(&rec);
+    let out = sandbox.dir.path().join("dataset");
+
+    let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &["--with-force-command"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    for line in [
+        "episode 1 (\"pick up the cube\", success): episode 0 of the dataset, 61 frames",
+        "episode 2 (\"pick up the cube\", failure): episode 1 of the dataset, 61 frames",
+        "episode 3 (\"pour the water\") discarded: not exported",
+        "episode 4 (\"stack the blocks\", success): refused: hand/state at",
+        "episode 5 (\"wave\") was never stopped: not exported",
+        "2 episodes exported, 1 refused; the dataset now holds 2 episodes, 122 frames, 1 tasks",
+    ] {
+        assert!(stdout.contains(line), "missing `{line}` in:\n{stdout}");
+    }
+
+    // Frame 10 of episode 0 (1 s + 10/30 s) and frame 5 of episode 1 (4 s + 5/30 s).
+    for (index, at) in [
+        (10u64, T0 + S + 333_333_333),
+        (61 + 5, T0 + 4 * S + 166_666_667),
+    ] {
+        let Some(report) = check_lerobot(&out, Some(index)) else {
+            return;
+        };
+        assert_eq!(report["total_episodes"], 2);
+        assert_eq!(report["total_frames"], 122);
+        let frame = &report["frame"];
+        let (state, action, forces) = expected_frame(at);
+        assert_eq!(floats(&frame["observation.state"]), state, "frame {index}");
+        assert_eq!(floats(&frame["action"]), action, "frame {index}");
+        assert_eq!(
+            floats(&frame["glove.force_command"]),
+            forces,
+            "frame {index}"
+        );
+    }
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
+            .unwrap();
+    let names = info["features"]["observation.state"]["names"]
+        .as_array()
+        .unwrap();
+    assert_eq!(names[0], "glove.little.pos");
+    assert_eq!(names[6], "thumb_flex.pos");
+    assert_eq!(names[12], "thumb_flex.vel");
+    assert_eq!(names[18], "thumb.tip.normal_n");
+    assert_eq!(
+        names.len(),
+        6 + 2 * JOINTS + 10,
+        "no effort columns for the Revo2"
+    );
+    assert_eq!(info["features"]["action"]["names"][5], "pinky.target");
+    assert_eq!(info["robot_type"], "revo2");
+
+    // Appending: only the success this time.
+    let (ok, stdout, stderr) = export(
+        &sandbox,
+        &rec,
+        &out,
+        &["--with-force-command", "--only-success"],
+    );
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("episode 2 (\"pick up the cube\") failure: not exported (--only-success)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("the dataset now holds 3 episodes, 183 frames"),
+        "{stdout}"
+    );
+    if let Some(report) = check_lerobot(&out, Some(122 + 10)) {
+        let (state, ..) = expected_frame(T0 + S + 333_333_333);
+        assert_eq!(floats(&report["frame"]["observation.state"]), state);
+        assert_eq!(report["frame"]["episode_index"], 2);
+        assert_eq!(report["total_tasks"], 1);
+    }
+
+    // Other features: refused by name, the dataset left as it was.
+    let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &[]);
+    assert!(!ok, "{stdout}");
+    assert!(stderr.contains("glove.force_command"), "{stderr}");
+    if let Some(report) = check_lerobot(&out, None) {
+        assert_eq!(report["total_episodes"], 3);
+    }
+}
+
+#[test]
+fn bad_arguments_are_refused_by_name() {
+    let sandbox = Sandbox::new();
+    let rec = sandbox.dir.path().join("session.mcap");
+    write_recording(&rec);
+    let out = sandbox.dir.path().join("dataset");
+    let (ok, _, stderr) = export(&sandbox, &rec, &out, &["--min-rate-ratio", "1.5"]);
+    assert!(!ok && stderr.contains("--min-rate-ratio 1.5"), "{stderr}");
+    let missing = sandbox.dir.path().join("nope.mcap");
+    let (ok, _, stderr) = export(&sandbox, &missing, &out, &[]);
+    assert!(!ok && stderr.contains("nope.mcap"), "{stderr}");
+    let (ok, _, stderr) = export(&sandbox, &rec, &out, &["--namespace", "left"]);
+    assert!(!ok && stderr.contains("left/"), "{stderr}");
+    assert!(!out.exists(), "no dataset from refused exports");
+}
