@@ -3,7 +3,8 @@
 //! their device (a simulator process, or an emulated bus in the test process) and their
 //! commands; starting, waiting, health, logs and stopping are here once, with the commands and
 //! readings every hand's tests make (a position command in rad, the joints' positions) and
-//! their turn ([`one_at_a_time`]).
+//! their turn ([`one_at_a_time`]). [`HandNode::simulated`] is any shipped hand's node against its
+//! simulator process, for tests that need a running hand of each kind.
 
 use std::ffi::OsStr;
 use std::sync::{Mutex, MutexGuard};
@@ -160,6 +161,54 @@ impl<S> HandNode<S> {
             }
         });
         out
+    }
+}
+
+impl HandNode {
+    /// The shipped hand `hand` (`revo2`, `shadow`, `allegro`, `leap`; the Allegro in protocol
+    /// `v4`) as a node against its simulator process on a fresh rig, health every 100 ms;
+    /// waits (up to 20 s) until `hand/state` says the link is up.
+    pub fn simulated(hand: &str) -> Self {
+        let mut rig = Rig::new();
+        let config = match hand {
+            "revo2" | "shadow" => {
+                let transport = rig.start_socket_sim(hand);
+                format!("transport = \"{transport}\"\nhealth_period_ms = 100\n")
+            }
+            "allegro" => {
+                let slcan = rig.path("allegro-slcan").display().to_string();
+                let control = rig.path("allegro.ctl").display().to_string();
+                rig.start_sim(
+                    "sim-allegro",
+                    crate::bin("teleop-sim-allegro"),
+                    &[
+                        "--slcan",
+                        &slcan,
+                        "--generation",
+                        "v4",
+                        "--control",
+                        &control,
+                    ],
+                    "allegro: generation",
+                );
+                format!("link = \"slcan:{slcan}\"\nprotocol = \"v4\"\nhealth_period_ms = 100\n")
+            }
+            "leap" => {
+                let link = rig.path("leap-link").display().to_string();
+                let control = rig.path("leap.ctl").display().to_string();
+                rig.start_sim(
+                    "sim-leap",
+                    crate::bin("teleop-sim-leap"),
+                    &["--link", &link, "--control", &control],
+                    "leap: link",
+                );
+                format!("port = \"{link}\"\nhealth_period_ms = 100\n")
+            }
+            other => panic!("no simulated hand {other}"),
+        };
+        let node = Self::start(rig, hand, crate::bin(&format!("teleop-{hand}")), &config);
+        node.wait_state(Duration::from_secs(20), "the link up", |s| s.link_up == 1);
+        node
     }
 }
 

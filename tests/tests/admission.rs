@@ -9,9 +9,7 @@
 
 use std::time::{Duration, Instant};
 
-use teleop_e2e::bin;
 use teleop_e2e::hand::HandNode;
-use teleop_e2e::rig::Rig;
 use teleop_hand_profile::{CommandUnits, HandProfile};
 use teleop_msgs::{control_mode, units, HandCommand, HandState, NodeHealth};
 
@@ -28,80 +26,17 @@ struct Hand {
 impl Hand {
     /// Starts `hand`'s simulator and node (health every 100 ms) and waits until the link is up.
     fn start(hand: &str) -> Self {
-        let mut rig = Rig::new();
-        let profile = HandProfile::builtin(hand).unwrap();
-        let (config, position_modes, lacks): (String, &'static [u8], Option<u8>) = match hand {
-            "revo2" => {
-                let socket = rig.path("revo2.sock").display().to_string();
-                rig.start_sim(
-                    "sim-revo2",
-                    bin("teleop-sim-revo2"),
-                    &["--socket", &socket],
-                    "revo2: socket",
-                );
-                (
-                    format!("transport = \"sim:{socket}\"\nhealth_period_ms = 100\n"),
-                    &[control_mode::POSITION, control_mode::POSITION_TIME],
-                    None,
-                )
-            }
-            "shadow" => {
-                let socket = rig.path("shadow.sock").display().to_string();
-                rig.start_sim(
-                    "sim-shadow",
-                    bin("teleop-sim-shadow"),
-                    &["--socket", &socket],
-                    "shadow: socket",
-                );
-                (
-                    format!("transport = \"sim:{socket}\"\nhealth_period_ms = 100\n"),
-                    &[control_mode::POSITION, control_mode::POSITION_TIME],
-                    Some(control_mode::VELOCITY),
-                )
-            }
-            "allegro" => {
-                let slcan = rig.path("allegro-slcan").display().to_string();
-                let control = rig.path("allegro.ctl").display().to_string();
-                rig.start_sim(
-                    "sim-allegro",
-                    bin("teleop-sim-allegro"),
-                    &[
-                        "--slcan",
-                        &slcan,
-                        "--generation",
-                        "v4",
-                        "--control",
-                        &control,
-                    ],
-                    "allegro: generation",
-                );
-                (
-                    format!(
-                        "link = \"slcan:{slcan}\"\nprotocol = \"v4\"\nhealth_period_ms = 100\n"
-                    ),
-                    &[control_mode::POSITION],
-                    Some(control_mode::POSITION_TIME),
-                )
-            }
-            "leap" => {
-                let link = rig.path("leap-link").display().to_string();
-                let control = rig.path("leap.ctl").display().to_string();
-                rig.start_sim(
-                    "sim-leap",
-                    bin("teleop-sim-leap"),
-                    &["--link", &link, "--control", &control],
-                    "leap: link",
-                );
-                (
-                    format!("port = \"{link}\"\nhealth_period_ms = 100\n"),
-                    &[control_mode::POSITION],
-                    Some(control_mode::POSITION_TIME),
-                )
-            }
+        let (position_modes, lacks): (&'static [u8], Option<u8>) = match hand {
+            "revo2" => (&[control_mode::POSITION, control_mode::POSITION_TIME], None),
+            "shadow" => (
+                &[control_mode::POSITION, control_mode::POSITION_TIME],
+                Some(control_mode::VELOCITY),
+            ),
+            "allegro" | "leap" => (&[control_mode::POSITION], Some(control_mode::POSITION_TIME)),
             other => panic!("no hand {other}"),
         };
-        let node = HandNode::start(rig, hand, bin(&format!("teleop-{hand}")), &config);
-        node.wait_state(Duration::from_secs(20), "the link up", |s| s.link_up == 1);
+        let profile = HandProfile::builtin(hand).unwrap();
+        let node = HandNode::simulated(hand);
         Self {
             node,
             profile,

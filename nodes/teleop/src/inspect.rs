@@ -7,20 +7,23 @@
 
 use std::cell::RefCell;
 use std::collections::BTreeMap;
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use iceoryx2::node::{Node, NodeState, NodeView};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::CallbackProgression;
-use teleop_msgs::{
-    text_of, visit_topic, DeviceInfo, EStop, EStopAck, Message, NodeHealth, TopicVisitor,
-};
+use teleop_hand_profile::HandProfile;
+use teleop_msgs::{text_of, visit_topic, EStop, EStopAck, Message, NodeHealth, TopicVisitor};
 use teleop_runtime::{
     discover_namespaces, latch_path, latched_namespaces, now_ns, qualified, set_latch, split,
     EventLoop, Flow, Input, IpcSettings, Namespace, NodeRuntime, Service, StopReason, Subscriber,
     Wake,
 };
+
+use crate::echo::{Echo, Format};
 
 /// Name of the short-lived iceoryx2 node the inspection commands create.
 const CLI_NODE: &str = "teleop-cli";
@@ -125,13 +128,21 @@ pub(crate) fn unknown_topic(topic: &str) -> anyhow::Error {
     anyhow::anyhow!("unknown topic {topic:?}; topics are: {}", names.join(", "))
 }
 
+/// `teleop echo`: the samples of one topic as they arrive, written by [`Echo`] in `format`,
+/// hand samples named by the profile file `profile` if given (else by each sample's shipped
+/// profile).
 pub fn echo(
     ipc: &IpcSettings,
     topic: &str,
     namespace: Option<&Namespace>,
     count: Option<u64>,
+    format: Format,
+    profile: Option<&Path>,
 ) -> anyhow::Result<ExitCode> {
     let (named, info) = split(topic).ok_or_else(|| unknown_topic(topic))?;
+    let profile = profile
+        .map(|path| HandProfile::load(path).with_context(|| "--profile"))
+        .transpose()?;
     let namespace = match (named, namespace) {
         (Some(a), Some(b)) if a != *b => {
             anyhow::bail!("topic {topic:?} is in namespace \"{a}\", but --namespace says \"{b}\"")
@@ -140,12 +151,13 @@ pub fn echo(
         (None, b) => b.cloned(),
     };
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
-    struct Echo<'a> {
+    struct Visit<'a> {
         runtime: &'a NodeRuntime,
         namespace: Option<&'a Namespace>,
         count: Option<u64>,
+        echo: Echo,
     }
-    impl TopicVisitor for Echo<'_> {
+    impl TopicVisitor for Visit<'_> {
         type Output = anyhow::Result<()>;
         fn visit<M: Message>(self) -> anyhow::Result<()> {
             let sub = self.runtime.subscriber_in::<M>(self.namespace)?;
@@ -154,9 +166,10 @@ pub fn echo(
             // A failed write (the reader closed the pipe: `teleop echo ... | head`) ends the echo.
             let failed: RefCell<Option<std::io::Error>> = RefCell::new(None);
             let done = || printed.get() >= limit || failed.borrow().is_some();
+            let echo = RefCell::new(self.echo);
             let print = |m: &M| {
                 if !done() {
-                    match out!("{}", shown_sample(m)) {
+                    match out!("{}", echo.borrow_mut().show(m)) {
                         Ok(()) => printed.set(printed.get() + 1),
                         Err(e) => *failed.borrow_mut() = Some(e),
                     }
@@ -185,50 +198,15 @@ pub fn echo(
     }
     visit_topic(
         info.name,
-        Echo {
+        Visit {
             runtime: &runtime,
             namespace: namespace.as_ref(),
             count,
+            echo: Echo::new(format, profile),
         },
     )
     .ok_or_else(|| unknown_topic(topic))??;
     Ok(ExitCode::SUCCESS)
-}
-
-/// A sample as `echo` prints it: a device identity and a health report's details by name
-/// (their text fields are otherwise bytes), any other payload as its fields.
-fn shown_sample<M: Message>(m: &M) -> String {
-    let by_name = |fields: Vec<(String, String)>| -> String {
-        let fields: Vec<String> = fields.iter().map(|(k, v)| format!("{k}: {v:?}")).collect();
-        fields.join(", ")
-    };
-    if M::TOPIC == DeviceInfo::TOPIC {
-        if let Ok(d) = DeviceInfo::from_bytes(m.as_bytes()) {
-            let fields = d.named_fields().into_iter();
-            let fields = fields.map(|(k, v)| (k.to_string(), v)).collect();
-            return format!(
-                "DeviceInfo {{ header: {:?}, {} }}",
-                d.header,
-                by_name(fields)
-            );
-        }
-    }
-    if M::TOPIC == NodeHealth::TOPIC {
-        if let Ok(h) = NodeHealth::from_bytes(m.as_bytes()) {
-            let details = h.details().map(|(k, v)| (k, v.to_string())).collect();
-            let counters = NodeHealth {
-                details: Default::default(),
-                detail_count: 0,
-                ..h
-            };
-            return format!(
-                "{counters:?}; node {:?}, details {{ {} }}",
-                h.name(),
-                by_name(details)
-            );
-        }
-    }
-    format!("{m:?}")
 }
 
 /// What `stats` keeps per topic.
@@ -669,37 +647,5 @@ mod tests {
         assert!(row.ends_with("  reconnects=2 rtt_ms=0.25"), "{table}");
         let counters: Vec<&str> = row.split_whitespace().skip(1).take(4).collect();
         assert_eq!(counters, ["0", "3", "0", "0"], "{table}");
-    }
-
-    #[test]
-    fn echo_shows_identities_and_details_by_name() {
-        let device = DeviceInfo {
-            device_model: teleop_msgs::device_model::GLOVE,
-            link_kind: teleop_msgs::link_kind::SERIAL,
-            bus_address: 1,
-            model_name: teleop_msgs::fixed_text("EH55BF1"),
-            ..Default::default()
-        };
-        let shown = shown_sample(&device);
-        assert!(
-            shown.ends_with(
-                "device_model: \"glove\", link_kind: \"serial\", bus_address: \"1\", \
-                 model_name: \"EH55BF1\" }"
-            ),
-            "{shown}"
-        );
-        let mut h = NodeHealth::default();
-        h.set_name("bridge");
-        h.set_detail("rtt_ms", 0.25);
-        let shown = shown_sample(&h);
-        assert!(
-            shown.ends_with("node \"bridge\", details { rtt_ms: \"0.25\" }"),
-            "{shown}"
-        );
-        // Other payloads as their fields.
-        assert_eq!(
-            shown_sample(&EStop::default()),
-            format!("{:?}", EStop::default())
-        );
     }
 }
