@@ -6,8 +6,9 @@
 //!
 //! * YAML (the default): one document per sample, starting `---`; a table of plain values on
 //!   one line (`index: {position: 0.5, speed: 0.0, ...}`), NaN as `.nan`, infinities as
-//!   `.inf`/`-.inf`, texts plain when they are simple names, else double-quoted. Read back by any YAML parser (also YAML 1.1 ones: every
-//!   float has a dot, every exponent a sign).
+//!   `.inf`/`-.inf`, texts plain when they are simple names, else double-quoted. YAML 1.1
+//!   readers (PyYAML) read it as YAML 1.2 ones do: every float has a dot and every exponent a
+//!   sign, and names such as `on` or `no` are quoted.
 //! * JSON: one object per line (JSON Lines), NaN and infinities as `null`.
 //! * CSV: a header line, then one row per sample; a column is the dotted path of a value
 //!   (`joints.index.position`, `header.seq`, `input_age_ms.0`). NaN is an empty cell. A sample
@@ -515,7 +516,8 @@ fn health(h: &NodeHealth) -> Fields {
 }
 
 /// Fixed `uint8` arrays at least this long are texts: the contract's zero-padded UTF-8 fields
-/// (names, identities, a task) are 24 bytes or more, its byte arrays of numbers 6 or fewer.
+/// (names, identities, a task) are 24 bytes or more, its arrays of byte-sized numbers
+/// (`error_bits`, `temperature_c`, `source`) 5.
 const TEXT_BYTES: usize = 16;
 
 /// A payload or nested struct by its fields `(name, ROS 2 type, offset, size)` over its
