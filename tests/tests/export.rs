@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use teleop_e2e::{dataset::check_lerobot, Sandbox};
 use teleop_msgs::{
     device_model, episode_event, episode_outcome, fixed_text, units, Episode, GloveForceCommand,
-    GloveState, HandCommand, HandState, Tactile,
+    GloveState, HandCommand, HandState, Message, Tactile,
 };
 use teleop_recording::{RecordedMessage, Recorder, TopicId, WriterOptions};
 
@@ -107,9 +107,13 @@ fn marks() -> Vec<(u64, u8, u8, &'static str)> {
     ]
 }
 
-/// Writes the session: every topic's samples and the marks, in log-time order, with the Revo2
+/// A side of the session: its namespace (`None`: the topics without one) and what it adds to
+/// every value (so that the two sides of a bimanual recording differ).
+type Side = (Option<&'static str>, f32);
+
+/// Writes the session: every side's topics and the marks, in log-time order, with the Revo2
 /// profile embedded as the recorder embeds it.
-fn write_recording(path: &Path) {
+fn write_recording(path: &Path, sides: &[Side]) {
     let profile = Sandbox::repo().join("config/hands/revo2.toml");
     let metadata = vec![(
         "hand_profile".to_string(),
@@ -122,42 +126,82 @@ fn write_recording(path: &Path) {
         ]),
     )];
     let mut rec = Recorder::create(path, WriterOptions::default(), &metadata).unwrap();
-    let ids: [TopicId; 6] = [
-        rec.add_message_type::<GloveState>().unwrap(),
-        rec.add_message_type::<HandState>().unwrap(),
-        rec.add_message_type::<Tactile>().unwrap(),
-        rec.add_message_type::<HandCommand>().unwrap(),
-        rec.add_message_type::<GloveForceCommand>().unwrap(),
-        rec.add_message_type::<Episode>().unwrap(),
-    ];
-    // (log time, topic, seq) of every sample, then written in log order.
-    let mut due: Vec<(u64, usize, u64)> = Vec::new();
-    for (topic, stream) in [GLOVE, STATE, TACTILE, COMMAND, FORCE]
-        .into_iter()
-        .enumerate()
-    {
-        let mut seq = 0;
-        while stream.stamp(seq) < T0 + END {
-            let rel = stream.stamp(seq) - T0;
-            let stalled = topic == 1 && (STALL.0..STALL.1).contains(&rel);
-            if !stalled {
-                due.push((stream.stamp(seq) + stream.delay, topic, seq));
+    let name =
+        |ns: Option<&str>, topic: &str| ns.map_or(topic.to_string(), |ns| format!("{ns}/{topic}"));
+    // Per side, per topic: (channel, id).
+    let mut ids: Vec<Vec<(String, TopicId)>> = Vec::new();
+    for (ns, _) in sides {
+        let mut add = |topic: &str, schema: &str, text: String| {
+            let channel = name(*ns, topic);
+            let id = rec.add_topic(&channel, schema, &text).unwrap();
+            (channel, id)
+        };
+        ids.push(vec![
+            add(
+                GloveState::TOPIC,
+                GloveState::SCHEMA_NAME,
+                GloveState::schema(),
+            ),
+            add(
+                HandState::TOPIC,
+                HandState::SCHEMA_NAME,
+                HandState::schema(),
+            ),
+            add(Tactile::TOPIC, Tactile::SCHEMA_NAME, Tactile::schema()),
+            add(
+                HandCommand::TOPIC,
+                HandCommand::SCHEMA_NAME,
+                HandCommand::schema(),
+            ),
+            add(
+                GloveForceCommand::TOPIC,
+                GloveForceCommand::SCHEMA_NAME,
+                GloveForceCommand::schema(),
+            ),
+        ]);
+    }
+    let episode_id = rec.add_message_type::<Episode>().unwrap();
+    // (log time, side, topic, seq) of every sample, then written in log order; topic 5 is a mark.
+    let mut due: Vec<(u64, usize, usize, u64)> = Vec::new();
+    for side in 0..sides.len() {
+        for (topic, stream) in [GLOVE, STATE, TACTILE, COMMAND, FORCE]
+            .into_iter()
+            .enumerate()
+        {
+            let mut seq = 0;
+            while stream.stamp(seq) < T0 + END {
+                let rel = stream.stamp(seq) - T0;
+                let stalled = topic == 1 && (STALL.0..STALL.1).contains(&rel);
+                if !stalled {
+                    due.push((stream.stamp(seq) + stream.delay, side, topic, seq));
+                }
+                seq += 1;
             }
-            seq += 1;
         }
     }
     for (i, (at, ..)) in marks().into_iter().enumerate() {
-        due.push((T0 + at + MS / 2, 5, i as u64));
+        due.push((T0 + at + MS / 2, 0, 5, i as u64));
     }
     due.sort();
-    for (log, topic, seq) in due {
+    for (log, side, topic, seq) in due {
+        let off = sides[side].1;
+        let mut write = |bytes: RecordedMessage| {
+            let (channel, id) = &ids[side][topic];
+            rec.write(
+                *id,
+                &RecordedMessage {
+                    topic: channel,
+                    ..bytes
+                },
+            )
+            .unwrap();
+        };
         match topic {
             0 => {
                 let mut s = GloveState::default();
                 s.header.stamp_ns = GLOVE.stamp(seq);
-                s.position = std::array::from_fn(|c| glove_position(seq, c));
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
-                    .unwrap();
+                s.position = std::array::from_fn(|c| glove_position(seq, c) + off);
+                write(RecordedMessage::from_sample(&s, log));
             }
             1 => {
                 let mut s = HandState {
@@ -168,12 +212,11 @@ fn write_recording(path: &Path) {
                 };
                 s.header.stamp_ns = STATE.stamp(seq);
                 for (j, joint) in s.joints.iter_mut().enumerate().take(JOINTS) {
-                    joint.position = joint_position(seq, j);
-                    joint.speed = joint_speed(seq, j);
+                    joint.position = joint_position(seq, j) + off;
+                    joint.speed = joint_speed(seq, j) + off;
                     joint.effort = f32::NAN; // the Revo2 measures none
                 }
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
-                    .unwrap();
+                write(RecordedMessage::from_sample(&s, log));
             }
             2 => {
                 let mut s = Tactile {
@@ -183,11 +226,10 @@ fn write_recording(path: &Path) {
                 };
                 s.header.stamp_ns = TACTILE.stamp(seq);
                 for (i, tip) in s.fingertips.iter_mut().enumerate() {
-                    tip.normal_n = tip_normal(seq, i);
-                    tip.tangential_n = tip_tangential(i);
+                    tip.normal_n = tip_normal(seq, i) + off;
+                    tip.tangential_n = tip_tangential(i) + off;
                 }
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
-                    .unwrap();
+                write(RecordedMessage::from_sample(&s, log));
             }
             3 => {
                 let mut s = HandCommand {
@@ -197,17 +239,15 @@ fn write_recording(path: &Path) {
                 };
                 s.header.stamp_ns = COMMAND.stamp(seq);
                 for (j, joint) in s.joints.iter_mut().enumerate().take(JOINTS) {
-                    joint.target = target(seq, j);
+                    joint.target = target(seq, j) + off;
                 }
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
-                    .unwrap();
+                write(RecordedMessage::from_sample(&s, log));
             }
             4 => {
                 let mut s = GloveForceCommand::default();
                 s.header.stamp_ns = FORCE.stamp(seq);
-                s.force = std::array::from_fn(|i| force(seq, i));
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
-                    .unwrap();
+                s.force = std::array::from_fn(|i| force(seq, i) + off as i16);
+                write(RecordedMessage::from_sample(&s, log));
             }
             _ => {
                 let (at, event, outcome, task) = marks()[seq as usize];
@@ -218,7 +258,7 @@ fn write_recording(path: &Path) {
                     ..Episode::default()
                 };
                 s.header.stamp_ns = T0 + at;
-                rec.write(ids[topic], &RecordedMessage::from_sample(&s, log))
+                rec.write(episode_id, &RecordedMessage::from_sample(&s, log))
                     .unwrap();
             }
         }
@@ -228,7 +268,7 @@ fn write_recording(path: &Path) {
 
 /// The frame at `at` as the recording's samples give it (newest at or before, every topic):
 /// observation.state, action, glove.force_command.
-fn expected_frame(at: u64) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+fn expected_frame(at: u64, off: f32) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let (g, s, t, c, f) = (
         GLOVE.newest(at),
         STATE.newest(at),
@@ -236,14 +276,16 @@ fn expected_frame(at: u64) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
         COMMAND.newest(at),
         FORCE.newest(at),
     );
-    let mut state: Vec<f32> = (0..6).map(|ch| glove_position(g, ch)).collect();
-    state.extend((0..JOINTS).map(|j| joint_position(s, j)));
-    state.extend((0..JOINTS).map(|j| joint_speed(s, j)));
+    let mut state: Vec<f32> = (0..6).map(|ch| glove_position(g, ch) + off).collect();
+    state.extend((0..JOINTS).map(|j| joint_position(s, j) + off));
+    state.extend((0..JOINTS).map(|j| joint_speed(s, j) + off));
     for i in 0..5 {
-        state.extend([tip_normal(t, i), tip_tangential(i)]);
+        state.extend([tip_normal(t, i) + off, tip_tangential(i) + off]);
     }
-    let action = (0..JOINTS).map(|j| target(c, j)).collect();
-    let forces = (0..5).map(|i| f32::from(force(f, i))).collect();
+    let action = (0..JOINTS).map(|j| target(c, j) + off).collect();
+    let forces = (0..5)
+        .map(|i| f32::from(force(f, i) + off as i16))
+        .collect();
     (state, action, forces)
 }
 
@@ -279,7 +321,7 @@ fn export(sandbox: &Sandbox, rec: &Path, out: &Path, extra: &[&str]) -> (bool, S
 fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
     let sandbox = Sandbox::new();
     let rec: PathBuf = sandbox.dir.path().join("session.mcap");
-    write_recording(&rec);
+    write_recording(&rec, &[(None, 0.0)]);
     let out = sandbox.dir.path().join("dataset");
 
     let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &["--with-force-command"]);
@@ -306,7 +348,7 @@ fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
         assert_eq!(report["total_episodes"], 2);
         assert_eq!(report["total_frames"], 122);
         let frame = &report["frame"];
-        let (state, action, forces) = expected_frame(at);
+        let (state, action, forces) = expected_frame(at, 0.0);
         assert_eq!(floats(&frame["observation.state"]), state, "frame {index}");
         assert_eq!(floats(&frame["action"]), action, "frame {index}");
         assert_eq!(
@@ -350,7 +392,7 @@ fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
         "{stdout}"
     );
     if let Some(report) = check_lerobot(&out, Some(122 + 10)) {
-        let (state, ..) = expected_frame(T0 + S + 333_333_333);
+        let (state, ..) = expected_frame(T0 + S + 333_333_333, 0.0);
         assert_eq!(floats(&report["frame"]["observation.state"]), state);
         assert_eq!(report["frame"]["episode_index"], 2);
         assert_eq!(report["total_tasks"], 1);
@@ -369,7 +411,7 @@ fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
 fn bad_arguments_are_refused_by_name() {
     let sandbox = Sandbox::new();
     let rec = sandbox.dir.path().join("session.mcap");
-    write_recording(&rec);
+    write_recording(&rec, &[(None, 0.0)]);
     let out = sandbox.dir.path().join("dataset");
     let (ok, _, stderr) = export(&sandbox, &rec, &out, &["--min-rate-ratio", "1.5"]);
     assert!(!ok && stderr.contains("--min-rate-ratio 1.5"), "{stderr}");
@@ -379,4 +421,55 @@ fn bad_arguments_are_refused_by_name() {
     let (ok, _, stderr) = export(&sandbox, &rec, &out, &["--namespace", "left"]);
     assert!(!ok && stderr.contains("left/"), "{stderr}");
     assert!(!out.exists(), "no dataset from refused exports");
+}
+
+#[test]
+fn a_bimanual_recording_exports_both_sides_named_by_side() {
+    let sandbox = Sandbox::new();
+    let rec = sandbox.dir.path().join("bimanual.mcap");
+    write_recording(&rec, &[(Some("left"), 0.0), (Some("right"), 100.0)]);
+    let out = sandbox.dir.path().join("dataset");
+    let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &["--with-force-command"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("2 episodes exported, 1 refused"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("refused: left/hand/state at"), "{stdout}");
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
+            .unwrap();
+    assert_eq!(info["robot_type"], "revo2_bimanual");
+    let names = info["features"]["observation.state"]["names"]
+        .as_array()
+        .unwrap();
+    let per_side = 6 + 2 * JOINTS + 10;
+    assert_eq!(names.len(), 2 * per_side);
+    assert_eq!(names[6], "left/thumb_flex.pos");
+    assert_eq!(names[per_side + 6], "right/thumb_flex.pos");
+    assert_eq!(
+        info["features"]["action"]["names"][JOINTS],
+        "right/thumb_flex.target"
+    );
+    assert_eq!(
+        info["features"]["glove.force_command"]["names"][5],
+        "right/glove.little.force"
+    );
+
+    let Some(report) = check_lerobot(&out, Some(10)) else {
+        return;
+    };
+    let at = T0 + S + 333_333_333;
+    let (left, left_action, left_forces) = expected_frame(at, 0.0);
+    let (right, right_action, right_forces) = expected_frame(at, 100.0);
+    let frame = &report["frame"];
+    assert_eq!(floats(&frame["observation.state"]), [left, right].concat());
+    assert_eq!(
+        floats(&frame["action"]),
+        [left_action, right_action].concat()
+    );
+    assert_eq!(
+        floats(&frame["glove.force_command"]),
+        [left_forces, right_forces].concat()
+    );
 }
