@@ -187,6 +187,8 @@ fn write_recording(path: &Path, minutes: u64) -> f64 {
 fn export_once(recording: &Path, out: &Path) -> (f64, f64) {
     let _ = std::fs::remove_dir_all(out);
     let started = Instant::now();
+    // Waited for with wait4 below, which gives this child's own rusage (std's wait does not).
+    #[allow(clippy::zombie_processes)]
     let child = Command::new(bin("teleop"))
         .args(["export", recording.to_str().unwrap(), "--format", "lerobot"])
         .args(["--fps", "30", "--with-force-command", "--out", out.to_str().unwrap()])

@@ -12,7 +12,8 @@ Reads every parquet file of the dataset and checks that:
   data/chunk_index, data/file_index, dataset_from_index, dataset_to_index and length point at
   exactly the rows of that episode (episode_index, frame_index 0..length-1, its task_index);
 - each episode's stats/<feature>/{min,max,count} columns equal those of its rows;
-- meta/tasks.parquet has task_index 0..total_tasks-1 and pandas metadata making `task` the index;
+- meta/tasks.parquet has task_index 0..total_tasks-1 and pandas metadata making `task` the index
+  (and, where pandas is installed, pandas reads it so, as lerobot does);
 - meta/stats.json has min, max, mean, std, count, q01..q99 per feature, count = total_frames,
   min/max those of all frames.
 
@@ -144,6 +145,15 @@ def main():
     pandas = json.loads((tasks_table.schema.metadata or {}).get(b"pandas", b"{}"))
     need(pandas.get("index_columns") == ["task"], "tasks.parquet: `task` is not the pandas index")
     task_index = {t["task"]: t["task_index"] for t in tasks}
+    try:  # lerobot reads the tasks with pandas (load_tasks): where it is installed, read them so too
+        import pandas
+    except ImportError:
+        pandas = None
+    if pandas is not None:
+        frame = pandas.read_parquet(os.path.join(root, "meta", "tasks.parquet"))
+        need(frame.index.name == "task", f"pandas reads the tasks indexed by {frame.index.name!r}")
+        need({str(k): int(v) for k, v in frame["task_index"].items()} == task_index,
+             "pandas reads other tasks than pyarrow")
 
     # Episodes: each points at exactly its rows.
     episodes = []
