@@ -377,6 +377,34 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
     Ok(ExitCode::SUCCESS)
 }
 
+/// The rate rule (see the module's documentation): the first key topic whose rate within an
+/// episode of `seconds`, from its `samples`, is below `ratio` × its rate over the recording
+/// (`reference`, `None` for a topic that is not a key topic), said with both rates.
+fn too_slow<'a>(
+    topics: impl Iterator<Item = &'a str>,
+    samples: &[u64],
+    reference: &[Option<f64>],
+    seconds: f64,
+    ratio: f64,
+) -> Option<String> {
+    topics
+        .zip(samples)
+        .zip(reference)
+        .find_map(|((topic, &n), reference)| {
+            let reference = (*reference)?;
+            let rate = if seconds > 0.0 {
+                n as f64 / seconds
+            } else {
+                0.0
+            };
+            (rate < ratio * reference).then(|| {
+                format!(
+                    "{topic} at {rate:.1} Hz, below {ratio} x the recording's {reference:.1} Hz"
+                )
+            })
+        })
+}
+
 /// The first difference between two recordings' features.
 fn spec_difference(a: &DatasetSpec, b: &DatasetSpec) -> String {
     for (fa, fb) in a.features.iter().zip(&b.features) {
@@ -472,22 +500,8 @@ fn export_recording(
                     span.label()
                 );
                 let seconds = span.duration_s();
-                let slow = layout.slots.iter().zip(&samples).zip(&reference).find_map(
-                    |((slot, &n), reference)| {
-                        let reference = (*reference)?;
-                        let rate = if seconds > 0.0 {
-                            n as f64 / seconds
-                        } else {
-                            0.0
-                        };
-                        (rate < opts.min_rate_ratio * reference).then(|| {
-                            format!(
-                                "{} at {rate:.1} Hz, below {} x the recording's {reference:.1} Hz",
-                                slot.topic, opts.min_rate_ratio
-                            )
-                        })
-                    },
-                );
+                let topics = layout.slots.iter().map(|s| s.topic.as_str());
+                let slow = too_slow(topics, &samples, &reference, seconds, opts.min_rate_ratio);
                 if let Some(why) = slow {
                     out!("{label}: refused: {why}")?;
                     refused += 1;
@@ -533,4 +547,30 @@ fn export_recording(
         handle(event, &mut buffer)?;
     }
     Ok((exported, refused))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_rate_rule_refuses_the_first_key_topic_below_its_share() {
+        let topics = ["glove/state", "hand/tactile", "hand/state"];
+        let reference = [Some(250.0), None, Some(1000.0)];
+        // 2 s: glove/state at 240 Hz (96 %), tactile silent (not a key topic), hand/state 950 Hz.
+        assert_eq!(
+            too_slow(topics.into_iter(), &[480, 0, 1900], &reference, 2.0, 0.9),
+            None
+        );
+        // hand/state stalled: 800 Hz < 900 Hz.
+        assert_eq!(
+            too_slow(topics.into_iter(), &[480, 0, 1600], &reference, 2.0, 0.9).as_deref(),
+            Some("hand/state at 800.0 Hz, below 0.9 x the recording's 1000.0 Hz")
+        );
+        // A ratio of 0 keeps everything.
+        assert_eq!(
+            too_slow(topics.into_iter(), &[0, 0, 0], &reference, 2.0, 0.0),
+            None
+        );
+    }
 }
