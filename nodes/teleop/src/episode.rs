@@ -2,11 +2,13 @@
 //! without a namespace: one operator's episode covers every side), acknowledged by the running
 //! recorders.
 //!
-//! A mark is only worth sending when a recorder takes it: before sending, the command waits for
-//! the recorders' health reports (each carries `episode_marks`, the marks it has received),
-//! then sends the mark and waits until every recorder seen counts it; it says what the
-//! recorder now holds (the episode's number, open or closed). No recorder, or one that does not
-//! count the mark in time, is an error: the mark may be lost, and the operator must know.
+//! A mark is only worth sending when a recorder takes it: before sending, the command listens to
+//! the recorders' health reports for a report period (each carries `episode_marks`, the marks
+//! it has written with what they changed, and `episode_ignored`, those that changed nothing),
+//! then sends the mark and waits until every recorder heard counts it; it says what the
+//! recorder now holds (the episode's number, open or closed). No recorder, one that does not
+//! count the mark in time, or one that ignored it (a STOP with no episode open) is an error:
+//! the operator must know.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -16,10 +18,14 @@ use teleop_runtime::{IpcSettings, NodeRuntime};
 
 /// How long to wait for the recorders' first health reports (they report every 500 ms).
 const FIND_RECORDERS: Duration = Duration::from_millis(1500);
+/// How long to go on listening once a recorder reported: every recorder reports within it.
+const LISTEN: Duration = Duration::from_millis(600);
 /// How long a recorder has to count the mark.
 const ACK_WAIT: Duration = Duration::from_secs(3);
 /// The health detail a recorder counts marks in.
 const MARKS: &str = "episode_marks";
+/// The health detail a recorder counts ignored marks in.
+const IGNORED: &str = "episode_ignored";
 
 /// An episode mark.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -79,13 +85,16 @@ pub fn send(ipc: &IpcSettings, mark: &Mark) -> anyhow::Result<String> {
     let runtime = NodeRuntime::new("teleop-episode", ipc)?;
     let health = runtime.subscriber::<NodeHealth>()?;
     let mut recorders: BTreeMap<String, NodeHealth> = BTreeMap::new();
-    let deadline = Instant::now() + FIND_RECORDERS;
-    while recorders.is_empty() && Instant::now() < deadline {
+    let mut deadline = Instant::now() + FIND_RECORDERS;
+    while Instant::now() < deadline {
         health.drain(|h| {
             if h.detail(MARKS).is_some() {
                 recorders.insert(h.name(), *h);
             }
         });
+        if !recorders.is_empty() {
+            deadline = deadline.min(Instant::now() + LISTEN);
+        }
         std::thread::sleep(Duration::from_millis(20));
     }
     if recorders.is_empty() {
@@ -95,9 +104,10 @@ pub fn send(ipc: &IpcSettings, mark: &Mark) -> anyhow::Result<String> {
             FIND_RECORDERS.as_millis()
         );
     }
+    let taken = |h: &NodeHealth| h.detail(MARKS).unwrap_or(0.0) + h.detail(IGNORED).unwrap_or(0.0);
     let before: BTreeMap<String, f64> = recorders
         .iter()
-        .map(|(name, h)| (name.clone(), h.detail(MARKS).unwrap_or(0.0)))
+        .map(|(name, h)| (name.clone(), taken(h)))
         .collect();
     // The publisher stays until the recorders counted the mark (iceoryx2 takes back the
     // samples of a publisher that is gone before they are read).
@@ -108,15 +118,16 @@ pub fn send(ipc: &IpcSettings, mark: &Mark) -> anyhow::Result<String> {
     while counted.len() < before.len() && Instant::now() < deadline {
         health.drain(|h| {
             let name = h.name();
-            if let (Some(was), Some(now)) = (before.get(&name), h.detail(MARKS)) {
-                if now > *was {
-                    counted.insert(name, *h);
-                }
+            if before.get(&name).is_some_and(|was| taken(h) > *was) {
+                counted.insert(name, *h);
             }
         });
         std::thread::sleep(Duration::from_millis(20));
     }
-    let missing: Vec<&String> = before.keys().filter(|n| !counted.contains_key(*n)).collect();
+    let missing: Vec<&String> = before
+        .keys()
+        .filter(|n| !counted.contains_key(*n))
+        .collect();
     if !missing.is_empty() {
         anyhow::bail!(
             "the mark was sent, but {} did not count it within {} ms: check that recorder \
@@ -127,6 +138,33 @@ pub fn send(ipc: &IpcSettings, mark: &Mark) -> anyhow::Result<String> {
                 .collect::<Vec<_>>()
                 .join(", "),
             ACK_WAIT.as_millis()
+        );
+    }
+    let ignored: Vec<&String> = counted
+        .iter()
+        .filter(|(name, h)| {
+            h.detail(IGNORED) > recorders.get(*name).and_then(|r| r.detail(IGNORED))
+        })
+        .map(|(name, _)| name)
+        .collect();
+    if !ignored.is_empty() {
+        let why = match mark {
+            Mark::Stop { .. } => "no episode is open",
+            Mark::Discard => "there is no episode left to discard",
+            Mark::Start { .. } => "the recorder refused it",
+        };
+        anyhow::bail!(
+            "{} ignored the mark: {why} ({})",
+            ignored
+                .iter()
+                .map(|n| n.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            counted
+                .values()
+                .map(describe)
+                .collect::<Vec<_>>()
+                .join("; ")
         );
     }
     Ok(counted
@@ -171,12 +209,18 @@ mod tests {
             task: "pick the ball".into(),
         }
         .payload();
-        assert_eq!((start.event, start.task()), (episode_event::START, "pick the ball".into()));
+        assert_eq!(
+            (start.event, start.task()),
+            (episode_event::START, "pick the ball".into())
+        );
         let stop = Mark::Stop {
             outcome: outcome(false, true),
         }
         .payload();
-        assert_eq!((stop.event, stop.outcome), (episode_event::STOP, episode_outcome::FAILURE));
+        assert_eq!(
+            (stop.event, stop.outcome),
+            (episode_event::STOP, episode_outcome::FAILURE)
+        );
         assert_eq!(Mark::Discard.payload().event, episode_event::DISCARD);
         assert_eq!(outcome(false, false), episode_outcome::UNLABELLED);
     }

@@ -24,7 +24,8 @@
 //! closes or is discarded the recorder writes its record `episode.<n>` with its health (see
 //! `episode`) and syncs the chunk, so a killed recorder keeps every closed episode. Its own
 //! `health` report (every 500 ms and at once after a mark) says the current episode
-//! (`episode`, `episode_open`, `episode_s`), the episodes kept and the marks received.
+//! (`episode`, `episode_open`, `episode_s`), the episodes kept and the marks taken and ignored.
+//! A recorder restarted in the same session continues its predecessor's episodes.
 //!
 //! Every file is announced (`recorded PATH` on stderr) as soon as it is started, so that the
 //! launcher's summary lists a killed recorder's file too. A recorder that cannot go on (a full
@@ -48,7 +49,6 @@ use teleop_runtime::{
 };
 
 mod episode;
-pub use episode::record_name as episode_record_name;
 use episode::Book;
 
 /// Where a recording goes (rotated parts get `_1`, `_2`, ... before `.mcap`).
@@ -169,6 +169,33 @@ fn last_sequences(files: &[PathBuf]) -> HashMap<String, Vec<(u32, u64)>> {
         }
     }
     last
+}
+
+/// The episodes of this recorder's predecessors in the same session (`files`, newest first),
+/// for the book to continue: an episode they left open can still be stopped here.
+fn continue_episodes(files: &[PathBuf]) -> Book {
+    if files.is_empty() {
+        return Book::default();
+    }
+    let oldest_first: Vec<&PathBuf> = files.iter().rev().collect();
+    match teleop_recording::read_episodes(&oldest_first) {
+        Ok(episodes) => {
+            if let Some(open) = episodes.open() {
+                tracing::info!(
+                    episode = open.index,
+                    task = %open.task,
+                    "continuing the previous recorder's open episode"
+                );
+            }
+            Book::continuing(episodes)
+        }
+        Err(e) => {
+            tracing::warn!(
+                "cannot read the previous recorder's episodes ({e}): numbering starts again at 1"
+            );
+            Book::default()
+        }
+    }
 }
 
 /// `seq` and `source_id` of a payload's `SampleHeader` (every contract payload starts with one).
@@ -329,7 +356,9 @@ impl<M: Message> Tap for TopicTap<M> {
                     ..RecordedMessage::from_sample(m, now_ns())
                 };
                 result = rec.write(self.id, &msg);
-                book.observe(index, M::TOPIC, m.as_bytes());
+                if result.is_ok() {
+                    book.observe(index, M::TOPIC, m.as_bytes());
+                }
             }
         });
         result.map(|()| n).map_err(Box::new)
@@ -375,16 +404,17 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         Output::File(path) => path.parent().map(Path::to_path_buf).unwrap_or_default(),
         Output::Timestamped(dir) => dir.clone(),
     };
-    let previous = match options.metadata.iter().find(|(n, _)| n == SESSION_METADATA) {
+    let (previous, mut book) = match options.metadata.iter().find(|(n, _)| n == SESSION_METADATA) {
         Some((_, session)) => {
             let folder = if folder.as_os_str().is_empty() {
                 PathBuf::from(".")
             } else {
                 folder
             };
-            last_sequences(&session_files(&folder, session))
+            let files = session_files(&folder, session);
+            (last_sequences(&files), continue_episodes(&files))
         }
-        None => HashMap::new(),
+        None => (HashMap::new(), Book::default()),
     };
     let mut rec = match &options.out {
         Output::File(path) => Recorder::create(path, options.writer.clone(), &options.metadata)?,
@@ -453,7 +483,6 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     let mut reported = vec![0u64; taps.len()];
     let mut last_report = std::time::Instant::now();
     let mut failure: Option<anyhow::Error> = None;
-    let mut book = Book::default();
     let mut health = Health::new(runtime)?;
     let mut last_health = std::time::Instant::now();
     let channels: Vec<String> = taps.iter().map(|t| t.channel().to_string()).collect();
@@ -523,9 +552,27 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     }
     if failure.is_none() {
         let dropped: Vec<u64> = taps.iter().map(|t| t.dropped()).collect();
-        if let Err(e) = book.settle(&channels, &dropped, &mut rec) {
-            failure = Some((*e).into());
+        match book.settle(&channels, &dropped, &mut rec) {
+            Ok(true) => {
+                // A mark taken while stopping: `teleop episode` is waiting for this report.
+                for (name, value) in book.details(now_ns()) {
+                    health.set_detail(name, value);
+                }
+                if let Err(e) = health.publish(&[]) {
+                    tracing::warn!("cannot publish the recorder's health: {e}");
+                }
+            }
+            Ok(false) => {}
+            Err(e) => failure = Some((*e).into()),
         }
+    }
+    if let Some((index, task)) = book.open() {
+        tracing::warn!(
+            episode = index,
+            task,
+            "recording stops with an episode open: it has no record here; a recorder restarted \
+             in this session continues it, else the export leaves it out"
+        );
     }
     announce(&rec);
     let (summary, error) = rec.finish_all();

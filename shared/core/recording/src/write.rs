@@ -567,6 +567,20 @@ impl Recorder {
         name: &str,
         fields: BTreeMap<String, String>,
     ) -> Result<(), RecordingError> {
+        self.add_metadata_once(name, fields.clone())?;
+        self.metadata.retain(|(n, _)| n != name);
+        self.metadata.push((name.to_string(), fields));
+        Ok(())
+    }
+
+    /// Adds a metadata record to the current file only (an event of this file's time, such as
+    /// an episode's record): unlike [`add_metadata`](Self::add_metadata) it is not repeated in
+    /// later parts.
+    pub fn add_metadata_once(
+        &mut self,
+        name: &str,
+        fields: BTreeMap<String, String>,
+    ) -> Result<(), RecordingError> {
         if name == CONTRACT_METADATA {
             return Err(RecordingError::invalid_use(
                 &self.current,
@@ -576,15 +590,12 @@ impl Recorder {
         self.check_failed()?;
         let written = self.writer.write_metadata(&Metadata {
             name: name.to_string(),
-            metadata: fields.clone(),
+            metadata: fields,
         });
-        if let Err(e) = written {
+        written.map_err(|e| {
             let e = RecordingError::mcap(&self.current, e);
-            return Err(self.fail(e));
-        }
-        self.metadata.retain(|(n, _)| n != name);
-        self.metadata.push((name.to_string(), fields));
-        Ok(())
+            self.fail(e)
+        })
     }
 
     /// Finishes the current file properly (drops record, summary, indexes, footer) and returns
