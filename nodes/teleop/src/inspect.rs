@@ -30,7 +30,10 @@ const CLI_NODE: &str = "teleop-cli";
 
 /// The namespaces a command covers: those given, or the topics without a namespace (`None`)
 /// and every namespace in use.
-fn covered(ipc: &IpcSettings, given: &[Namespace]) -> anyhow::Result<Vec<Option<Namespace>>> {
+pub(crate) fn covered(
+    ipc: &IpcSettings,
+    given: &[Namespace],
+) -> anyhow::Result<Vec<Option<Namespace>>> {
     if !given.is_empty() {
         return Ok(given.iter().cloned().map(Some).collect());
     }
@@ -40,11 +43,25 @@ fn covered(ipc: &IpcSettings, given: &[Namespace]) -> anyhow::Result<Vec<Option<
 }
 
 /// A namespace for people: its name, or `(none)` for the topics without a namespace.
-fn shown(namespace: Option<&Namespace>) -> &str {
+pub(crate) fn shown(namespace: Option<&Namespace>) -> &str {
     namespace.map_or("(none)", Namespace::as_str)
 }
 
-pub fn nodes(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
+/// One iceoryx2 node of the pipeline as `teleop nodes` lists it.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub(crate) struct NodeRow {
+    /// Its name (`?` when its details cannot be read).
+    pub name: String,
+    /// `alive`, `dead`, `inaccessible` or `undefined`.
+    pub status: &'static str,
+    /// Its process id (`?` when unknown).
+    pub pid: String,
+    /// Its executable (`?` when unknown).
+    pub exe: String,
+}
+
+/// Every iceoryx2 node of the pipeline of `ipc`, sorted by name.
+pub(crate) fn node_rows(ipc: &IpcSettings) -> anyhow::Result<Vec<NodeRow>> {
     let config = ipc.config()?;
     let mut rows = Vec::new();
     Node::<Service>::list(&config, |state| {
@@ -64,20 +81,36 @@ pub fn nodes(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<Exit
                 )
             },
         );
-        rows.push((name, status, pid, exe));
+        rows.push(NodeRow {
+            name,
+            status,
+            pid,
+            exe,
+        });
         CallbackProgression::Continue
     })
     .map_err(|e| anyhow::anyhow!("cannot list iceoryx2 nodes: {e:?}"))?;
+    rows.sort();
+    Ok(rows)
+}
+
+pub fn nodes(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
+    let mut rows = node_rows(ipc)?;
     if !namespaces.is_empty() {
-        rows.retain(|(name, ..)| {
+        rows.retain(|row| {
             namespaces
                 .iter()
-                .any(|ns| name.starts_with(&format!("{ns}/")))
+                .any(|ns| row.name.starts_with(&format!("{ns}/")))
         });
     }
-    rows.sort();
     out!("{:<20} {:<8} {:>8}  EXECUTABLE", "NODE", "STATE", "PID")?;
-    for (name, status, pid, exe) in &rows {
+    for NodeRow {
+        name,
+        status,
+        pid,
+        exe,
+    } in &rows
+    {
         out!("{name:<20} {status:<8} {pid:>8}  {exe}")?;
     }
     if rows.is_empty() {
@@ -209,19 +242,88 @@ pub fn echo(
     Ok(ExitCode::SUCCESS)
 }
 
-/// What `stats` keeps per topic.
-trait Probe {
+/// A latency's percentiles over a window, ms.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Percentiles {
+    pub p50: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Percentiles {
+    /// The percentiles of `v` (ns), `None` when it is empty.
+    fn of(mut v: Vec<u64>) -> Option<Self> {
+        if v.is_empty() {
+            return None;
+        }
+        v.sort_unstable();
+        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1e6;
+        Some(Self {
+            p50: at(0.5),
+            p99: at(0.99),
+            max: at(1.0),
+        })
+    }
+}
+
+/// What a [`Probe`] measured of its topic.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct TopicSummary {
+    /// The qualified topic name.
+    pub name: String,
+    /// Samples per second over the window.
+    pub rate_hz: f64,
+    /// Samples in the window.
+    pub samples: u64,
+    /// Samples lost (overwritten unread) since the probe started.
+    pub drops: u64,
+    /// stamp - origin: how old the device sample it descends from was when it was made.
+    pub latency: Option<Percentiles>,
+    /// receive - stamp: the transport.
+    pub transport: Option<Percentiles>,
+}
+
+impl TopicSummary {
+    /// `teleop stats`'s row.
+    fn row(&self) -> String {
+        let pct = |p: Option<Percentiles>| match p {
+            None => format!("{:>8} {:>8} {:>8}", "-", "-", "-"),
+            Some(p) => format!("{:>8.3} {:>8.3} {:>8.3}", p.p50, p.p99, p.max),
+        };
+        format!(
+            "{:<28} {:>8.1} {:>7} {:>6}  {}  {}",
+            self.name,
+            self.rate_hz,
+            self.samples,
+            self.drops,
+            pct(self.latency),
+            pct(self.transport),
+        )
+    }
+}
+
+/// One topic of one namespace, subscribed to measure its rate, drops and latency from the
+/// samples' headers: `teleop stats` over its window, `teleop top` over a sliding one
+/// ([`Probe::forget_before`]). Its subscriber, like every one of the runtime's, overwrites the
+/// oldest sample when it falls behind: a probe never holds a publisher up.
+pub(crate) trait Probe {
     fn listener(&self) -> &Listener<Service>;
+    /// Takes every queued sample.
     fn drain(&self);
-    fn report(&self, window: Duration) -> String;
+    /// Forgets the samples received before `ns` (`now_ns` time).
+    fn forget_before(&self, ns: u64);
+    /// The samples kept, as received over `window`.
+    fn summary(&self, window: Duration) -> TopicSummary;
+    /// For [`newest`]: the probe as its concrete type.
+    fn as_any(&self) -> &dyn std::any::Any;
 }
 
 struct TopicProbe<M: Message> {
     sub: Subscriber<M>,
     /// The qualified topic name.
     name: String,
-    /// (stamp - origin, receive - stamp) in ns per sample.
-    samples: RefCell<Vec<(u64, u64)>>,
+    /// (received, stamp - origin, receive - stamp) in ns per sample.
+    samples: RefCell<Vec<(u64, u64, u64)>>,
     dropped_before: u64,
     since_ns: u64,
 }
@@ -240,41 +342,44 @@ impl<M: Message> Probe for TopicProbe<M> {
             }
             let now = now_ns();
             samples.push((
+                now,
                 h.stamp_ns.saturating_sub(h.origin_ns),
                 now.saturating_sub(h.stamp_ns),
             ));
         });
     }
-    fn report(&self, window: Duration) -> String {
+    fn forget_before(&self, ns: u64) {
+        self.samples.borrow_mut().retain(|s| s.0 >= ns);
+    }
+    fn summary(&self, window: Duration) -> TopicSummary {
         let samples = self.samples.borrow();
         let n = samples.len() as u64;
-        let rate = n as f64 / window.as_secs_f64();
-        let pct = |mut v: Vec<u64>| -> String {
-            if v.is_empty() {
-                return format!("{:>8} {:>8} {:>8}", "-", "-", "-");
-            }
-            v.sort_unstable();
-            let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize] as f64 / 1e6;
-            format!("{:>8.3} {:>8.3} {:>8.3}", at(0.5), at(0.99), at(1.0))
-        };
-        format!(
-            "{:<28} {:>8.1} {:>7} {:>6}  {}  {}",
-            self.name,
-            rate,
-            n,
-            self.sub.dropped().saturating_sub(self.dropped_before),
-            pct(samples.iter().map(|s| s.0).collect()),
-            pct(samples.iter().map(|s| s.1).collect()),
-        )
+        TopicSummary {
+            name: self.name.clone(),
+            rate_hz: n as f64 / window.as_secs_f64().max(1e-3),
+            samples: n,
+            drops: self.sub.dropped().saturating_sub(self.dropped_before),
+            latency: Percentiles::of(samples.iter().map(|s| s.1).collect()),
+            transport: Percentiles::of(samples.iter().map(|s| s.2).collect()),
+        }
+    }
+    fn as_any(&self) -> &dyn std::any::Any {
+        self
     }
 }
 
-pub fn stats(
-    ipc: &IpcSettings,
-    window: Duration,
-    namespaces: &[Namespace],
-) -> anyhow::Result<ExitCode> {
-    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
+/// The newest sample a probe of topic `M` received (`None` for a probe of another topic).
+pub(crate) fn newest<M: Message>(probe: &dyn Probe) -> Option<M> {
+    let probe = probe.as_any().downcast_ref::<TopicProbe<M>>()?;
+    probe.sub.latest()
+}
+
+/// A probe of every topic of the contract in `namespace`, measuring from now: the sample a new
+/// subscriber gets from a topic's history (maybe old) is skipped.
+pub(crate) fn probes(
+    runtime: &NodeRuntime,
+    namespace: Option<&Namespace>,
+) -> anyhow::Result<Vec<Box<dyn Probe>>> {
     struct Make<'a>(&'a NodeRuntime, Option<&'a Namespace>);
     impl TopicVisitor for Make<'_> {
         type Output = anyhow::Result<Box<dyn Probe>>;
@@ -292,15 +397,24 @@ pub fn stats(
             }))
         }
     }
+    teleop_msgs::topics()
+        .iter()
+        .map(|t| {
+            visit_topic(t.name, Make(runtime, namespace)).ok_or_else(|| unknown_topic(t.name))?
+        })
+        .collect()
+}
+
+pub fn stats(
+    ipc: &IpcSettings,
+    window: Duration,
+    namespaces: &[Namespace],
+) -> anyhow::Result<ExitCode> {
+    let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     let mut probes = Vec::new();
     let mut health = Vec::new();
     for ns in covered(ipc, namespaces)? {
-        for t in teleop_msgs::topics() {
-            probes.push(
-                visit_topic(t.name, Make(&runtime, ns.as_ref()))
-                    .ok_or_else(|| unknown_topic(t.name))??,
-            );
-        }
+        probes.extend(self::probes(&runtime, ns.as_ref())?);
         let sub = runtime.subscriber_in::<NodeHealth>(ns.as_ref())?;
         // Reports from before the window are not this window's.
         sub.drain(|_| {});
@@ -350,7 +464,7 @@ pub fn stats(
         "TR_MAX"
     )?;
     for p in &probes {
-        out!("{}", p.report(measured))?;
+        out!("{}", p.summary(measured).row())?;
     }
     out!("{}", health_table(&latest))?;
     if stop != StopReason::Requested {
@@ -385,25 +499,140 @@ fn health_table(latest: &BTreeMap<String, NodeHealth>) -> String {
 /// How long `teleop estop` waits for the nodes that obey the e-stop to acknowledge it.
 const ESTOP_ACK_WAIT: Duration = Duration::from_secs(1);
 
-/// Engages or releases the e-stop of the namespaces given, or else of the topics without a
-/// namespace, of every namespace in use and of every namespace latched (whose nodes may all be
-/// down): one operator's e-stop stops every side, and `--release` releases every side.
-///
-/// The state is the latch file of each namespace (see `teleop_runtime::EStopInput`), written
-/// and synced before the `estop` topic wakes the running nodes, so it outlives this command
-/// and any node's restart; the plain latch (no namespace) stops every namespace, also those that
-/// start later. Then it waits for the nodes' acknowledgements (`estop/ack`) and lists them; none
-/// at all is a failure (exit code 1), although the latch stays as set.
-///
-/// Engaging is the easy direction: the latches are written first, then every doorbell is rung,
-/// and a step that fails does not keep the next from being tried; what could not be done is
-/// said at the end (exit code 1). A latch written but no doorbell rung still stops every node
-/// within `teleop_runtime::LATCH_POLL`. Releasing is strict: the first error ends it.
+/// What one `teleop estop` (or the console's e-stop key) did.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct EStopReport {
+    /// Engaged (else released).
+    pub engage: bool,
+    /// The latch files written (engaged) or removed (released).
+    pub latches: Vec<std::path::PathBuf>,
+    /// How many namespaces' doorbells were rung.
+    pub rung: usize,
+    /// Per namespace, the nodes that acknowledged, sorted.
+    pub acks: Vec<(Option<Namespace>, Vec<String>)>,
+    /// What could not be done (engaging goes on past a failure).
+    pub failures: Vec<String>,
+}
+
+impl EStopReport {
+    /// How many nodes acknowledged.
+    pub fn acknowledged(&self) -> usize {
+        self.acks.iter().map(|(_, who)| who.len()).sum()
+    }
+
+    /// The first line `teleop estop` prints: what state the pipeline is now in.
+    pub fn headline(&self) -> &'static str {
+        match (self.engage, self.latches.is_empty(), self.rung) {
+            (false, ..) => "e-stop released",
+            (true, true, 0) => "e-stop COULD NOT BE ENGAGED: no latch written, no doorbell rung",
+            (true, true, _) => {
+                "e-stop ENGAGED in the running nodes, NOT latched: a node that starts or restarts \
+                 does not see it"
+            }
+            (true, false, _) => {
+                "e-stop ENGAGED (latched): glove forces at zero, hands holding, until `teleop \
+                 estop --release`"
+            }
+        }
+    }
+
+    /// Who acknowledged, per namespace: `namespace (none): acknowledged by feedback, revo2`.
+    pub fn ack_lines(&self) -> impl Iterator<Item = String> + '_ {
+        self.acks.iter().map(|(ns, answered)| {
+            format!(
+                "namespace {}: acknowledged by {}",
+                shown(ns.as_ref()),
+                if answered.is_empty() {
+                    "no node".to_string()
+                } else {
+                    answered.join(", ")
+                }
+            )
+        })
+    }
+
+    /// Why the command fails, if it does: failures, or no node acknowledged.
+    pub fn problem(&self) -> Option<String> {
+        if !self.failures.is_empty() {
+            let mut text = String::from("e-stop engaged with failures; what could not be done:");
+            for f in &self.failures {
+                text.push_str(&format!("\n  - {f}"));
+            }
+            return Some(text);
+        }
+        if self.acknowledged() > 0 {
+            return None;
+        }
+        Some(if self.engage {
+            format!(
+                "no node acknowledged the e-stop within {} ms: none that obeys it is running; the \
+                 latch is set and every node that starts, in any namespace, will obey it",
+                ESTOP_ACK_WAIT.as_millis(),
+            )
+        } else {
+            format!(
+                "no node acknowledged the release within {} ms: none that obeys the e-stop is \
+                 running; the latch is cleared",
+                ESTOP_ACK_WAIT.as_millis(),
+            )
+        })
+    }
+}
+
+/// `teleop estop`: engages or releases ([`estop_action`]) and prints what happened; exit code 1
+/// when something could not be done or no node acknowledged.
 pub fn estop(
     ipc: &IpcSettings,
     engage: bool,
     namespaces: &[Namespace],
 ) -> anyhow::Result<ExitCode> {
+    let report = estop_action(ipc, engage, namespaces)?;
+    println!("{}", report.headline());
+    if engage {
+        for path in &report.latches {
+            println!("  latch {}", path.display());
+        }
+    } else {
+        for ((ns, _), path) in report.acks.iter().zip(&report.latches) {
+            println!(
+                "  namespace {}: latch {} removed",
+                shown(ns.as_ref()),
+                path.display()
+            );
+        }
+    }
+    for line in report.ack_lines() {
+        println!("  {line}");
+    }
+    match report.problem() {
+        Some(problem) => {
+            eprintln!("{problem}");
+            Ok(ExitCode::FAILURE)
+        }
+        None => Ok(ExitCode::SUCCESS),
+    }
+}
+
+/// Engages or releases the e-stop of the namespaces given, or else of the topics without a
+/// namespace, of every namespace in use and of every namespace latched (whose nodes may all be
+/// down): one operator's e-stop stops every side, and a release releases every side. Prints
+/// nothing: `teleop estop` and the console show the [`EStopReport`].
+///
+/// The state is the latch file of each namespace (see `teleop_runtime::EStopInput`), written
+/// and synced before the `estop` topic wakes the running nodes, so it outlives this command
+/// and any node's restart; the plain latch (no namespace) stops every namespace, also those that
+/// start later. Then it waits for the nodes' acknowledgements (`estop/ack`), at most
+/// [`ESTOP_ACK_WAIT`].
+///
+/// Engaging is the easy direction: the latches are written first, then every doorbell is rung,
+/// and a step that fails does not keep the next from being tried; what could not be done is in
+/// [`EStopReport::failures`]. A latch written but no doorbell rung still stops every node
+/// within `teleop_runtime::LATCH_POLL`. Releasing is strict: the first error ends it (an `Err`).
+pub(crate) fn estop_action(
+    ipc: &IpcSettings,
+    engage: bool,
+    namespaces: &[Namespace],
+) -> anyhow::Result<EStopReport> {
     if !engage {
         return release(ipc, namespaces);
     }
@@ -486,42 +715,18 @@ pub fn estop(
         }
         wait_for_acks(runtime, &mut sides, asked_at, true);
     }
-    match (latched.is_empty(), rung_count) {
-        (true, 0) => println!("e-stop COULD NOT BE ENGAGED: no latch written, no doorbell rung"),
-        (true, _) => println!(
-            "e-stop ENGAGED in the running nodes, NOT latched: a node that starts or restarts \
-             does not see it"
-        ),
-        (false, _) => println!(
-            "e-stop ENGAGED (latched): glove forces at zero, hands holding, until `teleop estop \
-             --release`"
-        ),
-    }
-    for path in &latched {
-        println!("  latch {}", path.display());
-    }
-    let acknowledged = print_acks(&mut sides);
-    if !failures.is_empty() {
-        eprintln!("e-stop engaged with failures; what could not be done:");
-        for f in &failures {
-            eprintln!("  - {f}");
-        }
-        return Ok(ExitCode::FAILURE);
-    }
-    if acknowledged == 0 {
-        eprintln!(
-            "no node acknowledged the e-stop within {} ms: none that obeys it is running; the latch \
-             is set and every node that starts, in any namespace, will obey it",
-            ESTOP_ACK_WAIT.as_millis(),
-        );
-        return Ok(ExitCode::FAILURE);
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(EStopReport {
+        engage: true,
+        latches: latched,
+        rung: rung_count,
+        acks: answers(sides),
+        failures,
+    })
 }
 
-/// `teleop estop --release`: strict, the first error ends it (the latches already removed stay
-/// removed; the rest stay engaged).
-fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCode> {
+/// The release: strict, the first error ends it (the latches already removed stay removed; the
+/// rest stay engaged).
+fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<EStopReport> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     let mut covered = covered(ipc, namespaces)?;
     if namespaces.is_empty() {
@@ -541,31 +746,23 @@ fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<ExitCo
         sides.push((ns, Some(acks), Vec::<String>::new()));
     }
     let asked_at = now_ns();
+    let mut latches = Vec::with_capacity(sides.len());
     for ((ns, _, _), publisher) in sides.iter().zip(&mut doorbells) {
         let path = latch_path(ipc, ns.as_ref());
         set_latch(&path, false).map_err(|e| {
             anyhow::anyhow!("cannot release the e-stop latch {}: {e}", path.display())
         })?;
         publisher.publish(&EStop::default())?;
+        latches.push(path);
     }
     wait_for_acks(&runtime, &mut sides, asked_at, false);
-    println!("e-stop released");
-    for (ns, _, _) in &sides {
-        println!(
-            "  namespace {}: latch {} removed",
-            shown(ns.as_ref()),
-            latch_path(ipc, ns.as_ref()).display()
-        );
-    }
-    if print_acks(&mut sides) == 0 {
-        eprintln!(
-            "no node acknowledged the release within {} ms: none that obeys the e-stop is running; \
-             the latch is cleared",
-            ESTOP_ACK_WAIT.as_millis(),
-        );
-        return Ok(ExitCode::FAILURE);
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(EStopReport {
+        engage: false,
+        latches,
+        rung: doorbells.len(),
+        acks: answers(sides),
+        failures: Vec::new(),
+    })
 }
 
 /// One namespace of `teleop estop`: its acknowledgements (if they could be read) and the nodes
@@ -608,23 +805,15 @@ fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engag
     }
 }
 
-/// Prints who acknowledged, per namespace; returns how many did.
-fn print_acks(sides: &mut [Side]) -> usize {
-    let mut acknowledged = 0;
-    for (ns, _, answered) in sides.iter_mut() {
-        answered.sort();
-        acknowledged += answered.len();
-        println!(
-            "  namespace {}: acknowledged by {}",
-            shown(ns.as_ref()),
-            if answered.is_empty() {
-                "no node".to_string()
-            } else {
-                answered.join(", ")
-            }
-        );
-    }
-    acknowledged
+/// Who answered, per namespace, sorted.
+fn answers(sides: Vec<Side>) -> Vec<(Option<Namespace>, Vec<String>)> {
+    sides
+        .into_iter()
+        .map(|(ns, _, mut answered)| {
+            answered.sort();
+            (ns, answered)
+        })
+        .collect()
 }
 
 #[cfg(test)]
