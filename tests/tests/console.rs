@@ -331,3 +331,14 @@ fn the_console_shows_both_sides_and_stops_both() {
         s.contains("top exited 0")
     });
 }
+
+#[test]
+fn without_a_terminal_the_console_says_so_and_fails() {
+    let sandbox = Sandbox::new();
+    let (ok, out) = sandbox.cli(&["top"]);
+    assert!(!ok, "{out}");
+    assert!(
+        out.contains("teleop top draws on a terminal") && !out.contains('\u{1b}'),
+        "{out}"
+    );
+}

@@ -41,10 +41,20 @@ const NODE: &str = "teleop-top";
 /// The recorder's node name (in a namespace, `<ns>/recorder`).
 const RECORDER: &str = "recorder";
 
+/// What the gathering tells the console.
+pub enum Update {
+    /// What to show now.
+    Screen(Box<Screen>),
+    /// SIGINT or SIGTERM: the console ends (successfully).
+    Signal,
+    /// The gathering failed and ended.
+    Failed(String),
+}
+
 /// The gathering thread, seen from the console.
 pub struct Gatherer {
-    /// A new screen every [`REFRESH`]; an error ends the gathering.
-    pub screens: Receiver<Result<Screen, String>>,
+    /// A new screen every [`REFRESH`], or why the gathering ended.
+    pub updates: Receiver<Update>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -53,7 +63,7 @@ impl Gatherer {
     /// Starts gathering the namespaces `given`, or else the topics without a namespace and every
     /// namespace in use; returns once it subscribed (or could not).
     pub fn start(ipc: &IpcSettings, given: &[Namespace]) -> anyhow::Result<Self> {
-        let (tx, screens) = sync_channel(2);
+        let (tx, updates) = sync_channel(2);
         let (ready_tx, ready) = sync_channel(1);
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
@@ -64,7 +74,7 @@ impl Gatherer {
         };
         match ready.recv() {
             Ok(Ok(())) => Ok(Self {
-                screens,
+                updates,
                 stop,
                 thread: Some(thread),
             }),
@@ -112,7 +122,7 @@ fn gather(
     given: &[Namespace],
     stop: &AtomicBool,
     ready: &SyncSender<Result<(), String>>,
-    screens: &SyncSender<Result<Screen, String>>,
+    updates: &SyncSender<Update>,
 ) {
     let opened = (|| -> anyhow::Result<(NodeRuntime, Vec<Side>)> {
         let runtime = NodeRuntime::new(NODE, ipc)?;
@@ -171,7 +181,7 @@ fn gather(
                     // While the console has not taken the screens before (it is busy), this
                     // one is left out: the next refresh brings a newer one.
                     Ok(screen) => {
-                        let _ = screens.try_send(Ok(screen));
+                        let _ = updates.try_send(Update::Screen(Box::new(screen)));
                     }
                     Err(e) => {
                         failure = Some(format!("{e:#}"));
@@ -197,10 +207,13 @@ fn gather(
                     Err(e) => format!("{e:#}"),
                 }
             }
-            (Ok(signal), None) => format!("stopped by {signal:?}"),
+            (Ok(_signal), None) => {
+                let _ = updates.send(Update::Signal);
+                return;
+            }
             (Err(e), None) => format!("{e:#}"),
         };
-        let _ = screens.send(Err(why));
+        let _ = updates.send(Update::Failed(why));
         return;
     }
 }

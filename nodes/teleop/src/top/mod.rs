@@ -14,6 +14,7 @@ mod keys;
 mod live;
 mod screen;
 
+use std::io::IsTerminal;
 use std::process::ExitCode;
 use std::sync::mpsc::{channel, Sender, TryRecvError};
 use std::time::Duration;
@@ -25,9 +26,10 @@ use teleop_runtime::{IpcSettings, Namespace};
 use crate::episode::{self, Mark};
 use crate::inspect;
 use keys::{Action, Keys};
+use live::Update;
 use screen::Screen;
 
-/// Runs the console until `q` (or Ctrl-C): the namespaces `given`, or else every side found;
+/// Runs the console until `q` (or Ctrl-C, SIGINT, SIGTERM): the namespaces `given`, or else every side found;
 /// `task` is the task `s` starts episodes of (without it, `s` asks).
 pub fn run(
     ipc: &IpcSettings,
@@ -36,8 +38,19 @@ pub fn run(
 ) -> anyhow::Result<ExitCode> {
     // Subscribe before taking the terminal: an error is then printed on a normal terminal.
     let gatherer = live::Gatherer::start(ipc, given)?;
+    let mut terminal = ratatui::try_init().map_err(|e| {
+        // Raw mode or the alternate screen may have been set before the failure; a terminal
+        // gets both undone, anything else raw mode only (no escape codes into a file).
+        if std::io::stdout().is_terminal() {
+            ratatui::restore();
+        } else {
+            let _ = ratatui::crossterm::terminal::disable_raw_mode();
+        }
+        anyhow::anyhow!(
+            "teleop top draws on a terminal, and standard input and output are not one ({e})"
+        )
+    })?;
     let _terminal_back = TerminalGuard;
-    let mut terminal = ratatui::try_init()?;
     let mut keys = Keys {
         task,
         ..Default::default()
@@ -49,12 +62,13 @@ pub fn run(
     // Drawn again only when something changed: a new screen, a key, an action's answer.
     let mut changed = true;
     loop {
-        match gatherer.screens.try_recv() {
-            Ok(Ok(gathered)) => {
-                screen = gathered;
+        match gatherer.updates.try_recv() {
+            Ok(Update::Screen(gathered)) => {
+                screen = *gathered;
                 changed = true;
             }
-            Ok(Err(e)) => anyhow::bail!("the console stopped gathering: {e}"),
+            Ok(Update::Signal) => return Ok(ExitCode::SUCCESS),
+            Ok(Update::Failed(e)) => anyhow::bail!("the console stopped gathering: {e}"),
             Err(TryRecvError::Empty) => {}
             Err(TryRecvError::Disconnected) => anyhow::bail!("the console stopped gathering"),
         }
