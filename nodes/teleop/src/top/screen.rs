@@ -121,6 +121,8 @@ pub struct RecorderView {
     pub age_s: f64,
 }
 
+/// Rows of one side's panel: its borders, the headings, six glove channels.
+const HAND_HEIGHT: u16 = 9;
 /// From this width on the tables have every column.
 pub const WIDE: u16 = 110;
 
@@ -130,15 +132,19 @@ pub const STALE_S: f64 = 0.5;
 /// Draws `screen` into `frame`, laid out for the frame's size.
 pub fn draw(frame: &mut Frame, screen: &Screen) {
     let area = frame.area();
-    let hand_height = if screen.hands.is_empty() {
+    // The bars before the tables: in a short terminal (two sides in 24 lines) the tables give
+    // up their rows first, then each side's panel its last ones.
+    let sides = screen.hands.len().max(1) as u16;
+    let wanted = if screen.hands.is_empty() {
         3
     } else {
-        9 * screen.hands.len() as u16
+        HAND_HEIGHT * sides
     };
+    let hand_height = wanted.min(area.height.saturating_sub(1 + 5 + 1));
     let [header, status, tables, hands, footer] = Layout::vertical([
         Constraint::Length(1),
         Constraint::Length(5),
-        Constraint::Min(5),
+        Constraint::Fill(1),
         Constraint::Length(hand_height),
         Constraint::Length(1),
     ])
@@ -167,7 +173,11 @@ pub fn draw(frame: &mut Frame, screen: &Screen) {
             hands,
         );
     } else {
-        let rows = Layout::vertical(vec![Constraint::Length(9); screen.hands.len()]).split(hands);
+        let rows = Layout::vertical(vec![
+            Constraint::Ratio(1, u32::from(sides));
+            screen.hands.len()
+        ])
+        .split(hands);
         for (hand, area) in screen.hands.iter().zip(rows.iter()) {
             draw_hand(frame, hand, *area);
         }
@@ -630,6 +640,32 @@ mod tests {
         assert!(bar_cells(&lines) > bar_cells(&narrow));
         // Too small to hold it all: drawn without panicking.
         drawn(&screen, 20, 5);
+    }
+
+    #[test]
+    fn two_sides_keep_their_forces_and_the_keys_in_80_by_24() {
+        let mut screen = session();
+        let mut right = screen.hands[0].clone();
+        right.side = "right".into();
+        right.force = Some(([1, 2, 3, 4, 5], false, 0.01));
+        screen.hands[0].side = "left".into();
+        screen.hands.push(right);
+        for (width, height) in [(80, 24), (120, 40)] {
+            let lines = drawn(&screen, width, height);
+            let all = lines.join("\n");
+            assert!(
+                all.contains("side left:") && all.contains("side right:"),
+                "{all}"
+            );
+            assert!(lines[usize::from(height) - 1].contains("q quit"), "{all}");
+            for finger in ["little", "ring", "middle", "index", "thumb"] {
+                let rows = lines
+                    .iter()
+                    .filter(|l| l.contains(&format!("│{finger} ")))
+                    .count();
+                assert_eq!(rows, 2, "{finger} of both sides\n{all}");
+            }
+        }
     }
 
     #[test]
