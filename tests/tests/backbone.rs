@@ -219,8 +219,13 @@ fn launch_runs_retargeting_and_force_feedback_end_to_end() {
     }
     let topics = String::from_utf8(sandbox.run_teleop(&["topics"]).stdout).unwrap();
     assert!(topics.contains("hand/command") && topics.contains("teleop_msgs/msg/HandCommand"));
+    // A Revo2 command, its joints named by the Revo2 profile.
     let echo = sandbox.run_teleop(&["echo", "hand/command", "-n", "1"]);
-    assert!(String::from_utf8_lossy(&echo.stdout).contains("HandCommand {"));
+    let echo = String::from_utf8_lossy(&echo.stdout);
+    assert!(
+        echo.contains("thumb_abduct:") && echo.contains("pinky:"),
+        "{echo}"
+    );
 
     let status = session.stop();
     assert!(status.success(), "clean stop on Ctrl-C: {status:?}");

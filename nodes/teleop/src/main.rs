@@ -1,6 +1,7 @@
 //! `teleop`: the one command users run. `teleop launch` starts the pipeline described in
 //! `launch.toml` as separate processes; `nodes`, `topics`, `echo`, `stats` and `estop` inspect and
 //! steer a running pipeline (every side of it, or the namespaces given with `--namespace`);
+//! `top` is the operator's console over it (a terminal UI);
 //! `calibrate` records an operator calibration profile.
 //!
 //! `glove`, `revo2`, `allegro`, `shadow` and `leap` are the devices' service commands: their arguments
@@ -26,11 +27,16 @@ macro_rules! out {
 
 mod calibrate;
 mod certs;
+mod doctor;
+mod echo;
+mod episode;
+mod export;
 mod inspect;
 mod launch;
 mod profile;
 mod recordings;
 mod retarget_eval;
+mod top;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -82,7 +88,8 @@ enum Command {
         #[arg(long = "namespace", value_name = "NS")]
         namespaces: Vec<Namespace>,
     },
-    /// Print decoded samples of a topic as they arrive.
+    /// Print decoded samples of a topic as they arrive: the used joints and fingertips named
+    /// by the hand profile, the glove's fingers by name; YAML, JSON Lines or CSV.
     Echo {
         /// Topic name, e.g. `glove/state` (see `teleop topics`).
         topic: String,
@@ -92,6 +99,14 @@ enum Command {
         /// The topic's namespace (or name it in the topic: `left/hand/command`).
         #[arg(long, value_name = "NS")]
         namespace: Option<Namespace>,
+        /// `yaml` (a document per sample), `json` (an object per line) or `csv` (a header
+        /// line, a row per sample).
+        #[arg(long, value_enum, default_value_t = echo::Format::Yaml)]
+        format: echo::Format,
+        /// A hand profile file naming the joints and fingertips of hand samples (default: the
+        /// shipped profile of each sample's hand model).
+        #[arg(long)]
+        profile: Option<PathBuf>,
     },
     /// Per-topic rate, drops and latency (from the sample headers) over a window.
     Stats {
@@ -235,6 +250,40 @@ enum Command {
         #[command(subcommand)]
         command: RecordingsCommand,
     },
+    /// Export recordings' episodes to a LeRobot v3.0 dataset (new, or appended to): the kept
+    /// episodes (not discarded, not left open) resampled to a fixed rate; an episode whose key
+    /// topics ran below --min-rate-ratio of the recording's rate is refused by name.
+    Export {
+        /// The recordings (one MCAP file each).
+        #[arg(required = true)]
+        recordings: Vec<PathBuf>,
+        /// The dataset format.
+        #[arg(long, value_enum)]
+        format: ExportFormat,
+        /// Frames per second.
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
+        fps: u32,
+        /// The dataset's folder (created, or appended to).
+        #[arg(long)]
+        out: PathBuf,
+        /// Only episodes stopped with --success.
+        #[arg(long)]
+        only_success: bool,
+        /// Refuse an episode whose glove/state, hand/state or hand/command rate within it is
+        /// below this fraction of the topic's rate over the whole recording.
+        #[arg(long, default_value_t = 0.9)]
+        min_rate_ratio: f64,
+        /// Add the glove's force command (5 forces) as the feature `glove.force_command`.
+        #[arg(long)]
+        with_force_command: bool,
+        /// The sides to export (repeatable); without it, every side with a hand/state channel.
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
+        /// Hand profile (default: the one embedded in the recording, else the shipped profile of
+        /// the recorded hand model).
+        #[arg(long)]
+        profile: Option<PathBuf>,
+    },
     /// Run retargeting and force feedback over a recording's inputs and compare with its outputs.
     Reprocess {
         /// The recording.
@@ -271,6 +320,35 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// Mark episodes in the running session's recording: `start --task "..."`, `stop
+    /// --success|--failure`, `discard`. Waits until the recorder counts the mark; fails when no
+    /// recorder runs.
+    Episode {
+        #[command(subcommand)]
+        command: EpisodeCommand,
+    },
+    /// Check this host for running a launch file's session on real hardware: real-time and
+    /// memory-locking rights, serial ports and their latency timers, EtherCAT and CAN
+    /// interfaces, the CPU governor, /dev/shm, the e-stop latch's directory. Prints each
+    /// problem with its fix; exits 1 when something would stop a hardware session.
+    Doctor {
+        /// The launch file.
+        #[arg(default_value = "launch.toml")]
+        file: PathBuf,
+    },
+    /// The operator's console: every node, topic rates and latencies, the glove's positions and
+    /// forces and the fingertips' tactile forces as bars, the link, the e-stop, the recording
+    /// and its episode, refreshed live. Keys: e, space or Esc engage the e-stop; r then y
+    /// release it; s starts an episode, k/f stop it with success/failure, d discards; q quits.
+    Top {
+        /// Only this namespace (repeatable); without it, the topics without a namespace and
+        /// every namespace found (the e-stop keys then act on every side, as `teleop estop`).
+        #[arg(long = "namespace", value_name = "NS")]
+        namespaces: Vec<Namespace>,
+        /// The task `s` starts episodes of (without it, `s` asks for it once).
+        #[arg(long, value_parser = episode::parse_task)]
+        task: Option<String>,
+    },
     /// Record an operator calibration profile from the live glove.
     Calibrate {
         /// Where to write the profile.
@@ -290,6 +368,27 @@ enum Command {
         #[arg(long, default_value = "1", value_parser = parse_seconds, allow_hyphen_values = true)]
         capture: Duration,
     },
+}
+
+#[derive(Subcommand)]
+enum EpisodeCommand {
+    /// Begin an episode (an episode still open is closed first, unlabelled).
+    Start {
+        /// What the episode does, in words (the dataset's task).
+        #[arg(long, value_parser = episode::parse_task)]
+        task: String,
+    },
+    /// End the open episode; without a flag its outcome is unlabelled.
+    Stop {
+        /// The task was done.
+        #[arg(long, conflicts_with = "failure")]
+        success: bool,
+        /// The task was not done.
+        #[arg(long)]
+        failure: bool,
+    },
+    /// Throw away the open episode, or else the last one closed (once).
+    Discard,
 }
 
 #[derive(Subcommand)]
@@ -317,6 +416,13 @@ enum RetargetCommand {
         #[arg(long, value_name = "NS")]
         namespace: Option<Namespace>,
     },
+}
+
+/// Dataset formats of `teleop export`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ExportFormat {
+    /// LeRobot v3.0 (parquet frames, meta/info.json, tasks, episodes, stats).
+    Lerobot,
 }
 
 #[derive(Subcommand)]
@@ -359,7 +465,16 @@ fn main() -> ExitCode {
             topic,
             count,
             namespace,
-        } => inspect::echo(&ipc, &topic, namespace.as_ref(), count),
+            format,
+            profile,
+        } => inspect::echo(
+            &ipc,
+            &topic,
+            namespace.as_ref(),
+            count,
+            format,
+            profile.as_deref(),
+        ),
         Command::Stats {
             seconds,
             namespaces,
@@ -461,6 +576,43 @@ fn main() -> ExitCode {
             capture,
         } => calibrate::run(&ipc, &out, yes, !no_pinch, settle, capture),
         Command::View { args } => run_viewer(&ipc, &args),
+        Command::Top { namespaces, task } => top::run(&ipc, &namespaces, task),
+        Command::Doctor { file } => doctor::run(&file, &ipc),
+        Command::Export {
+            recordings,
+            format: ExportFormat::Lerobot,
+            fps,
+            out,
+            only_success,
+            min_rate_ratio,
+            with_force_command,
+            namespaces,
+            profile,
+        } => export::run(
+            &recordings,
+            &export::ExportOptions {
+                fps,
+                out,
+                only_success,
+                min_rate_ratio,
+                with_force_command,
+                namespaces,
+                profile,
+            },
+        ),
+        Command::Episode { command } => {
+            let mark = match command {
+                EpisodeCommand::Start { task } => episode::Mark::Start { task },
+                EpisodeCommand::Stop { success, failure } => episode::Mark::Stop {
+                    outcome: episode::outcome(success, failure),
+                },
+                EpisodeCommand::Discard => episode::Mark::Discard,
+            };
+            episode::send(&ipc, &mark).and_then(|said| {
+                out!("{said}")?;
+                Ok(ExitCode::SUCCESS)
+            })
+        }
     };
     match result {
         Ok(code) => code,

@@ -218,14 +218,28 @@ mod tests {
         ));
         assert!(matches!(
             e.apply(&mark(episode_event::STOP, episode_outcome::SUCCESS, "", 20))[..],
-            [Change::Closed(EpisodeSpan { index: 1, outcome: episode_outcome::SUCCESS, start_ns: 10, stop_ns: 20, .. })]
+            [Change::Closed(EpisodeSpan {
+                index: 1,
+                outcome: episode_outcome::SUCCESS,
+                start_ns: 10,
+                stop_ns: 20,
+                ..
+            })]
         ));
         // A START over an open episode closes it unlabelled first.
         e.apply(&mark(episode_event::START, 0, "place", 30));
         let changes = e.apply(&mark(episode_event::START, 0, "pour", 40));
         assert!(matches!(
             changes[..],
-            [Change::Closed(EpisodeSpan { index: 2, outcome: episode_outcome::UNLABELLED, stop_ns: 40, .. }), Change::Started(OpenEpisode { index: 3, .. })]
+            [
+                Change::Closed(EpisodeSpan {
+                    index: 2,
+                    outcome: episode_outcome::UNLABELLED,
+                    stop_ns: 40,
+                    ..
+                }),
+                Change::Started(OpenEpisode { index: 3, .. })
+            ]
         ));
         // DISCARD throws away the open one, then the last closed one, never twice.
         assert_eq!(
@@ -240,7 +254,10 @@ mod tests {
             [Change::Ignored("the last episode is already discarded")]
         );
         assert!(e.open().is_none());
-        let kept: Vec<_> = e.kept().map(|s| (s.index, s.task.as_str(), s.label())).collect();
+        let kept: Vec<_> = e
+            .kept()
+            .map(|s| (s.index, s.task.as_str(), s.label()))
+            .collect();
         assert_eq!(kept, [(1, "pick", "success"), (2, "place", "unlabelled")]);
         assert_eq!(e.closed()[2].label(), "discarded");
         assert_eq!(e.closed()[2].task, "pour");
