@@ -51,3 +51,41 @@ pub fn check_lerobot(dir: &Path, frame: Option<u64>) -> Option<Report> {
     assert_eq!(report["ok"], true, "{report}");
     Some(report)
 }
+
+/// Loads the dataset at `dir` with lerobot's own `LeRobotDataset`
+/// (`tests/python/load_lerobot.py`) and returns its report (episode and frame counts, each
+/// episode's first frame). lerobot pulls in torch, so it is optional everywhere, CI included:
+/// without it this prints why and returns `None`. The Python that has it is
+/// `TELEOP_LEROBOT_PYTHON` (e.g. a virtual environment's), else `python3`.
+pub fn load_with_lerobot(dir: &Path) -> Option<Report> {
+    let python = std::env::var("TELEOP_LEROBOT_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Sandbox::repo().join("tests/python/load_lerobot.py");
+    let out = match Command::new(&python).arg(&script).arg(dir).output() {
+        Ok(out) => out,
+        Err(e) => {
+            eprintln!("skipped loading with lerobot: {python} does not run ({e})");
+            return None;
+        }
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if out.status.code() == Some(2) {
+        eprintln!(
+            "skipped loading with lerobot (optional; set TELEOP_LEROBOT_PYTHON to a Python \
+             that has it): {stderr}"
+        );
+        return None;
+    }
+    assert!(
+        out.status.success(),
+        "lerobot could not load {}: {stderr}",
+        dir.display()
+    );
+    let report: Report = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "load_lerobot.py printed no JSON ({e}): {}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    });
+    eprintln!("lerobot loaded {}: {report}", dir.display());
+    Some(report)
+}

@@ -6,8 +6,9 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
+use teleop_e2e::dataset::{check_lerobot, load_with_lerobot};
 use teleop_e2e::{wait_for, Sandbox};
-use teleop_msgs::{episode_outcome, GloveState};
+use teleop_msgs::{episode_outcome, GloveState, HandCommand, HandState, Message, GLOVE_CHANNELS};
 use teleop_runtime::NodeRuntime;
 
 /// Runs `teleop episode ARGS` and returns its output, failing the test when it fails.
@@ -157,6 +158,104 @@ fn three_episodes_through_the_cli_survive_a_killed_recorder() {
     assert_eq!(three["task"], "drop the ball");
     // Records of episodes are written once, not repeated in later files.
     assert!(!next.metadata.iter().any(|(n, _)| n == "episode.1"));
+
+    // The session's two files become a LeRobot dataset of the two kept episodes.
+    let dataset = sandbox.dir.path().join("dataset");
+    let (ok, out) = sandbox.cli(&[
+        "export",
+        repaired.to_str().unwrap(),
+        files[1].to_str().unwrap(),
+        "--format",
+        "lerobot",
+        "--fps",
+        "30",
+        "--out",
+        dataset.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}");
+    let Some(report) = check_lerobot(&dataset, Some(0)) else {
+        return;
+    };
+    assert_eq!(report["total_episodes"], 2, "{report}");
+    let info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dataset.join("meta/info.json")).unwrap())
+            .unwrap();
+    let names = |feature: &str| -> Vec<String> {
+        info["features"][feature]["names"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{feature} has no names: {info}"))
+            .iter()
+            .map(|n| n.as_str().unwrap().to_string())
+            .collect()
+    };
+    let value = |feature: &str, name: &str| -> f32 {
+        let i = names(feature)
+            .iter()
+            .position(|n| n == name)
+            .unwrap_or_else(|| panic!("no {name} in {feature}: {:?}", names(feature)));
+        report["frame"][feature][i].as_f64().unwrap() as f32
+    };
+    // Frame 0 is episode 1's start (every topic had spoken long before it): each value is the
+    // newest recorded sample at or before that instant.
+    let at = first.start_ns;
+    let newest = |topic: &str| -> Vec<u8> {
+        let mut found = None;
+        for m in
+            teleop_recording::read_messages(&repaired, &teleop_recording::Filter::topics([topic]))
+                .unwrap()
+        {
+            let m = m.unwrap();
+            let stamp = u64::from_le_bytes(m.payload[8..16].try_into().unwrap());
+            if stamp <= at && found.as_ref().is_none_or(|(s, _)| stamp >= *s) {
+                found = Some((stamp, m.payload));
+            }
+        }
+        found
+            .unwrap_or_else(|| panic!("no {topic} before the episode"))
+            .1
+    };
+    let glove = GloveState::from_bytes(&newest(GloveState::TOPIC)).unwrap();
+    for (c, channel) in GLOVE_CHANNELS.iter().enumerate() {
+        assert_eq!(
+            value("observation.state", &format!("glove.{channel}.pos")),
+            glove.position[c],
+            "glove {channel}"
+        );
+    }
+    let state = HandState::from_bytes(&newest(HandState::TOPIC)).unwrap();
+    let command = HandCommand::from_bytes(&newest(HandCommand::TOPIC)).unwrap();
+    for (j, joint) in [
+        "thumb_flex",
+        "thumb_abduct",
+        "index",
+        "middle",
+        "ring",
+        "pinky",
+    ]
+    .iter()
+    .enumerate()
+    {
+        assert_eq!(
+            value("observation.state", &format!("{joint}.pos")),
+            state.joints[j].position,
+            "{joint}"
+        );
+        assert_eq!(
+            value("action", &format!("{joint}.target")),
+            command.joints[j].target,
+            "{joint}"
+        );
+    }
+
+    // lerobot's own reader, where it is installed (it pulls in torch: optional).
+    if let Some(loaded) = load_with_lerobot(&dataset) {
+        assert_eq!(loaded["num_episodes"], 2, "{loaded}");
+        assert_eq!(loaded["num_frames"], report["total_frames"], "{loaded}");
+        assert_eq!(
+            loaded["first_frames"][0]["task"], "pick up the ball",
+            "{loaded}"
+        );
+    }
 }
 
 #[test]
