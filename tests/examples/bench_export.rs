@@ -58,7 +58,10 @@ impl Writer {
         header.stamp_ns = stamp;
         header.seq = seq + 1;
         self.rec
-            .write(self.ids[id], &RecordedMessage::from_sample(&sample, stamp + 200_000))
+            .write(
+                self.ids[id],
+                &RecordedMessage::from_sample(&sample, stamp + 200_000),
+            )
             .unwrap();
     }
 }
@@ -70,7 +73,10 @@ fn write_recording(path: &Path, minutes: u64) -> f64 {
         "hand_profile".to_string(),
         BTreeMap::from([
             ("file".to_string(), "config/hands/revo2.toml".to_string()),
-            ("text".to_string(), std::fs::read_to_string(profile).unwrap()),
+            (
+                "text".to_string(),
+                std::fs::read_to_string(profile).unwrap(),
+            ),
         ]),
     )];
     let mut rec = Recorder::create(path, WriterOptions::default(), &metadata).unwrap();
@@ -98,11 +104,7 @@ fn write_recording(path: &Path, minutes: u64) -> f64 {
     }
     let mut mark = 0;
     loop {
-        let (i, &(stamp, topic, seq)) = next
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, n)| n.0)
-            .unwrap();
+        let (i, &(stamp, topic, seq)) = next.iter().enumerate().min_by_key(|(_, n)| n.0).unwrap();
         if stamp >= end {
             break;
         }
@@ -173,11 +175,7 @@ fn write_recording(path: &Path, minutes: u64) -> f64 {
             _ => w.put(6, GloveDiagnostics::default(), stamp, seq),
         }
         let rate = RATES[i].0;
-        next[i] = (
-            T0 + ((seq + 1) as f64 * 1e9 / rate) as u64,
-            topic,
-            seq + 1,
-        );
+        next[i] = (T0 + ((seq + 1) as f64 * 1e9 / rate) as u64, topic, seq + 1);
     }
     w.rec.finish().unwrap();
     (minutes * 60) as f64
@@ -191,7 +189,13 @@ fn export_once(recording: &Path, out: &Path) -> (f64, f64) {
     #[allow(clippy::zombie_processes)]
     let child = Command::new(bin("teleop"))
         .args(["export", recording.to_str().unwrap(), "--format", "lerobot"])
-        .args(["--fps", "30", "--with-force-command", "--out", out.to_str().unwrap()])
+        .args([
+            "--fps",
+            "30",
+            "--with-force-command",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::inherit())
         .spawn()
@@ -225,7 +229,10 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|");
     for minutes in [1, 10] {
-        let path = sandbox.dir.path().join(format!("session-{minutes}min.mcap"));
+        let path = sandbox
+            .dir
+            .path()
+            .join(format!("session-{minutes}min.mcap"));
         let recorded = write_recording(&path, minutes);
         let info = teleop_recording::info(&path).unwrap();
         let out = sandbox.dir.path().join(format!("dataset-{minutes}"));
