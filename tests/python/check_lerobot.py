@@ -15,7 +15,10 @@ Reads every parquet file of the dataset and checks that:
 - meta/tasks.parquet has task_index 0..total_tasks-1 and pandas metadata making `task` the index
   (and, where pandas is installed, pandas reads it so, as lerobot does);
 - meta/stats.json has min, max, mean, std, count, q01..q99 per feature, count = total_frames,
-  min/max those of all frames.
+  min/max those of all frames;
+- where numpy is installed (CI has it), each episode's mean, std and quantiles are those of its
+  rows by lerobot's method (compute_stats.py, redone here in float64) and stats.json is
+  lerobot's aggregate of the episodes' (aggregate_feature_stats).
 
 Prints one JSON object: {"ok": true, "total_episodes": ..., "total_frames": ..., "frame": {...}}
 with the frame of global index INDEX (every column), or exits 1 naming the first failure.
@@ -92,6 +95,61 @@ def column_values(rows, name):
     return [[r[name] for r in rows]]
 
 
+def lerobot_episode_stats(np, values):
+    """An episode's statistics by lerobot's method (compute_stats.get_feature_stats with
+    RunningQuantileStats fed the episode in one batch), in float64: min, max, mean, population
+    std from E[x^2] - E[x]^2, and each quantile read off a 5000-bin histogram over
+    [min - 1e-10, max + 1e-10], interpolated inside the bin; one frame: std 0, quantiles = mean."""
+    x = np.asarray(values, dtype=np.float64).reshape(len(values), -1)
+    out = {"min": x.min(0), "max": x.max(0), "mean": x.mean(0)}
+    if len(x) < 2:
+        out["std"] = np.zeros(x.shape[1])
+        for q in QUANTILES:
+            out[q] = out["mean"]
+        return out
+    out["std"] = np.sqrt(np.maximum(0.0, (x ** 2).mean(0) - out["mean"] ** 2))
+    for q in QUANTILES:
+        out[q] = np.zeros(x.shape[1])
+    for d in range(x.shape[1]):
+        edges = np.linspace(out["min"][d] - 1e-10, out["max"][d] + 1e-10, 5001)
+        hist, _ = np.histogram(x[:, d], bins=edges)
+        cumsum = np.cumsum(hist)
+        for q in QUANTILES:
+            target = int(q[1:]) / 100 * len(x)
+            idx = int(np.searchsorted(cumsum, target))
+            if idx == 0:
+                value = edges[0]
+            elif idx >= len(cumsum):
+                value = edges[-1]
+            else:
+                before = cumsum[idx - 1]
+                inside = cumsum[idx] - before
+                value = edges[idx] if inside == 0 else (
+                    edges[idx] + (target - before) / inside * (edges[idx + 1] - edges[idx]))
+            out[q][d] = value
+    return out
+
+
+def lerobot_aggregate(np, parts):
+    """stats.json from the episodes' statistics by lerobot's aggregate_feature_stats."""
+    counts = np.array([p["count"][0] for p in parts], dtype=np.float64)
+    total = counts.sum()
+    means = np.array([p["mean"] for p in parts])
+    mean = (means * counts[:, None]).sum(0) / total
+    var = ((np.array([p["std"] for p in parts]) ** 2 + (means - mean) ** 2) * counts[:, None]).sum(0) / total
+    out = {"min": np.array([p["min"] for p in parts]).min(0),
+           "max": np.array([p["max"] for p in parts]).max(0),
+           "mean": mean, "std": np.sqrt(var)}
+    for q in QUANTILES:
+        stack = np.array([p[q] for p in parts])
+        out[q] = stack.min(0) if int(q[1:]) <= 50 else stack.max(0)
+    return out
+
+
+def near(np, got, want, tolerance):
+    return len(got) == len(want) and bool(np.all(np.abs(np.asarray(got, dtype=np.float64) - want) <= tolerance))
+
+
 def main():
     args = sys.argv[1:]
     frame_at = None
@@ -155,6 +213,11 @@ def main():
         need({str(k): int(v) for k, v in frame["task_index"].items()} == task_index,
              "pandas reads other tasks than pyarrow")
 
+    try:  # numpy (which pyarrow does not need) checks the statistics by lerobot's method
+        import numpy as np
+    except ImportError:
+        np = None
+
     # Episodes: each points at exactly its rows.
     episodes = []
     for path in files(root, os.path.join("meta", "episodes")):
@@ -192,6 +255,13 @@ def main():
                 want = [float(fn(c)) for c in cols]
                 need(len(got) == len(want) and all(close(float(a), b) for a, b in zip(got, want)),
                      f"episode {n}: stats/{name}/{stat} {got[:4]}..., its rows say {want[:4]}...")
+            if np is not None:
+                want = lerobot_episode_stats(np, [r[name] for r in mine])
+                for stat in ["mean", "std"] + QUANTILES:
+                    slack = 1e-9 * np.maximum(1.0, np.abs(want[stat]))
+                    need(near(np, e[f"stats/{name}/{stat}"], want[stat], slack),
+                         f"episode {n}: stats/{name}/{stat} is not lerobot's: "
+                         f"{e[f'stats/{name}/{stat}'][:4]}... vs {list(want[stat][:4])}...")
 
     # Global stats.
     with open(os.path.join(root, "meta", "stats.json")) as f:
@@ -209,6 +279,12 @@ def main():
             want = [float(fn(c)) for c in cols]
             need(all(close(float(a), b) for a, b in zip(stats[name][stat], want)),
                  f"stats.json: `{name}`.{stat} is not that of all frames")
+        if np is not None:
+            parts = [{stat: e[f"stats/{name}/{stat}"] for stat in STATS} for e in episodes]
+            want = lerobot_aggregate(np, parts)
+            for stat in ["mean", "std"] + QUANTILES:
+                need(near(np, stats[name][stat], want[stat], 1e-9 * np.maximum(1.0, np.abs(want[stat]))),
+                     f"stats.json: `{name}`.{stat} is not lerobot's aggregate of the episodes")
 
     out = {
         "ok": True,
@@ -216,6 +292,7 @@ def main():
         "total_frames": info["total_frames"],
         "total_tasks": info["total_tasks"],
         "data_files": len(data),
+        "stats_checked_by_lerobots_method": np is not None,
     }
     if frame_at is not None:
         need(0 <= frame_at < len(rows), f"--frame {frame_at}: the dataset has {len(rows)} frames")

@@ -251,12 +251,13 @@ fn bin_of(x: f64, first: f64, last: f64) -> usize {
     bin
 }
 
-/// Edge `i` of `np.linspace(first, last, QUANTILE_BINS + 1)`.
+/// Edge `i` of `np.linspace(first, last, QUANTILE_BINS + 1)`, computed as numpy does
+/// (`i × step + start`, the last edge `stop` itself), so that a value falls in the same bin.
 fn edge(i: usize, first: f64, last: f64) -> f64 {
     if i == QUANTILE_BINS {
         last
     } else {
-        first + (last - first) * (i as f64 / QUANTILE_BINS as f64)
+        i as f64 * ((last - first) / QUANTILE_BINS as f64) + first
     }
 }
 
