@@ -2,7 +2,8 @@
 //! discarded, one whose hand/state stalled, one never stopped) becomes a dataset of the first
 //! two, which an independent reader (pyarrow, `tests/python/check_lerobot.py`) reads whole and
 //! finds consistent; a frame's values are the recorded samples at its instant (zero-order
-//! hold); appending works and appending other features is refused.
+//! hold); appending works and appending other features is refused; a bimanual recording
+//! exports both sides; an export killed at any moment leaves a dataset that reads right.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeMap;
@@ -472,4 +473,63 @@ fn a_bimanual_recording_exports_both_sides_named_by_side() {
         floats(&frame["glove.force_command"]),
         [left_forces, right_forces].concat()
     );
+}
+
+/// Whatever moment an export is killed at, the dataset reads right (the old version or the new
+/// one, nothing between), and the next export cleans up after it and appends.
+#[test]
+fn a_killed_export_leaves_a_dataset_that_reads_right() {
+    let sandbox = Sandbox::new();
+    let rec = sandbox.dir.path().join("session.mcap");
+    write_recording(&rec, &[(None, 0.0)]);
+    let out = sandbox.dir.path().join("dataset");
+    let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &[]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let mut episodes = 2;
+    // Kill appending exports at moments spread over their run (where each lands does not
+    // matter: every one must leave a dataset that reads right).
+    for delay_ms in [0, 30, 60, 80, 100, 120, 140, 170, 200, 400] {
+        let mut child = sandbox
+            .teleop()
+            .args(["export", rec.to_str().unwrap(), "--format", "lerobot"])
+            .args(["--fps", "30", "--out", out.to_str().unwrap()])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay_ms));
+        child.kill().unwrap();
+        let finished = child.wait().unwrap().success();
+        let Some(report) = check_lerobot(&out, None) else {
+            return;
+        };
+        let now = report["total_episodes"].as_u64().unwrap();
+        assert!(
+            now == episodes || now == episodes + 2,
+            "killed after {delay_ms} ms: {now} episodes, {episodes} before"
+        );
+        println!(
+            "killed after {delay_ms} ms: {}, the dataset has {now} episodes ({episodes} before)",
+            if finished {
+                "it had finished"
+            } else {
+                "it had not finished"
+            }
+        );
+        episodes = now;
+    }
+    // The next export removes what a killed one left and appends.
+    let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &[]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(
+        !sandbox
+            .dir
+            .path()
+            .join(".dataset.teleop-export-staging")
+            .exists(),
+        "the staging folder is gone"
+    );
+    if let Some(report) = check_lerobot(&out, None) {
+        assert_eq!(report["total_episodes"].as_u64().unwrap(), episodes + 2);
+    }
 }
