@@ -173,6 +173,12 @@ fn three_episodes_through_the_cli_survive_a_killed_recorder() {
         dataset.to_str().unwrap(),
     ]);
     assert!(ok, "{out}");
+    // One recording to the export (one recorder session): episode 3, started in the first file
+    // and discarded in the second, is discarded, not "never stopped".
+    assert!(
+        out.contains("episode 3 (\"drop the ball\") discarded: not exported"),
+        "{out}"
+    );
     let Some(report) = check_lerobot(&dataset, Some(0)) else {
         return;
     };

@@ -15,6 +15,14 @@
 //! because it is what the same session achieved when nothing went wrong, whatever the hand or
 //! the configuration; a slow loop, a stalled node or a lost link during the episode shows as a
 //! lower rate.
+//!
+//! # Recordings of one session
+//!
+//! The files of one recorder session (the rotated parts of a recording, and the files of a
+//! recorder restarted by `teleop launch`: the same `recorder_session` metadata record) are one
+//! recording to the export, read in the order they started: an episode started in one file and
+//! stopped or discarded in the next is one episode, its frames taken from both. Every other
+//! file is a recording of its own.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -298,6 +306,34 @@ fn measures_efforts(path: &Path, topic: &str, joints: usize) -> anyhow::Result<b
         }))
 }
 
+/// The recordings grouped into sessions (see the module's documentation): each group's files
+/// in the order they started, the groups in the order their first files were given.
+fn sessions(recordings: &[PathBuf]) -> anyhow::Result<Vec<Vec<(PathBuf, RecordingInfo)>>> {
+    let mut groups: Vec<(Option<String>, Vec<(PathBuf, RecordingInfo)>)> = Vec::new();
+    for path in recordings {
+        let info = recording_info(path)?;
+        let session = info
+            .metadata
+            .iter()
+            .find(|(name, _)| name == teleop_recorder::SESSION_METADATA)
+            .map(|(_, fields)| format!("{fields:?}"));
+        match groups
+            .iter_mut()
+            .find(|(s, _)| session.is_some() && *s == session)
+        {
+            Some((_, files)) => files.push((path.clone(), info)),
+            None => groups.push((session, vec![(path.clone(), info)])),
+        }
+    }
+    Ok(groups
+        .into_iter()
+        .map(|(_, mut files)| {
+            files.sort_by_key(|(_, info)| info.start_ns);
+            files
+        })
+        .collect())
+}
+
 /// `teleop export`: every recording's episodes into the dataset at `opts.out`, in one commit.
 pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitCode> {
     anyhow::ensure!(!recordings.is_empty(), "no recording given");
@@ -310,9 +346,9 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
     let mut first: Option<(PathBuf, DatasetSpec)> = None;
     let mut exported = 0u64;
     let mut refused = 0u64;
-    for path in recordings {
-        let info = recording_info(path)?;
-        let sides = sides_of(&info, &opts.namespaces);
+    for group in sessions(recordings)? {
+        let (path, info) = &group[0];
+        let sides = sides_of(info, &opts.namespaces);
         anyhow::ensure!(
             !sides.is_empty(),
             "{}: no hand/state channel: nothing to export",
@@ -350,7 +386,7 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
         let Some(w) = writer.as_mut() else {
             anyhow::bail!("the dataset writer did not open");
         };
-        let (e, r) = export_recording(path, &info, &layout, opts, w)
+        let (e, r) = export_recording(&group, &layout, opts, w)
             .with_context(|| format!("exporting {}", path.display()))?;
         exported += e;
         refused += r;
@@ -405,6 +441,26 @@ fn too_slow<'a>(
         })
 }
 
+/// A topic's rate over a recording's files: its intervals between messages over their log
+/// time, summed over the files (the time between two files is no time of the topic's).
+fn recording_rate(files: &[(PathBuf, RecordingInfo)], topic: &str) -> f64 {
+    let (mut intervals, mut seconds) = (0u64, 0.0f64);
+    for (_, info) in files {
+        if let Some(t) = info.topics.iter().find(|t| t.topic == topic) {
+            if t.rate_hz > 0.0 {
+                let n = t.messages.saturating_sub(1);
+                intervals += n;
+                seconds += n as f64 / t.rate_hz;
+            }
+        }
+    }
+    if seconds > 0.0 {
+        intervals as f64 / seconds
+    } else {
+        0.0
+    }
+}
+
 /// The first difference between two recordings' features.
 fn spec_difference(a: &DatasetSpec, b: &DatasetSpec) -> String {
     for (fa, fb) in a.features.iter().zip(&b.features) {
@@ -423,16 +479,16 @@ fn spec_difference(a: &DatasetSpec, b: &DatasetSpec) -> String {
     format!("{} vs {} features", a.features.len(), b.features.len())
 }
 
-/// One recording's episodes into `writer`: (exported, refused).
+/// One recording's episodes (its files in order) into `writer`: (exported, refused).
 fn export_recording(
-    path: &Path,
-    info: &RecordingInfo,
+    files: &[(PathBuf, RecordingInfo)],
     layout: &Layout,
     opts: &ExportOptions,
     writer: &mut DatasetWriter,
 ) -> anyhow::Result<(u64, u64)> {
-    let episodes = read_episodes(&[path])?;
-    let name = path.display();
+    let paths: Vec<&PathBuf> = files.iter().map(|(p, _)| p).collect();
+    let episodes = read_episodes(&paths)?;
+    let name = files[0].0.display();
     if let Some(open) = episodes.open() {
         out!(
             "{name}: episode {} (\"{}\") was never stopped: not exported",
@@ -462,18 +518,11 @@ fn export_recording(
     if chosen.is_empty() {
         return Ok((0, 0));
     }
-    // Each key topic's rate over the whole recording: the reference of the rate rule.
+    // Each key topic's rate over the whole recording (all its files): the rate rule's reference.
     let reference: Vec<Option<f64>> = layout
         .slots
         .iter()
-        .map(|s| {
-            s.source.is_key().then(|| {
-                info.topics
-                    .iter()
-                    .find(|t| t.topic == s.topic)
-                    .map_or(0.0, |t| t.rate_hz)
-            })
-        })
+        .map(|s| s.source.is_key().then(|| recording_rate(files, &s.topic)))
         .collect();
     let windows = chosen
         .iter()
@@ -528,7 +577,11 @@ fn export_recording(
         }
         Ok(())
     };
-    for msg in read_messages(path, &Filter::topics(topics))? {
+    let mut messages = Vec::with_capacity(files.len());
+    for (path, _) in files {
+        messages.push(read_messages(path, &Filter::topics(topics.clone()))?);
+    }
+    for msg in messages.into_iter().flatten() {
         let msg = msg?;
         let Some(slot) = layout.slots.iter().position(|s| s.topic == msg.topic) else {
             continue;
