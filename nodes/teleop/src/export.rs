@@ -306,10 +306,13 @@ fn measures_efforts(path: &Path, topic: &str, joints: usize) -> anyhow::Result<b
         }))
 }
 
+/// A recording's file and what it holds.
+type RecordingFile = (PathBuf, RecordingInfo);
+
 /// The recordings grouped into sessions (see the module's documentation): each group's files
 /// in the order they started, the groups in the order their first files were given.
-fn sessions(recordings: &[PathBuf]) -> anyhow::Result<Vec<Vec<(PathBuf, RecordingInfo)>>> {
-    let mut groups: Vec<(Option<String>, Vec<(PathBuf, RecordingInfo)>)> = Vec::new();
+fn sessions(recordings: &[PathBuf]) -> anyhow::Result<Vec<Vec<RecordingFile>>> {
+    let mut groups: Vec<(Option<String>, Vec<RecordingFile>)> = Vec::new();
     for path in recordings {
         let info = recording_info(path)?;
         let session = info
@@ -443,7 +446,7 @@ fn too_slow<'a>(
 
 /// A topic's rate over a recording's files: its intervals between messages over their log
 /// time, summed over the files (the time between two files is no time of the topic's).
-fn recording_rate(files: &[(PathBuf, RecordingInfo)], topic: &str) -> f64 {
+fn recording_rate(files: &[RecordingFile], topic: &str) -> f64 {
     let (mut intervals, mut seconds) = (0u64, 0.0f64);
     for (_, info) in files {
         if let Some(t) = info.topics.iter().find(|t| t.topic == topic) {
@@ -481,7 +484,7 @@ fn spec_difference(a: &DatasetSpec, b: &DatasetSpec) -> String {
 
 /// One recording's episodes (its files in order) into `writer`: (exported, refused).
 fn export_recording(
-    files: &[(PathBuf, RecordingInfo)],
+    files: &[RecordingFile],
     layout: &Layout,
     opts: &ExportOptions,
     writer: &mut DatasetWriter,
