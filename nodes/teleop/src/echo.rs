@@ -1,6 +1,6 @@
 //! `teleop echo`'s readable samples: one sample of any topic, and the hand profile that names
 //! its joints and fingertips, in, text out. No I/O here; the subscription loop lives in
-//! `inspect`.
+//! `inspect`, which writes the text and the warnings ([`Echo::take_warnings`]).
 //!
 //! A sample becomes a tree of named values ([`Value`]), then text in one of three [`Format`]s:
 //!
@@ -10,10 +10,15 @@
 //!   readers (PyYAML) read it as YAML 1.2 ones do: every float has a dot and every exponent a
 //!   sign, and names such as `on` or `no` are quoted.
 //! * JSON: one object per line (JSON Lines), NaN and infinities as `null`.
-//! * CSV: a header line, then one row per sample; a column is the dotted path of a value
-//!   (`joints.index.position`, `header.seq`, `input_age_ms.0`). NaN is an empty cell. A sample
-//!   whose columns differ from the previous one's (health reports of different nodes) gets a
-//!   header line of its own first.
+//! * CSV: one header line, then one row per sample; a column is the dotted path of a value
+//!   (`joints.index.position`, `header.seq`, `input_age_ms.0`). NaN and a value the sample does
+//!   not have are empty cells. The columns are fixed for a run, so that CSV readers
+//!   (`csv.DictReader`, pandas) see one header: a hand topic's are the joints or fingertips of
+//!   the profile naming the run's first hand sample, every one of them whether a sample uses it
+//!   or not, and every fingertip field whatever the sensor fills; `health`'s are every input
+//!   age slot and the details as `detail.<i>.name` / `detail.<i>.value` for each of the
+//!   contract's slots (a report of any node fits them). A sample with values the header has no
+//!   column for (more joints than the first) has them left out, said once as a warning.
 //!
 //! What a sample shows:
 //!
@@ -22,11 +27,17 @@
 //!   in the profile's joint order, fingertips in its finger order (the fingers with a tip
 //!   sensor, `hand/tactile`'s order); an entry the profile does not name is `joint_<i>` /
 //!   `fingertip_<i>`. Units are in the names where the contract fixes them (`effort_nm`,
-//!   `current_ma`, `normal_n`); positions and speeds are in the sample's `units`.
+//!   `current_ma`, `normal_n`); positions and speeds are in the sample's `units`. A profile
+//!   given (`--profile`) names every hand sample, also one of another hand model (a lab's own
+//!   hand may reuse a shipped hand's model id), with a warning, once, that the models differ;
+//!   in CSV the profile of the run's first hand sample names the later ones, with the same
+//!   warning.
 //! * Glove topics: by the glove's channel and finger names ([`GLOVE_CHANNELS`],
 //!   [`GLOVE_FINGERS`]).
 //! * `health`: node name, loop rate, input ages, counters and the named details.
 //! * `device/info`: the identity by field name ([`DeviceInfo::named_fields`]).
+//! * `episode`: the event and outcome by name, the task as text; `estop` and `estop/ack`:
+//!   `engaged` as true (1) or false (0).
 //! * Every other topic by its field table ([`Message::FIELDS`], the payload's ROS 2 schema),
 //!   without the `reserved` fields; fixed byte fields of 16 bytes or more are the contract's
 //!   zero-padded UTF-8 texts.
@@ -35,14 +46,15 @@
 //! bits by name (`flags: {held: false, clamped: true, ...}`); a value the contract does not
 //! name shows as its number.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use teleop_hand_profile::HandProfile;
 use teleop_msgs::{
-    command_flags, contact_source, control_mode, device_model, fingertip_sensor, force_flags,
-    link_kind, text_of, units, DeviceInfo, Fingertip, GloveDiagnostics, GloveForceCommand,
-    GloveState, HandCommand, HandState, Message, NodeHealth, SampleHeader, Tactile, GLOVE_CHANNELS,
-    GLOVE_FINGERS,
+    command_flags, contact_source, control_mode, device_model, episode_event, episode_outcome,
+    fingertip_sensor, force_flags, link_kind, text_of, units, DeviceInfo, EStop, EStopAck, Episode,
+    Fingertip, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand, HandState,
+    JointCommand, JointState, Message, NodeHealth, SampleHeader, Tactile, GLOVE_CHANNELS,
+    GLOVE_FINGERS, MAX_HEALTH_DETAILS,
 };
 
 /// How `teleop echo` writes samples.
@@ -60,6 +72,9 @@ pub enum Format {
 /// One value of a sample.
 #[derive(Debug, Clone, PartialEq)]
 enum Value {
+    /// A value the sample does not have (a CSV column of a joint it does not use): `null`, an
+    /// empty cell.
+    Null,
     Bool(bool),
     Int(i128),
     F32(f32),
@@ -87,6 +102,12 @@ value_from!(F32: f32);
 value_from!(F64: f64);
 value_from!(Text: String, &str);
 
+impl<T: Into<Value>> From<Option<T>> for Value {
+    fn from(v: Option<T>) -> Self {
+        v.map_or(Value::Null, Into::into)
+    }
+}
+
 /// `(name, value)` for a [`Fields`] list.
 fn entry(name: &str, value: impl Into<Value>) -> (String, Value) {
     (name.to_string(), value.into())
@@ -99,8 +120,17 @@ pub struct Echo {
     profile: Option<HandProfile>,
     /// The shipped profile of each hand model met so far (`None`: there is none).
     shipped: BTreeMap<u8, Option<HandProfile>>,
-    /// The columns of the last CSV header written.
+    /// CSV without a profile given: the first hand sample's model, whose shipped profile names
+    /// every hand sample of the run (the columns are fixed).
+    first_model: Option<u8>,
+    /// CSV: the columns of the header, written before the first row.
     columns: Option<Vec<String>>,
+    /// Warnings not yet taken ([`Echo::take_warnings`]).
+    warnings: Vec<String>,
+    /// Whether a hand sample named by another model's profile was warned of.
+    warned_model: bool,
+    /// Whether a CSV sample with values the header has no column for was warned of.
+    warned_columns: bool,
 }
 
 impl Echo {
@@ -111,12 +141,16 @@ impl Echo {
             format,
             profile,
             shipped: BTreeMap::new(),
+            first_model: None,
             columns: None,
+            warnings: Vec::new(),
+            warned_model: false,
+            warned_columns: false,
         }
     }
 
     /// The text of one sample (without a final line break): a YAML document, a JSON line, or
-    /// a CSV row (after a header line when the columns are new).
+    /// a CSV row (the first after the header line).
     pub fn show<M: Message>(&mut self, sample: &M) -> String {
         let fields = self.fields(sample);
         match self.format {
@@ -125,24 +159,50 @@ impl Echo {
             Format::Csv => {
                 let mut cells = Vec::new();
                 flatten("", &Value::Map(fields), &mut cells);
-                let columns: Vec<String> = cells.iter().map(|(k, _)| k.clone()).collect();
-                let row = cells
-                    .into_iter()
-                    .map(|(_, v)| v)
-                    .collect::<Vec<_>>()
-                    .join(",");
-                if self.columns.as_ref() == Some(&columns) {
-                    return row;
-                }
-                let header = columns
+                let Some(columns) = &self.columns else {
+                    let header: Vec<String> = cells.iter().map(|(k, _)| csv_cell(k)).collect();
+                    let row: Vec<String> = cells.iter().map(|(_, v)| v.clone()).collect();
+                    self.columns = Some(cells.into_iter().map(|(k, _)| k).collect());
+                    return format!("{}\n{}", header.join(","), row.join(","));
+                };
+                // The header's columns, whatever this sample has.
+                let at: HashMap<&str, usize> = columns
                     .iter()
-                    .map(|c| csv_cell(c))
-                    .collect::<Vec<_>>()
-                    .join(",");
-                self.columns = Some(columns);
-                format!("{header}\n{row}")
+                    .enumerate()
+                    .map(|(i, c)| (c.as_str(), i))
+                    .collect();
+                let mut row = vec![String::new(); columns.len()];
+                let mut left_out = Vec::new();
+                for (column, cell) in cells {
+                    match at.get(column.as_str()) {
+                        Some(&i) => row[i] = cell,
+                        None => left_out.push(column),
+                    }
+                }
+                if !left_out.is_empty() && !self.warned_columns {
+                    self.warned_columns = true;
+                    self.warnings.push(format!(
+                        "{}: values without a column in the CSV header (fixed by the first \
+                         sample) are left out: {}",
+                        M::TOPIC,
+                        left_out.join(", ")
+                    ));
+                }
+                row.join(",")
             }
         }
+    }
+
+    /// The warnings since the last call, each for standard error (said once per run: a hand
+    /// sample named by another model's profile, CSV values left out).
+    pub fn take_warnings(&mut self) -> Vec<String> {
+        std::mem::take(&mut self.warnings)
+    }
+
+    /// Whether the columns are fixed (CSV): every slot a sample may use is shown, those it
+    /// does not as [`Value::Null`].
+    fn fixed(&self) -> bool {
+        self.format == Format::Csv
     }
 
     /// The sample as named values.
@@ -166,7 +226,23 @@ impl Echo {
             return glove_force_command(&f);
         }
         if let Some(h) = payload::<NodeHealth, M>(sample) {
-            return health(&h);
+            return health(&h, self.fixed());
+        }
+        if let Some(e) = payload::<Episode, M>(sample) {
+            return episode(&e);
+        }
+        if let Some(e) = payload::<EStop, M>(sample) {
+            return vec![
+                entry("header", header(&e.header)),
+                entry("engaged", engaged(e.engaged)),
+            ];
+        }
+        if let Some(a) = payload::<EStopAck, M>(sample) {
+            return vec![
+                entry("header", header(&a.header)),
+                entry("engaged", engaged(a.engaged)),
+                entry("node_name", text_of(&a.node_name)),
+            ];
         }
         if let Some(d) = payload::<DeviceInfo, M>(sample) {
             let mut fields = vec![entry("header", header(&d.header))];
@@ -182,46 +258,89 @@ impl Echo {
         )
     }
 
-    /// The profile naming hand model `model`'s joints and fingertips, if there is one.
+    /// The profile naming the joints and fingertips of a sample of hand model `model`, if
+    /// there is one: the one given, else (CSV) the shipped one of the run's first hand
+    /// sample's model, else the shipped one of `model`. Warns once when that profile is
+    /// another model's.
     fn profile(&mut self, model: u8) -> Option<&HandProfile> {
-        if self.profile.is_some() {
+        if let Some(given) = &self.profile {
+            if given.model_id != model && !self.warned_model {
+                self.warned_model = true;
+                self.warnings.push(format!(
+                    "a sample of hand model {} ({model}) is named by the profile given, \
+                     {:?}, which is of model {} ({}); check that its joints are this hand's",
+                    device_model::name(model),
+                    given.name,
+                    device_model::name(given.model_id),
+                    given.model_id
+                ));
+            }
             return self.profile.as_ref();
         }
+        let naming = if self.fixed() {
+            *self.first_model.get_or_insert(model)
+        } else {
+            model
+        };
+        if naming != model && !self.warned_model {
+            self.warned_model = true;
+            self.warnings.push(format!(
+                "a sample of hand model {} ({model}) is named by the profile of model {} \
+                 ({naming}), the first sample's: the CSV columns are fixed for a run",
+                device_model::name(model),
+                device_model::name(naming),
+            ));
+        }
         self.shipped
-            .entry(model)
-            .or_insert_with(|| HandProfile::builtin_for_model(model))
+            .entry(naming)
+            .or_insert_with(|| HandProfile::builtin_for_model(naming))
             .as_ref()
     }
 
-    /// Names of the first `count` joints of hand model `model`.
-    fn joint_names(&mut self, model: u8, count: usize) -> Vec<String> {
+    /// Names of the joints of a sample of hand model `model` that uses `used` of them: the
+    /// first `used`, or with fixed columns every one the profile names and any used past
+    /// them.
+    fn joint_names(&mut self, model: u8, used: usize) -> Vec<String> {
         let named: Vec<String> = self
             .profile(model)
             .map(|p| p.joint_names().map(str::to_string).collect())
             .unwrap_or_default();
+        let count = self.shown(named.len(), used);
         numbered(named, count, "joint")
     }
 
-    /// Names of the first `count` fingertips of hand model `model`.
-    fn fingertip_names(&mut self, model: u8, count: usize) -> Vec<String> {
+    /// Names of the fingertips of a sample of hand model `model` that uses `used` of them, as
+    /// [`Echo::joint_names`].
+    fn fingertip_names(&mut self, model: u8, used: usize) -> Vec<String> {
         let named: Vec<String> = self
             .profile(model)
             .map(|p| p.fingertips().map(|f| f.name.clone()).collect())
             .unwrap_or_default();
+        let count = self.shown(named.len(), used);
         numbered(named, count, "fingertip")
     }
 
+    /// How many entries a sample using `used` of them shows when the profile names `named`.
+    fn shown(&self, named: usize, used: usize) -> usize {
+        if self.fixed() {
+            used.max(named)
+        } else {
+            used
+        }
+    }
+
     fn hand_command(&mut self, c: &HandCommand) -> Fields {
-        let joints = c.active_joints();
-        let names = self.joint_names(c.hand_model, joints.len());
+        let used = c.active_joints();
+        let names = self.joint_names(c.hand_model, used.len());
         let joints = names
             .into_iter()
-            .zip(joints)
-            .map(|(name, j)| {
+            .enumerate()
+            .map(|(i, name)| {
+                let j: Option<&JointCommand> = used.get(i);
                 let fields = vec![
-                    entry("target", j.target),
-                    entry("speed_limit", j.speed_limit),
-                    entry("effort_limit", j.effort_limit),
+                    entry("target", j.map(|j| j.target)),
+                    entry("speed_limit", j.map(|j| j.speed_limit)),
+                    entry("effort_limit", j.map(|j| j.effort_limit)),
                 ];
                 (name, Value::Map(fields))
             })
@@ -259,19 +378,20 @@ impl Echo {
     }
 
     fn hand_state(&mut self, s: &HandState) -> Fields {
-        let joints = s.active_joints();
-        let names = self.joint_names(s.hand_model, joints.len());
+        let used = s.active_joints();
+        let names = self.joint_names(s.hand_model, used.len());
         let joints = names
             .into_iter()
-            .zip(joints)
-            .map(|(name, j)| {
+            .enumerate()
+            .map(|(i, name)| {
+                let j: Option<&JointState> = used.get(i);
                 let fields = vec![
-                    entry("position", j.position),
-                    entry("speed", j.speed),
+                    entry("position", j.map(|j| j.position)),
+                    entry("speed", j.map(|j| j.speed)),
                     // The contract: N m whatever `units` says.
-                    entry("effort_nm", j.effort),
-                    entry("current_ma", j.current_ma),
-                    entry("status", j.status),
+                    entry("effort_nm", j.map(|j| j.effort)),
+                    entry("current_ma", j.map(|j| j.current_ma)),
+                    entry("status", j.map(|j| j.status)),
                 ];
                 (name, Value::Map(fields))
             })
@@ -306,12 +426,13 @@ impl Echo {
     }
 
     fn tactile(&mut self, t: &Tactile) -> Fields {
-        let tips = t.active_fingertips();
-        let names = self.fingertip_names(t.hand_model, tips.len());
+        let used = t.active_fingertips();
+        let names = self.fingertip_names(t.hand_model, used.len());
+        let fixed = self.fixed();
         let tips = names
             .into_iter()
-            .zip(tips)
-            .map(|(name, f)| (name, Value::Map(fingertip(f))))
+            .enumerate()
+            .map(|(i, name)| (name, Value::Map(fingertip(used.get(i), fixed))))
             .collect();
         vec![
             entry("header", header(&t.header)),
@@ -378,38 +499,50 @@ fn header(h: &SampleHeader) -> Value {
     ])
 }
 
-/// A fingertip's fields, those its sensor kind fills (all of them for another kind).
-fn fingertip(f: &Fingertip) -> Fields {
+/// A fingertip's fields, those its sensor kind fills (all of them for another kind); with
+/// `fixed` columns every field, [`Value::Null`] where the sensor kind does not fill it and
+/// throughout for a fingertip the sample does not use (`f` is `None`).
+fn fingertip(f: Option<&Fingertip>, fixed: bool) -> Fields {
+    let kind = f.map(|f| f.sensor_kind);
     let sensor = entry(
         "sensor",
-        named(
-            f.sensor_kind,
-            &[
-                (fingertip_sensor::NONE, "none"),
-                (fingertip_sensor::REVO2_FORCE, "revo2_force"),
-                (fingertip_sensor::PST_PRESSURE, "pst_pressure"),
-            ],
-        ),
+        kind.map(|k| {
+            named(
+                k,
+                &[
+                    (fingertip_sensor::NONE, "none"),
+                    (fingertip_sensor::REVO2_FORCE, "revo2_force"),
+                    (fingertip_sensor::PST_PRESSURE, "pst_pressure"),
+                ],
+            )
+        }),
     );
-    let forces = [
-        entry("normal_n", f.normal_n),
-        entry("tangential_n", f.tangential_n),
-        entry("direction_deg", f.direction_deg),
-        entry("direction_valid", f.direction_valid != 0),
-        entry("proximity", f.proximity),
-        entry("status", f.status),
-        entry("update_counter", f.update_counter),
+    let forces = vec![
+        entry("normal_n", f.map(|f| f.normal_n)),
+        entry("tangential_n", f.map(|f| f.tangential_n)),
+        entry("direction_deg", f.map(|f| f.direction_deg)),
+        entry("direction_valid", f.map(|f| f.direction_valid != 0)),
+        entry("proximity", f.map(|f| f.proximity)),
+        entry("status", f.map(|f| f.status)),
+        entry("update_counter", f.map(|f| f.update_counter)),
     ];
-    let raw = [
-        entry("pressure", f.pressure),
-        entry("temperature", f.temperature),
+    let raw = vec![
+        entry("pressure", f.map(|f| f.pressure)),
+        entry("temperature", f.map(|f| f.temperature)),
     ];
+    let (forces_filled, raw_filled) = match kind {
+        None | Some(fingertip_sensor::NONE) => (false, false),
+        Some(fingertip_sensor::REVO2_FORCE) => (true, false),
+        Some(fingertip_sensor::PST_PRESSURE) => (false, true),
+        Some(_) => (true, true),
+    };
     let mut fields = vec![sensor];
-    match f.sensor_kind {
-        fingertip_sensor::NONE => {}
-        fingertip_sensor::REVO2_FORCE => fields.extend(forces),
-        fingertip_sensor::PST_PRESSURE => fields.extend(raw),
-        _ => fields.extend(forces.into_iter().chain(raw)),
+    for (filled, group) in [(forces_filled, forces), (raw_filled, raw)] {
+        if filled {
+            fields.extend(group);
+        } else if fixed {
+            fields.extend(group.into_iter().map(|(k, _)| (k, Value::Null)));
+        }
     }
     fields
 }
@@ -498,10 +631,25 @@ fn glove_force_command(f: &GloveForceCommand) -> Fields {
     ]
 }
 
-fn health(h: &NodeHealth) -> Fields {
+/// A health report: the used input ages and the details by name; with `fixed` columns every
+/// input age slot (those unused [`Value::Null`]) and the details as a list of every slot's
+/// name and value (`detail.<i>.name`, `detail.<i>.value`), so that any node's report has the
+/// same columns.
+fn health(h: &NodeHealth, fixed: bool) -> Fields {
     let inputs = usize::from(h.input_count).min(h.input_age_ms.len());
-    let ages = h.input_age_ms[..inputs].iter().map(|a| Value::from(*a));
-    let details = h.details().map(|(k, v)| (k, Value::from(v))).collect();
+    let shown = if fixed { h.input_age_ms.len() } else { inputs };
+    let ages = (0..shown).map(|i| Value::from(h.input_age_ms[..inputs].get(i).copied()));
+    let details = if fixed {
+        let mut used = h.details();
+        let slots = (0..MAX_HEALTH_DETAILS).map(|_| {
+            let (name, value) = used.next().unzip();
+            Value::Map(vec![entry("name", name), entry("value", value)])
+        });
+        ("detail".to_string(), Value::List(slots.collect()))
+    } else {
+        let named = h.details().map(|(k, v)| (k, Value::from(v))).collect();
+        ("details".to_string(), Value::Map(named))
+    };
     vec![
         entry("header", header(&h.header)),
         entry("node", h.name()),
@@ -511,8 +659,37 @@ fn health(h: &NodeHealth) -> Fields {
         entry("clamps", h.clamps),
         entry("errors", h.errors),
         entry("dropped", h.dropped),
-        ("details".to_string(), Value::Map(details)),
+        details,
     ]
+}
+
+/// An episode mark: its event and outcome by name, its task as text.
+fn episode(e: &Episode) -> Fields {
+    let event = named(
+        e.event,
+        &[
+            (episode_event::START, "start"),
+            (episode_event::STOP, "stop"),
+            (episode_event::DISCARD, "discard"),
+        ],
+    );
+    vec![
+        entry("header", header(&e.header)),
+        entry("event", event),
+        // As the recorder reads it: any value but success or failure is unlabelled.
+        entry("outcome", episode_outcome::name(e.outcome)),
+        entry("task", e.task()),
+    ]
+}
+
+/// An e-stop state (`engaged`: 1 engaged, 0 released) as true or false; another value as its
+/// number.
+fn engaged(value: u8) -> Value {
+    match value {
+        0 => Value::Bool(false),
+        1 => Value::Bool(true),
+        other => Value::from(other),
+    }
 }
 
 /// Fixed `uint8` arrays at least this long are texts: the contract's zero-padded UTF-8 fields
@@ -999,6 +1176,20 @@ mod tests {
             assert_eq!(targets, names, "{hand}");
             assert!(header.contains(&"flags.clamped".to_string()));
             assert_eq!(rows.len(), 1);
+            // Joint i's target is i: each value under its own joint's name.
+            let parsed: serde_json::Value = serde_json::from_str(&json).unwrap();
+            for (i, name) in names.iter().enumerate() {
+                assert!(
+                    yaml.contains(&format!("\n  {name}: {{target: {i}.0, ")),
+                    "{name}: {yaml}"
+                );
+                assert_eq!(parsed["joints"][name]["target"], i as f64, "{name}: {json}");
+                let at = header
+                    .iter()
+                    .position(|c| *c == format!("joints.{name}.target"))
+                    .unwrap();
+                assert_eq!(rows[0][at], format!("{i}.0"), "{name}");
+            }
         }
     }
 
@@ -1139,21 +1330,54 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(&show(Format::Json, &h)).unwrap();
         assert_eq!(json["details"]["rtt_ms"], 0.25);
         assert_eq!(json["input_age_ms"], serde_json::json!([1.5, -1.0]));
-        // Another node's report has other columns: a header of its own.
-        let mut echo = Echo::new(Format::Csv, None);
-        let first = echo.show(&h);
-        assert_eq!(first.lines().count(), 2, "{first}");
-        assert!(first.starts_with("header.seq,"), "{first}");
-        assert!(
-            first.contains(",details.reconnects,details.rtt_ms\n"),
-            "{first}"
-        );
-        assert_eq!(echo.show(&h).lines().count(), 1, "same columns: no header");
-        let mut other = NodeHealth::default();
+
+        // CSV: reports of nodes with other inputs and details have the same columns, those of
+        // every slot, under one header.
+        let mut other = NodeHealth {
+            input_count: 5,
+            input_age_ms: [0.5, 1.5, 2.5, 3.5, 4.5],
+            ..Default::default()
+        };
         other.set_name("glove");
-        let second = echo.show(&other);
-        assert_eq!(second.lines().count(), 2, "{second}");
-        assert!(!second.contains("details"), "{second}");
+        for i in 0..MAX_HEALTH_DETAILS {
+            other.set_detail(&format!("d{i}"), i as f64);
+        }
+        let mut echo = Echo::new(Format::Csv, None);
+        let text = [&h, &other, &NodeHealth::default(), &h]
+            .map(|report| echo.show(report))
+            .join("\n");
+        assert!(echo.take_warnings().is_empty());
+        let (header, rows) = csv(&text);
+        assert_eq!(rows.len(), 4, "one header, a row per report: {text}");
+        assert!(text.starts_with("header.seq,"), "{text}");
+        let mut expected: Vec<String> = (0..5).map(|i| format!("input_age_ms.{i}")).collect();
+        for i in 0..MAX_HEALTH_DETAILS {
+            expected.push(format!("detail.{i}.name"));
+            expected.push(format!("detail.{i}.value"));
+        }
+        for column in &expected {
+            assert!(header.contains(column), "{column}: {header:?}");
+        }
+        assert!(
+            !header.iter().any(|c| c.starts_with("details.")),
+            "{header:?}"
+        );
+        let cell = |row: usize, column: &str| {
+            let at = header.iter().position(|c| c == column).unwrap();
+            rows[row][at].as_str()
+        };
+        assert_eq!(cell(0, "node"), "left/allegro");
+        assert_eq!(cell(0, "input_age_ms.1"), "-1.0");
+        assert_eq!(cell(0, "input_age_ms.2"), "", "past input_count: empty");
+        assert_eq!(cell(0, "detail.1.name"), "rtt_ms");
+        assert_eq!(cell(0, "detail.1.value"), "0.25");
+        assert_eq!(cell(0, "detail.2.name"), "");
+        assert_eq!(cell(1, "node"), "glove");
+        assert_eq!(cell(1, "input_age_ms.4"), "4.5");
+        assert_eq!(cell(1, "detail.7.name"), "d7");
+        assert_eq!(cell(1, "detail.7.value"), "7.0");
+        assert_eq!(cell(2, "detail.0.name"), "");
+        assert_eq!(rows[3], rows[0]);
     }
 
     #[test]
@@ -1169,19 +1393,8 @@ mod tests {
         let yaml = show(Format::Yaml, &ack);
         assert_eq!(
             yaml,
-            "---\nheader: {seq: 4, stamp_ns: 1000, origin_ns: 0, source_id: 0}\nengaged: 1\n\
+            "---\nheader: {seq: 4, stamp_ns: 1000, origin_ns: 0, source_id: 0}\nengaged: true\n\
              node_name: \"left/feedback\""
-        );
-        let episode = teleop_msgs::Episode {
-            event: teleop_msgs::episode_event::START,
-            task: teleop_msgs::fixed_text("pick up the cube"),
-            ..Default::default()
-        };
-        assert!(
-            show(Format::Yaml, &episode)
-                .ends_with("\nevent: 1\noutcome: 0\ntask: \"pick up the cube\""),
-            "{}",
-            show(Format::Yaml, &episode)
         );
         // The same header as the payloads shown by name.
         let estop = show(Format::Yaml, &EStop::default());
@@ -1189,7 +1402,7 @@ mod tests {
         assert_eq!(estop.lines().nth(1), state.lines().nth(1));
         assert_eq!(
             show(Format::Json, &EStop::default()),
-            "{\"header\":{\"seq\":0,\"stamp_ns\":0,\"origin_ns\":0,\"source_id\":0},\"engaged\":0}"
+            "{\"header\":{\"seq\":0,\"stamp_ns\":0,\"origin_ns\":0,\"source_id\":0},\"engaged\":false}"
         );
         let device = DeviceInfo {
             device_model: device_model::GLOVE,
@@ -1205,6 +1418,177 @@ mod tests {
                  model_name: EH55BF1"
             ),
             "{yaml}"
+        );
+    }
+
+    #[test]
+    fn episodes_and_estops_show_their_values_by_name() {
+        use teleop_msgs::{episode_event, episode_outcome, fixed_text};
+        let mut mark = Episode {
+            event: episode_event::START,
+            task: fixed_text("pick up the cube"),
+            ..Default::default()
+        };
+        let yaml = show(Format::Yaml, &mark);
+        assert!(
+            yaml.ends_with("\nevent: start\noutcome: unlabelled\ntask: \"pick up the cube\""),
+            "{yaml}"
+        );
+        for (event, outcome, shown) in [
+            (
+                episode_event::STOP,
+                episode_outcome::SUCCESS,
+                "stop,success,",
+            ),
+            (
+                episode_event::STOP,
+                episode_outcome::FAILURE,
+                "stop,failure,",
+            ),
+            (
+                episode_event::DISCARD,
+                episode_outcome::UNLABELLED,
+                "discard,unlabelled,",
+            ),
+            (9, 7, "9,unlabelled,"),
+        ] {
+            mark.event = event;
+            mark.outcome = outcome;
+            mark.task = [0; teleop_msgs::EPISODE_TASK_BYTES];
+            let (header, rows) = csv(&show(Format::Csv, &mark));
+            assert_eq!(header[4..], ["event", "outcome", "task"], "{header:?}");
+            assert_eq!(
+                rows[0][4..].join(",") + ",",
+                format!("{shown},"),
+                "{event} {outcome}"
+            );
+        }
+        let json = show(Format::Json, &mark);
+        assert!(
+            json.ends_with(",\"event\":9,\"outcome\":\"unlabelled\",\"task\":\"\"}"),
+            "{json}"
+        );
+
+        let engaged = EStop {
+            engaged: 1,
+            ..Default::default()
+        };
+        assert!(show(Format::Yaml, &engaged).ends_with("\nengaged: true"));
+        let odd = EStop {
+            engaged: 2,
+            ..Default::default()
+        };
+        assert!(
+            show(Format::Yaml, &odd).ends_with("\nengaged: 2"),
+            "not named: its number"
+        );
+    }
+
+    #[test]
+    fn a_profile_of_another_model_names_the_sample_with_one_warning() {
+        // The LEAP's profile given, Allegro samples: named by the LEAP's joints, warned once.
+        let leap = profile("leap");
+        let s = state(&profile("allegro"));
+        let mut echo = Echo::new(Format::Yaml, Some(leap.clone()));
+        let shown = echo.show(&s);
+        let names: Vec<String> = leap.joint_names().map(String::from).collect();
+        assert_eq!(yaml_keys(&shown, "joints"), names, "{shown}");
+        let warnings = echo.take_warnings();
+        assert_eq!(warnings.len(), 1, "{warnings:?}");
+        assert!(
+            warnings[0].contains("hand model allegro (2)")
+                && warnings[0].contains(&format!("{:?}", leap.name))
+                && warnings[0].contains("model leap (5)"),
+            "{warnings:?}"
+        );
+        echo.show(&s);
+        assert!(echo.take_warnings().is_empty(), "said once");
+        // Its own model: no warning.
+        let mut echo = Echo::new(Format::Yaml, Some(leap.clone()));
+        echo.show(&state(&leap));
+        assert!(echo.take_warnings().is_empty());
+    }
+
+    #[test]
+    fn a_csv_run_keeps_its_first_header_whatever_the_samples_use() {
+        let revo2 = profile("revo2");
+        let names: Vec<String> = revo2.joint_names().map(String::from).collect();
+        let mut echo = Echo::new(Format::Csv, None);
+        let full = state(&revo2);
+        // Fewer joints used than the profile names; then another hand's sample (named by the
+        // run's profile, warned); then more joints than the header has.
+        let mut fewer = full;
+        fewer.joint_count = 2;
+        let other = state(&profile("allegro"));
+        let text = [&fewer, &full, &other].map(|s| echo.show(s)).join("\n");
+        let warnings = echo.take_warnings();
+        assert_eq!(warnings.len(), 2, "{warnings:?}");
+        assert!(
+            warnings[0].contains("hand model allegro (2)"),
+            "{warnings:?}"
+        );
+        assert!(warnings[0].contains("model revo2 (1)"), "{warnings:?}");
+        assert!(
+            warnings[1].contains("left out: joints.joint_6.position, joints.joint_6.speed, "),
+            "{warnings:?}"
+        );
+        let (header, rows) = csv(&text);
+        assert_eq!(rows.len(), 3, "one header: {text}");
+        let joint_columns: Vec<&str> = header
+            .iter()
+            .filter_map(|c| c.strip_prefix("joints.")?.strip_suffix(".position"))
+            .collect();
+        assert_eq!(
+            joint_columns, names,
+            "the profile's, from the first row: {text}"
+        );
+        let cell = |row: usize, column: String| {
+            let at = header.iter().position(|c| *c == column).unwrap();
+            rows[row][at].clone()
+        };
+        assert_eq!(cell(0, format!("joints.{}.position", names[1])), "0.1");
+        for field in ["position", "speed", "effort_nm", "current_ma", "status"] {
+            assert_eq!(
+                cell(0, format!("joints.{}.{field}", names[2])),
+                "",
+                "unused"
+            );
+        }
+        assert_eq!(cell(1, format!("joints.{}.position", names[2])), "0.2");
+        assert_eq!(cell(2, format!("joints.{}.position", names[5])), "0.5");
+
+        // Tactile: every field of every fingertip the profile names, whatever the sensor.
+        let mut t = Tactile {
+            hand_model: revo2.model_id,
+            fingertip_count: 1,
+            ..Default::default()
+        };
+        t.fingertips[0].sensor_kind = fingertip_sensor::REVO2_FORCE;
+        t.fingertips[0].normal_n = 1.5;
+        let mut echo = Echo::new(Format::Csv, None);
+        let text = echo.show(&t);
+        t.fingertip_count = 5;
+        for f in &mut t.fingertips {
+            f.sensor_kind = fingertip_sensor::PST_PRESSURE;
+            f.pressure = 7;
+        }
+        let text = format!("{text}\n{}", echo.show(&t));
+        assert!(echo.take_warnings().is_empty());
+        let (header, rows) = csv(&text);
+        assert_eq!(rows.len(), 2, "{text}");
+        let tips: Vec<String> = revo2.fingertips().map(|f| f.name.clone()).collect();
+        let cell = |row: usize, column: String| {
+            let at = header.iter().position(|c| *c == column).unwrap();
+            rows[row][at].clone()
+        };
+        assert_eq!(cell(0, format!("fingertips.{}.normal_n", tips[0])), "1.5");
+        assert_eq!(cell(0, format!("fingertips.{}.pressure", tips[0])), "");
+        assert_eq!(cell(0, format!("fingertips.{}.sensor", tips[1])), "");
+        assert_eq!(cell(1, format!("fingertips.{}.normal_n", tips[0])), "");
+        assert_eq!(cell(1, format!("fingertips.{}.pressure", tips[4])), "7");
+        assert_eq!(
+            cell(1, format!("fingertips.{}.sensor", tips[4])),
+            "pst_pressure"
         );
     }
 

@@ -163,7 +163,8 @@ pub(crate) fn unknown_topic(topic: &str) -> anyhow::Error {
 
 /// `teleop echo`: the samples of one topic as they arrive, written by [`Echo`] in `format`,
 /// hand samples named by the profile file `profile` if given (else by each sample's shipped
-/// profile).
+/// profile; a sample of another model than the given profile's is still named by it, with a
+/// warning on standard error), [`Echo`]'s warnings on standard error.
 pub fn echo(
     ipc: &IpcSettings,
     topic: &str,
@@ -202,7 +203,12 @@ pub fn echo(
             let echo = RefCell::new(self.echo);
             let print = |m: &M| {
                 if !done() {
-                    match out!("{}", echo.borrow_mut().show(m)) {
+                    let mut echo = echo.borrow_mut();
+                    let text = echo.show(m);
+                    for warning in echo.take_warnings() {
+                        eprintln!("warning: {warning}");
+                    }
+                    match out!("{text}") {
                         Ok(()) => printed.set(printed.get() + 1),
                         Err(e) => *failed.borrow_mut() = Some(e),
                     }
