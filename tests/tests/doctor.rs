@@ -225,27 +225,38 @@ fn world_readable_copy(launch: &Path) -> tempfile::TempDir {
     let world = tempfile::Builder::new()
         .prefix("teleop-doctor-nobody")
         .tempdir()
-        .unwrap();
+        .expect("the world-readable copy for the run as nobody");
     let open = |path: &Path, mode: u32| {
-        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))
+            .expect("the world-readable copy for the run as nobody");
     };
     open(world.path(), 0o777);
     let teleop = world.path().join("teleop");
     if std::fs::hard_link(bin("teleop"), &teleop).is_err() {
-        std::fs::copy(bin("teleop"), &teleop).unwrap();
+        std::fs::copy(bin("teleop"), &teleop)
+            .expect("the world-readable copy for the run as nobody");
     }
     open(&teleop, 0o755);
-    std::fs::copy(launch, world.path().join("launch.toml")).unwrap();
+    std::fs::copy(launch, world.path().join("launch.toml"))
+        .expect("the world-readable copy for the run as nobody");
     open(&world.path().join("launch.toml"), 0o644);
     fn copy_dir(from: &Path, to: &Path, open: &dyn Fn(&Path, u32)) {
-        std::fs::create_dir_all(to).unwrap();
+        std::fs::create_dir_all(to).expect("the world-readable copy for the run as nobody");
         open(to, 0o755);
-        for entry in std::fs::read_dir(from).unwrap().flatten() {
+        for entry in std::fs::read_dir(from)
+            .expect("the world-readable copy for the run as nobody")
+            .flatten()
+        {
             let target = to.join(entry.file_name());
-            if entry.file_type().unwrap().is_dir() {
+            if entry
+                .file_type()
+                .expect("the world-readable copy for the run as nobody")
+                .is_dir()
+            {
                 copy_dir(&entry.path(), &target, open);
             } else {
-                std::fs::copy(entry.path(), &target).unwrap();
+                std::fs::copy(entry.path(), &target)
+                    .expect("the world-readable copy for the run as nobody");
                 open(&target, 0o644);
             }
         }
