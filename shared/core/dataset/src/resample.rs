@@ -200,10 +200,17 @@ impl Resampler {
     }
 }
 
-/// Moves the samples stamped at or before `due` into the held one (only the newest counts).
+/// Moves the samples stamped at or before `due` into the held one (only the newest counts). A
+/// sample stamped before the held one (logged after its frame settled, or a restarted
+/// recorder's history) is dropped: a frame never goes back in time.
 fn collapse(s: &mut Slot, due: u64) {
     while s.pending.front().is_some_and(|(t, _)| *t <= due) {
-        s.held = s.pending.pop_front();
+        let Some(sample) = s.pending.pop_front() else {
+            break;
+        };
+        if s.held.as_ref().is_none_or(|(held, _)| sample.0 >= *held) {
+            s.held = Some(sample);
+        }
     }
 }
 
@@ -283,6 +290,35 @@ mod tests {
             [30, 40, 50]
         );
         assert_eq!(got[0].1, [1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_sample_older_than_the_held_one_never_takes_its_place() {
+        let mut r = Resampler::new(
+            &[1, 1],
+            10,
+            vec![Window {
+                start_ns: 0,
+                stop_ns: 3_000 * MS,
+            }],
+        );
+        r.push(0, 0, 0, &[0.0]);
+        r.push(1, 0, 0, &[0.0]);
+        r.push(0, 250 * MS, 250 * MS, &[250.0]);
+        // Slot 0 falls silent; slot 1 runs on until frames up to 300 settle by lateness.
+        for t in (10..=1_350).step_by(10) {
+            r.push(1, t * MS, t * MS, &[t as f32]);
+        }
+        let got = frames(&drain(&mut r));
+        assert_eq!(got.last(), Some(&(300, vec![250.0, 300.0])));
+        // A slot 0 sample stamped 120 ms, logged now (over a second late, a restarted
+        // recorder's history, the next file of a session): older than the 250 ms one held,
+        // it must not take its place.
+        r.push(0, 120 * MS, 1_360 * MS, &[120.0]);
+        r.finish();
+        let got = frames(&drain(&mut r));
+        assert_eq!(got.first(), Some(&(400, vec![250.0, 400.0])));
+        assert!(got.iter().all(|(_, v)| v[0] == 250.0), "{got:?}");
     }
 
     #[test]
