@@ -16,9 +16,13 @@ Reads every parquet file of the dataset and checks that:
   (and, where pandas is installed, pandas reads it so, as lerobot does);
 - meta/stats.json has min, max, mean, std, count, q01..q99 per feature, count = total_frames,
   min/max those of all frames;
-- where numpy is installed (CI has it), each episode's mean, std and quantiles are those of its
-  rows by lerobot's method (compute_stats.py, redone here in float64) and stats.json is
-  lerobot's aggregate of the episodes' (aggregate_feature_stats).
+- where numpy is installed (CI has it), each episode's mean, std and quantiles are those that
+  our numpy transcription of lerobot's method (compute_stats.py: get_feature_stats with
+  RunningQuantileStats, aggregate_feature_stats) computes from its rows, and stats.json is that
+  transcription's aggregate of the episodes'. This is not lerobot's code and it computes in
+  float64 where lerobot computes in the column's float32: it checks that the writer computed
+  what the method says, at f64, independently of the writer's code; a misreading of the method
+  shared by both would pass, and lerobot's own float32 values differ at float32 rounding.
 
 Prints one JSON object: {"ok": true, "total_episodes": ..., "total_frames": ..., "frame": {...}}
 with the frame of global index INDEX (every column), or exits 1 naming the first failure.
@@ -96,8 +100,9 @@ def column_values(rows, name):
 
 
 def lerobot_episode_stats(np, values):
-    """An episode's statistics by lerobot's method (compute_stats.get_feature_stats with
-    RunningQuantileStats fed the episode in one batch), in float64: min, max, mean, population
+    """An episode's statistics by our transcription of lerobot's method
+    (compute_stats.get_feature_stats with RunningQuantileStats fed the episode in one batch),
+    computed in float64 (lerobot: the column's float32): min, max, mean, population
     std from E[x^2] - E[x]^2, and each quantile read off a 5000-bin histogram over
     [min - 1e-10, max + 1e-10], interpolated inside the bin; one frame: std 0, quantiles = mean."""
     x = np.asarray(values, dtype=np.float64).reshape(len(values), -1)
@@ -131,7 +136,8 @@ def lerobot_episode_stats(np, values):
 
 
 def lerobot_aggregate(np, parts):
-    """stats.json from the episodes' statistics by lerobot's aggregate_feature_stats."""
+    """stats.json from the episodes' statistics by our transcription of lerobot's
+    aggregate_feature_stats, in float64."""
     counts = np.array([p["count"][0] for p in parts], dtype=np.float64)
     total = counts.sum()
     means = np.array([p["mean"] for p in parts])
@@ -213,7 +219,7 @@ def main():
         need({str(k): int(v) for k, v in frame["task_index"].items()} == task_index,
              "pandas reads other tasks than pyarrow")
 
-    try:  # numpy (which pyarrow does not need) checks the statistics by lerobot's method
+    try:  # numpy (which pyarrow does not need) checks the statistics by our transcription of lerobot's method
         import numpy as np
     except ImportError:
         np = None

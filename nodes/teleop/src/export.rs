@@ -2,8 +2,8 @@
 //!
 //! Owns what the dataset takes from a recording: which topics make which features and with
 //! which names (from the hand profile), which episodes go in (kept, optionally only the
-//! successful ones, and not those whose key topics ran too slowly), and the reading of the
-//! recording, streamed once in log-time order. The resampling, statistics and files are
+//! successful ones, and not those whose key topics ran too slowly, fell silent or gave values
+//! that are not finite), and the reading of the recording, streamed once. The resampling, statistics and files are
 //! `teleop-dataset`'s; the episodes' rule is `teleop-recording`'s.
 //!
 //! # The rate rule
@@ -14,23 +14,45 @@
 //! log time, as `teleop recordings info` prints it). The recording's own rate is the reference
 //! because it is what the same session achieved when nothing went wrong, whatever the hand or
 //! the configuration; a slow loop, a stalled node or a lost link during the episode shows as a
-//! lower rate.
+//! lower rate. Within the episode the rate is taken over the intervals between its samples
+//! (n - 1 over the first to the last stamp), so that a short episode is not judged by where its
+//! ends fall between two samples. An episode shorter than one frame period is refused.
+//!
+//! # The gap rule
+//!
+//! A frame holds each topic's newest sample however old it is (zero-order hold), so a gap in a
+//! recording (the tail a killed recorder lost, the time a restarted one took, a stalled node)
+//! would become frames repeating stale values. An episode is therefore also refused when a key
+//! topic is silent within it for longer than `--max-gap-ms` (default 100): the age its newest
+//! sample reaches at some instant of the episode (counted from that sample's stamp, which may
+//! be before the START). The message names the topic and the gap.
+//!
+//! # Values
+//!
+//! Efforts go into `observation.state` when the first `hand/state` sample of every side has a
+//! finite effort for every joint (the Revo2 reports NaN). Any value that is not finite in an
+//! episode's frames (an effort that turned NaN later, a broken sensor) refuses the episode,
+//! naming the feature and the name: it would make the dataset's statistics NaN. A feature whose
+//! topic the recording lacks (no `hand/tactile` for a hand with fingertip sensors, no
+//! `glove/force_command` with `--with-force-command`) refuses the export once, before any
+//! episode, naming it.
 //!
 //! # Recordings of one session
 //!
 //! The files of one recorder session (the rotated parts of a recording, and the files of a
 //! recorder restarted by `teleop launch`: the same `recorder_session` metadata record) are one
-//! recording to the export, read in the order they started: an episode started in one file and
-//! stopped or discarded in the next is one episode, its frames taken from both. Every other
-//! file is a recording of its own.
+//! recording to the export, read in the order they started (each file in its own order: log
+//! time, or file order for a killed recorder's file that `recordings repair` saved): an
+//! episode started in one file and stopped or discarded in the next is one episode, its frames
+//! taken from both. Every other file is a recording of its own. A file's samples older than
+//! what a frame already holds (a restarted recorder's history) are dropped by the resampler.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::Context;
 use teleop_dataset::{
-    check,
-    resample::{Event, Resampler, Window},
+    resample::{Event, Resampler, SlotInWindow, Window},
     DatasetSpec, DatasetWriter, EpisodeBuffer, FeatureSpec,
 };
 use teleop_hand_profile::{HandProfile, TipSensor, GLOVE_CHANNELS, GLOVE_FINGERS};
@@ -52,6 +74,8 @@ pub struct ExportOptions {
     pub only_success: bool,
     /// Refuse an episode whose key topic's rate is below this fraction of the recording's.
     pub min_rate_ratio: f64,
+    /// Refuse an episode in which a key topic is silent for longer than this (ms).
+    pub max_gap_ms: u64,
     /// Add `glove.force_command`.
     pub with_force_command: bool,
     /// The sides to export (none: the recording's).
@@ -210,6 +234,34 @@ impl Layout {
         }
     }
 
+    /// The first feature whose topic has no message in any of the recording's files, said with
+    /// the feature and the name it would fill.
+    fn missing_topic(&self, files: &[RecordingFile]) -> Option<String> {
+        let slot = self.slots.iter().find(|slot| {
+            !files.iter().any(|(_, info)| {
+                info.topics
+                    .iter()
+                    .any(|t| t.topic == slot.topic && t.messages > 0)
+            })
+        })?;
+        let feature = self
+            .spec
+            .features
+            .iter()
+            .find(|f| slot.names.first().is_some_and(|n| f.names.contains(n)))
+            .map_or("a feature", |f| f.key.as_str());
+        let why = match slot.source {
+            Source::Tactile => " (the hand profile has fingertip sensors)",
+            Source::Force => " (--with-force-command)",
+            _ => "",
+        };
+        Some(format!(
+            "no {} message: the dataset's `{feature}` needs it for `{}`{why}",
+            slot.topic,
+            slot.names.first().map_or("", String::as_str)
+        ))
+    }
+
     /// A sample's values for its slot and its stamp (`header.stamp_ns`), or why it cannot give
     /// them.
     fn values(&self, source: Source, payload: &[u8], out: &mut Vec<f32>) -> Result<u64, String> {
@@ -291,19 +343,31 @@ fn sides_of(info: &RecordingInfo, given: &[Namespace]) -> Vec<Option<Namespace>>
     sides
 }
 
-/// Whether the hand measures efforts: the first `hand/state` sample of the first side has a
-/// finite effort (the Revo2 reports NaN: no column of NaN goes into the dataset).
-fn measures_efforts(path: &Path, topic: &str, joints: usize) -> anyhow::Result<bool> {
-    let first = read_messages(path, &Filter::topics([topic]))?
-        .next()
-        .transpose()?;
-    Ok(first
-        .and_then(|m| HandState::from_bytes(&m.payload).ok())
-        .is_some_and(|s| {
-            s.joints[..joints.min(s.joints.len())]
-                .iter()
-                .any(|j| j.effort.is_finite())
-        }))
+/// Whether the hands measure efforts: the first `hand/state` sample of every side (in the
+/// session's first file) has a finite effort for every joint (the Revo2 reports NaN: no column
+/// of NaN goes into the dataset). A later value that is not finite refuses its episode.
+fn measures_efforts(
+    path: &Path,
+    sides: &[Option<Namespace>],
+    joints: usize,
+) -> anyhow::Result<bool> {
+    for side in sides {
+        let topic = qualified(side.as_ref(), HandState::TOPIC);
+        let first = read_messages(path, &Filter::topics([topic]))?
+            .next()
+            .transpose()?;
+        let finite = first
+            .and_then(|m| HandState::from_bytes(&m.payload).ok())
+            .is_some_and(|s| {
+                s.joints[..joints.min(s.joints.len())]
+                    .iter()
+                    .all(|j| j.effort.is_finite())
+            });
+        if !finite {
+            return Ok(false);
+        }
+    }
+    Ok(true)
 }
 
 /// A recording's file and what it holds.
@@ -365,14 +429,18 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
                 path.display()
             );
         }
-        let first_command: Vec<_> = read_messages(path, &Filter::topics([HandCommand::TOPIC]))?
+        // The first side's command names the hand when no profile is embedded.
+        let command_topic = qualified(sides[0].as_ref(), HandCommand::TOPIC);
+        let first_command: Vec<_> = read_messages(path, &Filter::topics([command_topic]))?
             .take(1)
             .collect::<Result<_, _>>()?;
         let profile =
             crate::recordings::recording_profile(path, opts.profile.as_deref(), &first_command)?;
-        let state_topic = qualified(sides[0].as_ref(), HandState::TOPIC);
-        let efforts = measures_efforts(path, &state_topic, profile.joints.len())?;
+        let efforts = measures_efforts(path, &sides, profile.joints.len())?;
         let layout = Layout::new(&profile, &sides, efforts, opts);
+        if let Some(missing) = layout.missing_topic(&group) {
+            anyhow::bail!("{}: {missing}", path.display());
+        }
         match &first {
             None => first = Some((path.clone(), layout.spec.clone())),
             Some((first_path, spec)) if *spec != layout.spec => anyhow::bail!(
@@ -397,12 +465,12 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
     let Some(w) = writer else {
         anyhow::bail!("no recording to export");
     };
-    w.commit()?;
+    // The commit reads the new version back (`teleop_dataset::check`) before it swaps it in.
+    let summary = w.commit()?;
     if exported == 0 {
         out!("no episode exported: {} is as it was", opts.out.display())?;
         return Ok(ExitCode::FAILURE);
     }
-    let summary = check(&opts.out)?;
     out!(
         "{}: {} episodes exported, {} refused; the dataset now holds {} episodes, {} frames, {} tasks at {} fps",
         opts.out.display(),
@@ -416,32 +484,59 @@ pub fn run(recordings: &[PathBuf], opts: &ExportOptions) -> anyhow::Result<ExitC
     Ok(ExitCode::SUCCESS)
 }
 
+/// An episode of `seconds` shorter than one frame period at `fps`, said so (its one frame, or
+/// none, would give no rate and no motion).
+fn too_short(seconds: f64, fps: u32) -> Option<String> {
+    (seconds < 1.0 / f64::from(fps.max(1)))
+        .then(|| format!("shorter than one frame ({seconds:.3} s at {fps} fps)"))
+}
+
 /// The rate rule (see the module's documentation): the first key topic whose rate within an
-/// episode of `seconds`, from its `samples`, is below `ratio` × its rate over the recording
-/// (`reference`, `None` for a topic that is not a key topic), said with both rates.
+/// episode of `seconds` (over its samples' intervals, else its samples over the episode's
+/// length) is below `ratio` × its rate over the recording (`reference`, `None` for a topic that
+/// is not a key topic), said with both rates.
 fn too_slow<'a>(
     topics: impl Iterator<Item = &'a str>,
-    samples: &[u64],
+    seen: &[SlotInWindow],
     reference: &[Option<f64>],
     seconds: f64,
     ratio: f64,
 ) -> Option<String> {
     topics
-        .zip(samples)
+        .zip(seen)
         .zip(reference)
-        .find_map(|((topic, &n), reference)| {
+        .find_map(|((topic, seen), reference)| {
             let reference = (*reference)?;
-            let rate = if seconds > 0.0 {
-                n as f64 / seconds
+            let rate = seen.rate_hz().unwrap_or(if seconds > 0.0 {
+                seen.samples as f64 / seconds
             } else {
                 0.0
-            };
+            });
             (rate < ratio * reference).then(|| {
                 format!(
                     "{topic} at {rate:.1} Hz, below {ratio} x the recording's {reference:.1} Hz"
                 )
             })
         })
+}
+
+/// The gap rule (see the module's documentation): the first key topic (`key`) silent within
+/// the episode for longer than `max_gap_ns`, said with its gap.
+fn too_silent<'a>(
+    topics: impl Iterator<Item = &'a str>,
+    seen: &[SlotInWindow],
+    key: &[bool],
+    max_gap_ns: u64,
+) -> Option<String> {
+    topics.zip(seen).zip(key).find_map(|((topic, seen), &key)| {
+        (key && seen.longest_silence_ns > max_gap_ns).then(|| {
+            format!(
+                "{topic} silent for {:.0} ms, more than --max-gap-ms {}",
+                seen.longest_silence_ns as f64 / 1e6,
+                max_gap_ns / 1_000_000
+            )
+        })
+    })
 }
 
 /// A topic's rate over a recording's files: its intervals between messages over their log
@@ -534,6 +629,7 @@ fn export_recording(
             stop_ns: s.stop_ns,
         })
         .collect();
+    let key: Vec<bool> = layout.slots.iter().map(|s| s.source.is_key()).collect();
     let widths: Vec<usize> = layout.slots.iter().map(|s| s.names.len()).collect();
     let mut resampler = Resampler::new(&widths, opts.fps, windows);
     let mut buffer = EpisodeBuffer::new(&layout.spec);
@@ -543,7 +639,7 @@ fn export_recording(
     let mut handle = |event: Event, buffer: &mut EpisodeBuffer| -> anyhow::Result<()> {
         match event {
             Event::Frame { values, .. } => buffer.push(&values),
-            Event::WindowEnd { window, samples } => {
+            Event::WindowEnd { window, slots } => {
                 let span = &chosen[window];
                 let label = format!(
                     "{name}: episode {} (\"{}\", {})",
@@ -552,19 +648,39 @@ fn export_recording(
                     span.label()
                 );
                 let seconds = span.duration_s();
-                let topics = layout.slots.iter().map(|s| s.topic.as_str());
-                let slow = too_slow(topics, &samples, &reference, seconds, opts.min_rate_ratio);
-                if let Some(why) = slow {
-                    out!("{label}: refused: {why}")?;
-                    refused += 1;
+                let topics = || layout.slots.iter().map(|s| s.topic.as_str());
+                let why = if let Some(short) = too_short(seconds, opts.fps) {
+                    Some(short)
+                } else if let Some(slow) =
+                    too_slow(topics(), &slots, &reference, seconds, opts.min_rate_ratio)
+                {
+                    Some(slow)
+                } else if let Some(silent) = too_silent(
+                    topics(),
+                    &slots,
+                    &key,
+                    opts.max_gap_ms.saturating_mul(1_000_000),
+                ) {
+                    Some(silent)
                 } else if buffer.frames() == 0 {
                     let silent = layout
                         .slots
                         .iter()
-                        .zip(&samples)
-                        .find(|(_, &n)| n == 0)
+                        .zip(&slots)
+                        .find(|(_, seen)| seen.samples == 0)
                         .map_or("a topic".to_string(), |(s, _)| s.topic.clone());
-                    out!("{label}: refused: no frame ({silent} has no sample in it)")?;
+                    Some(format!("no frame ({silent} has no sample in it)"))
+                } else {
+                    buffer.first_non_finite().map(|(f, name, frame)| {
+                        let f = &layout.spec.features[f];
+                        format!(
+                            "feature `{}`, `{}`: a value that is not finite at frame {frame}",
+                            f.key, f.names[name]
+                        )
+                    })
+                };
+                if let Some(why) = why {
+                    out!("{label}: refused: {why}")?;
                     refused += 1;
                 } else {
                     let written = writer.write_episode(&span.task, buffer)?;
@@ -580,22 +696,24 @@ fn export_recording(
         }
         Ok(())
     };
-    let mut messages = Vec::with_capacity(files.len());
+    // The files one after another: one reader (and its chunk index) open at a time.
+    let filter = Filter::topics(topics);
     for (path, _) in files {
-        messages.push(read_messages(path, &Filter::topics(topics.clone()))?);
-    }
-    for msg in messages.into_iter().flatten() {
-        let msg = msg?;
-        let Some(slot) = layout.slots.iter().position(|s| s.topic == msg.topic) else {
-            continue;
-        };
-        let source = layout.slots[slot].source;
-        let stamp = layout
-            .values(source, &msg.payload, &mut values)
-            .map_err(|why| anyhow::anyhow!("{name}: a {} sample {why}", msg.topic))?;
-        resampler.push(slot, stamp, msg.log_time_ns, &values);
-        while let Some(event) = resampler.next_event() {
-            handle(event, &mut buffer)?;
+        for msg in read_messages(path, &filter)? {
+            let msg = msg?;
+            let Some(slot) = layout.slots.iter().position(|s| s.topic == msg.topic) else {
+                continue;
+            };
+            let source = layout.slots[slot].source;
+            let stamp = layout
+                .values(source, &msg.payload, &mut values)
+                .map_err(|why| {
+                    anyhow::anyhow!("{}: a {} sample {why}", path.display(), msg.topic)
+                })?;
+            resampler.push(slot, stamp, msg.log_time_ns, &values);
+            while let Some(event) = resampler.next_event() {
+                handle(event, &mut buffer)?;
+            }
         }
     }
     resampler.finish();
@@ -609,24 +727,116 @@ fn export_recording(
 mod tests {
     use super::*;
 
+    fn counts(samples: &[u64]) -> Vec<SlotInWindow> {
+        samples
+            .iter()
+            .map(|&samples| SlotInWindow {
+                samples,
+                ..SlotInWindow::default()
+            })
+            .collect()
+    }
+
     #[test]
     fn the_rate_rule_refuses_the_first_key_topic_below_its_share() {
         let topics = ["glove/state", "hand/tactile", "hand/state"];
         let reference = [Some(250.0), None, Some(1000.0)];
         // 2 s: glove/state at 240 Hz (96 %), tactile silent (not a key topic), hand/state 950 Hz.
         assert_eq!(
-            too_slow(topics.into_iter(), &[480, 0, 1900], &reference, 2.0, 0.9),
+            too_slow(
+                topics.into_iter(),
+                &counts(&[480, 0, 1900]),
+                &reference,
+                2.0,
+                0.9
+            ),
             None
         );
         // hand/state stalled: 800 Hz < 900 Hz.
         assert_eq!(
-            too_slow(topics.into_iter(), &[480, 0, 1600], &reference, 2.0, 0.9).as_deref(),
+            too_slow(
+                topics.into_iter(),
+                &counts(&[480, 0, 1600]),
+                &reference,
+                2.0,
+                0.9
+            )
+            .as_deref(),
             Some("hand/state at 800.0 Hz, below 0.9 x the recording's 1000.0 Hz")
         );
         // A ratio of 0 keeps everything.
         assert_eq!(
-            too_slow(topics.into_iter(), &[0, 0, 0], &reference, 2.0, 0.0),
+            too_slow(
+                topics.into_iter(),
+                &counts(&[0, 0, 0]),
+                &reference,
+                2.0,
+                0.0
+            ),
             None
+        );
+    }
+
+    #[test]
+    fn a_short_episode_is_judged_by_its_samples_intervals() {
+        // 49.9 ms of a 100 Hz topic whose samples fall at 10, 20, 30 and 40 ms: counted over
+        // the episode's length, 80 Hz (refused at 0.9); over its 3 intervals, 100 Hz.
+        let seen = SlotInWindow {
+            samples: 4,
+            stamps: Some((10_000_000, 40_000_000)),
+            longest_silence_ns: 10_000_000,
+        };
+        let reference = [Some(100.0)];
+        assert_eq!(
+            too_slow(
+                ["glove/state"].into_iter(),
+                &[seen],
+                &reference,
+                0.0499,
+                0.9
+            ),
+            None
+        );
+        // One sample: no interval; counted over the episode's length.
+        let one = SlotInWindow {
+            samples: 1,
+            stamps: Some((10_000_000, 10_000_000)),
+            longest_silence_ns: 10_000_000,
+        };
+        assert!(too_slow(["glove/state"].into_iter(), &[one], &reference, 0.0499, 0.9).is_some());
+    }
+
+    #[test]
+    fn an_episode_shorter_than_one_frame_is_refused_with_that_reason() {
+        assert_eq!(
+            too_short(0.0, 30).as_deref(),
+            Some("shorter than one frame (0.000 s at 30 fps)")
+        );
+        assert!(too_short(0.03, 30).is_some());
+        assert_eq!(too_short(0.034, 30), None);
+    }
+
+    #[test]
+    fn the_gap_rule_refuses_the_first_key_topic_silent_too_long() {
+        let topics = ["glove/state", "hand/tactile", "hand/state"];
+        let key = [true, false, true];
+        let silent = |gaps: [u64; 3]| -> Vec<SlotInWindow> {
+            gaps.iter()
+                .map(|&ms| SlotInWindow {
+                    longest_silence_ns: ms * 1_000_000,
+                    ..SlotInWindow::default()
+                })
+                .collect()
+        };
+        let max = 100_000_000;
+        // Tactile silent 5 s: not a key topic.
+        assert_eq!(
+            too_silent(topics.into_iter(), &silent([10, 5_000, 100]), &key, max),
+            None
+        );
+        assert_eq!(
+            too_silent(topics.into_iter(), &silent([10, 0, 600]), &key, max).as_deref(),
+            Some("hand/state silent for 600 ms, more than --max-gap-ms 100")
         );
     }
 }

@@ -252,7 +252,8 @@ enum Command {
     },
     /// Export recordings' episodes to a LeRobot v3.0 dataset (new, or appended to): the kept
     /// episodes (not discarded, not left open) resampled to a fixed rate; an episode whose key
-    /// topics ran below --min-rate-ratio of the recording's rate is refused by name.
+    /// topics ran below --min-rate-ratio of the recording's rate, or fell silent for longer
+    /// than --max-gap-ms, is refused by name.
     Export {
         /// The recordings (one MCAP file each).
         #[arg(required = true)]
@@ -273,6 +274,10 @@ enum Command {
         /// below this fraction of the topic's rate over the whole recording.
         #[arg(long, default_value_t = 0.9)]
         min_rate_ratio: f64,
+        /// Refuse an episode in which glove/state, hand/state or hand/command is silent for
+        /// longer than this (ms): its frames would repeat a stale value.
+        #[arg(long, default_value_t = 100)]
+        max_gap_ms: u64,
         /// Add the glove's force command (5 forces) as the feature `glove.force_command`.
         #[arg(long)]
         with_force_command: bool,
@@ -585,6 +590,7 @@ fn main() -> ExitCode {
             out,
             only_success,
             min_rate_ratio,
+            max_gap_ms,
             with_force_command,
             namespaces,
             profile,
@@ -595,6 +601,7 @@ fn main() -> ExitCode {
                 out,
                 only_success,
                 min_rate_ratio,
+                max_gap_ms,
                 with_force_command,
                 namespaces,
                 profile,

@@ -7,13 +7,21 @@
 //! A frame due before every slot has had a sample is dropped: an episode's frames begin at the
 //! first due instant at which every topic has spoken, and its frames are numbered from there.
 //!
-//! Samples arrive in the recording's order (the recorder's log time), which is not exactly
+//! Samples arrive in the recording's order (the recorder's log time, or file order), which is not exactly
 //! stamp order across topics: a sample may be logged after a later-stamped sample of another
 //! topic. A frame is therefore settled only when each slot has shown a sample stamped after it
 //! (its stamps only grow, so none older can follow), or when the log time has passed the frame
 //! by [`Resampler::late_ns`] (a topic that fell silent), or at the end of the input. Until then
 //! the slot keeps the samples stamped after the next due frame; older ones collapse into the
-//! one it holds. What is kept is bounded by that lateness, not by the recording's length.
+//! one it holds. What is kept is bounded by that lateness, not by the recording's length. A
+//! sample stamped before the one a slot holds (logged after its frame settled, a restarted
+//! recorder's history, a next file starting with an older stamp) is dropped: a frame never goes
+//! back in time.
+//!
+//! At each window's end the resampler says, per slot, how many samples fell in it, their first
+//! and last stamps (for a rate over their intervals) and the longest silence in it: the greatest
+//! age the slot's newest sample reached at an instant of the window. The caller decides what
+//! is too slow or too silent.
 //!
 //! Pure: no I/O, no clock; the caller gives every time.
 
@@ -44,9 +52,33 @@ pub enum Event {
     WindowEnd {
         /// Index of the window.
         window: usize,
-        /// Samples of each slot stamped within the window.
-        samples: Vec<u64>,
+        /// What each slot did within the window, in slot order.
+        slots: Vec<SlotInWindow>,
     },
+}
+
+/// What one slot did within one window.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SlotInWindow {
+    /// Samples stamped within the window.
+    pub samples: u64,
+    /// The first and the last of their stamps (ns).
+    pub stamps: Option<(u64, u64)>,
+    /// The longest silence within the window (ns): the greatest age the slot's newest sample
+    /// reached at an instant of the window, counted from that sample's stamp (which may be
+    /// before the window). 0 for a slot without a sample at or before the window's end.
+    pub longest_silence_ns: u64,
+}
+
+impl SlotInWindow {
+    /// Samples per second over the intervals between the samples within the window (n - 1
+    /// intervals over the first to the last stamp): not biased by where the window's ends fall
+    /// between two samples. `None` with fewer than two samples.
+    pub fn rate_hz(&self) -> Option<f64> {
+        let (first, last) = self.stamps?;
+        (self.samples >= 2 && last > first)
+            .then(|| (self.samples - 1) as f64 * 1e9 / (last - first) as f64)
+    }
 }
 
 #[derive(Debug, Clone, Default)]
@@ -54,6 +86,8 @@ struct Slot {
     width: usize,
     held: Option<(u64, Vec<f32>)>,
     pending: VecDeque<(u64, Vec<f32>)>,
+    /// The newest stamp seen.
+    newest: Option<u64>,
 }
 
 /// The zero-order-hold resampler (see the module's documentation).
@@ -65,8 +99,8 @@ pub struct Resampler {
     /// The window whose frames are being made, and the next frame's number in it.
     window: usize,
     k: u64,
-    /// Per window, per slot: samples stamped within it.
-    counts: Vec<Vec<u64>>,
+    /// Per window, per slot: what it did there so far.
+    seen: Vec<Vec<SlotInWindow>>,
     newest_log_ns: u64,
     finished: bool,
     /// How long after a frame's instant (in log time) it is settled even if a slot has not yet
@@ -78,7 +112,7 @@ impl Resampler {
     /// A resampler for slots of `widths` values each, making frames at `fps` over `windows`
     /// (sorted by start, not overlapping). `late_ns` defaults to one second.
     pub fn new(widths: &[usize], fps: u32, windows: Vec<Window>) -> Self {
-        let counts = vec![vec![0; widths.len()]; windows.len()];
+        let seen = vec![vec![SlotInWindow::default(); widths.len()]; windows.len()];
         Self {
             slots: widths
                 .iter()
@@ -91,7 +125,7 @@ impl Resampler {
             period_ns: 1e9 / f64::from(fps.max(1)),
             window: 0,
             k: 0,
-            counts,
+            seen,
             newest_log_ns: 0,
             finished: false,
             late_ns: 1_000_000_000,
@@ -124,7 +158,27 @@ impl Resampler {
         // Count it in the window its stamp falls in (windows are sorted).
         let at = self.windows.partition_point(|w| w.start_ns <= stamp_ns);
         if at > 0 && stamp_ns <= self.windows[at - 1].stop_ns {
-            self.counts[at - 1][slot] += 1;
+            let seen = &mut self.seen[at - 1][slot];
+            seen.samples += 1;
+            seen.stamps = Some(match seen.stamps {
+                Some((first, last)) => (first.min(stamp_ns), last.max(stamp_ns)),
+                None => (stamp_ns, stamp_ns),
+            });
+        }
+        // The silence since the slot's newest sample, in every window it reaches into that
+        // has not ended yet (an older sample is no news: it is dropped).
+        if let Some(last) = s.newest.filter(|&last| last < stamp_ns) {
+            note_silence(
+                &self.windows,
+                &mut self.seen,
+                self.window,
+                slot,
+                last,
+                stamp_ns,
+            );
+        }
+        if s.newest.is_none_or(|last| last < stamp_ns) {
+            s.newest = Some(stamp_ns);
         }
         // Keep pending in stamp order (a publisher's stamps only grow; tolerate one that
         // does not).
@@ -151,8 +205,14 @@ impl Resampler {
             let w = *self.windows.get(self.window)?;
             let due = self.due()?;
             if due > w.stop_ns {
-                let samples = self.counts[self.window].clone();
                 let window = self.window;
+                // The silence from each slot's newest sample to the window's end.
+                for (slot, s) in self.slots.iter().enumerate() {
+                    if let Some(last) = s.newest.filter(|&last| last < w.stop_ns) {
+                        note_silence(&self.windows, &mut self.seen, window, slot, last, w.stop_ns);
+                    }
+                }
+                let slots = self.seen[window].clone();
                 self.window += 1;
                 self.k = 0;
                 if let Some(next) = self.due() {
@@ -160,7 +220,7 @@ impl Resampler {
                         collapse(s, next);
                     }
                 }
-                return Some(Event::WindowEnd { window, samples });
+                return Some(Event::WindowEnd { window, slots });
             }
             let late = self.newest_log_ns > due.saturating_add(self.late_ns);
             let settled = self.finished
@@ -197,6 +257,29 @@ impl Resampler {
             }
             // Dropped: not every topic has spoken yet.
         }
+    }
+}
+
+/// Notes that a slot was silent from `last` to `next` (stamps): in each window from `from` on
+/// that the span reaches into, the age its held sample reaches there (up to the window's end).
+fn note_silence(
+    windows: &[Window],
+    seen: &mut [Vec<SlotInWindow>],
+    from: usize,
+    slot: usize,
+    last: u64,
+    next: u64,
+) {
+    for (w, seen) in windows.iter().zip(seen.iter_mut()).skip(from) {
+        if w.start_ns > next {
+            break;
+        }
+        if w.stop_ns < last {
+            continue;
+        }
+        let age = next.min(w.stop_ns) - last;
+        let gap = &mut seen[slot].longest_silence_ns;
+        *gap = (*gap).max(age);
     }
 }
 
@@ -266,7 +349,11 @@ mod tests {
         assert_eq!(got.len(), 4);
         assert!(matches!(
             events.last(),
-            Some(Event::WindowEnd { window: 0, samples }) if samples == &vec![43, 7]
+            Some(Event::WindowEnd { window: 0, slots })
+                if slots.iter().map(|s| s.samples).collect::<Vec<_>>() == [43, 7]
+                    && slots[0].stamps == Some((105 * MS, 399 * MS))
+                    && slots.iter().map(|s| s.longest_silence_ns).collect::<Vec<_>>()
+                        == [7 * MS, 50 * MS]
         ));
     }
 
@@ -290,6 +377,62 @@ mod tests {
             [30, 40, 50]
         );
         assert_eq!(got[0].1, [1.0, 2.0, 3.0]);
+    }
+
+    #[test]
+    fn a_window_reports_each_slots_longest_silence_and_its_rate_over_its_intervals() {
+        // Two windows: [0, 1000] and [2000, 2500] ms; slot 0 every 10 ms but silent from 300 to
+        // 900 ms; slot 1 every 100 ms, its last sample at 2300 ms.
+        let mut r = Resampler::new(
+            &[1, 1],
+            10,
+            vec![
+                Window {
+                    start_ns: 0,
+                    stop_ns: 1_000 * MS,
+                },
+                Window {
+                    start_ns: 2_000 * MS,
+                    stop_ns: 2_500 * MS,
+                },
+            ],
+        );
+        let mut samples: Vec<(u64, usize)> = (0..=300)
+            .step_by(10)
+            .chain((900..=3_000).step_by(10))
+            .map(|t| (t, 0))
+            .collect();
+        samples.extend((0..=2_300).step_by(100).map(|t| (t, 1)));
+        samples.sort();
+        let mut ends = Vec::new();
+        for (t, slot) in samples {
+            r.push(slot, t * MS, t * MS, &[t as f32]);
+            ends.extend(drain(&mut r));
+        }
+        r.finish();
+        ends.extend(drain(&mut r));
+        let ends: Vec<Vec<SlotInWindow>> = ends
+            .into_iter()
+            .filter_map(|e| match e {
+                Event::WindowEnd { slots, .. } => Some(slots),
+                Event::Frame { .. } => None,
+            })
+            .collect();
+        assert_eq!(ends.len(), 2);
+        let silences = |w: usize| {
+            ends[w]
+                .iter()
+                .map(|s| s.longest_silence_ns / MS)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(silences(0), [600, 100]);
+        // Slot 1 fell silent at 2300 ms: its value is 200 ms old at the window's end.
+        assert_eq!(silences(1), [10, 200]);
+        // Rates over the intervals: slot 0 in window 1, 51 samples over 500 ms.
+        assert_eq!(ends[1][0].samples, 51);
+        assert_eq!(ends[1][0].rate_hz(), Some(100.0));
+        assert_eq!(ends[1][1].rate_hz(), Some(10.0));
+        assert_eq!(SlotInWindow::default().rate_hz(), None);
     }
 
     #[test]

@@ -22,6 +22,14 @@
 //! the old version after it) is removed by the next export, which takes a lock file
 //! (`.<name>.teleop-export.lock`, an advisory `flock`) so two exports never build at once.
 //! Existing files are never written to: they are links shared with the old version.
+//!
+//! Before the swap the staging folder is read back with [`check`](crate::check) (a version
+//! that does not check is never published) and every file and folder in it is synced; after
+//! it the parent folder is synced, so that the swap itself survives a power loss.
+//!
+//! For tests, the environment variable `TELEOP_EXPORT_CRASH_AT` set to `mid-data` (after the
+//! first episode's frames are written), `before-swap` or `after-swap` aborts the process there,
+//! as a kill or a crash at that moment would.
 
 use std::{
     collections::BTreeMap,
@@ -170,6 +178,19 @@ impl EpisodeBuffer {
     /// Frames gathered.
     pub fn frames(&self) -> usize {
         self.frames
+    }
+
+    /// The first value that is not finite (NaN, ±inf), as (feature index, name index, frame):
+    /// such a value would be written silently and poison the statistics (a NaN mean).
+    pub fn first_non_finite(&self) -> Option<(usize, usize, usize)> {
+        self.values
+            .iter()
+            .zip(&self.widths)
+            .enumerate()
+            .find_map(|(feature, (values, &width))| {
+                let at = values.iter().position(|v| !v.is_finite())?;
+                Some((feature, at % width.max(1), at / width.max(1)))
+            })
     }
 
     /// Empties it for the next episode (keeping its memory).
@@ -381,7 +402,8 @@ impl DatasetWriter {
     }
 
     /// Writes one episode of task `task` (into the staging copy; nothing is visible before
-    /// [`commit`](Self::commit)). An episode without frames is refused.
+    /// [`commit`](Self::commit)). An episode without frames, or with a value that is not finite
+    /// ([`EpisodeBuffer::first_non_finite`]), is refused.
     pub fn write_episode(
         &mut self,
         task: &str,
@@ -392,6 +414,16 @@ impl DatasetWriter {
             return Err(DatasetError::invalid(
                 &self.out,
                 "an episode without frames",
+            ));
+        }
+        if let Some((f, name, frame)) = episode.first_non_finite() {
+            let f = &self.spec.features[f];
+            return Err(DatasetError::invalid(
+                &self.out,
+                format!(
+                    "feature `{}`, `{}`: a value that is not finite at frame {frame}",
+                    f.key, f.names[name]
+                ),
             ));
         }
         let task_index = match self.tasks.iter().position(|t| t == task) {
@@ -472,6 +504,7 @@ impl DatasetWriter {
             .write(&batch)
             .and_then(|()| writer.flush())
             .map_err(|e| DatasetError::parquet(&path, e))?;
+        crash_point("mid-data");
 
         self.rows.push(EpisodeRow {
             episode_index,
@@ -542,8 +575,13 @@ impl DatasetWriter {
             &self.staging.join("meta/info.json"),
             &Value::Object(self.info.clone()),
         )?;
+        // A version whose parts disagree is never published (dropped, the staging folder goes).
+        crate::check(&self.staging)?;
+        sync_folders(&self.staging)?;
+        crash_point("before-swap");
         swap_in(&self.staging, &self.out, self.existed)?;
         self.committed = true;
+        crash_point("after-swap");
         // After the swap the staging path holds the old version (or nothing).
         if self.staging.exists() {
             fs::remove_dir_all(&self.staging).map_err(|e| DatasetError::io(&self.staging, e))?;
@@ -884,6 +922,37 @@ fn link_tree(from: &Path, to: &Path, skip: &[&Path]) -> Result<(), DatasetError>
     Ok(())
 }
 
+/// Aborts the process at the crash point `name` when `TELEOP_EXPORT_CRASH_AT` names it (tests of
+/// crash safety: see the module's documentation). No destructor runs, as under a kill.
+fn crash_point(name: &str) {
+    if std::env::var_os("TELEOP_EXPORT_CRASH_AT").is_some_and(|at| at == name) {
+        eprintln!("TELEOP_EXPORT_CRASH_AT={name}: aborting");
+        std::process::abort();
+    }
+}
+
+/// Syncs `dir` and every folder under it (their entries: the new files' names), so that what
+/// the swap publishes is on disk (files are synced as they are finished).
+fn sync_folders(dir: &Path) -> Result<(), DatasetError> {
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in fs::read_dir(&dir).map_err(|e| DatasetError::io(&dir, e))? {
+            let entry = entry.map_err(|e| DatasetError::io(&dir, e))?;
+            if entry
+                .file_type()
+                .map_err(|e| DatasetError::io(entry.path(), e))?
+                .is_dir()
+            {
+                stack.push(entry.path());
+            }
+        }
+        File::open(&dir)
+            .and_then(|d| d.sync_all())
+            .map_err(|e| DatasetError::io(&dir, e))?;
+    }
+    Ok(())
+}
+
 /// Puts `staging` at `out`: one exchange of the two folders when `out` is a dataset, one rename
 /// otherwise (onto nothing or onto an empty folder).
 fn swap_in(staging: &Path, out: &Path, existed: bool) -> Result<(), DatasetError> {
@@ -1212,8 +1281,9 @@ mod tests {
         assert_eq!(check(&out).expect("check").total_frames, 5);
         assert!(!out.join("data/chunk-000/file-001.parquet").exists());
 
-        // A crash after the swap leaves the old version at the staging path: also removed.
-        // The next export cleans up and appends as if nothing had happened.
+        // The next export cleans up and appends as if nothing had happened. (Crashes mid-data,
+        // just before and just after the swap, in a real process: tests/tests/export.rs with
+        // TELEOP_EXPORT_CRASH_AT.)
         let mut w = DatasetWriter::open(&out, spec()).expect("after the crash");
         assert!(!staging.join("data/chunk-000/file-001.parquet").exists());
         w.write_episode("pick", &episode(2, 1.0)).expect("e1");
@@ -1229,6 +1299,49 @@ mod tests {
             (2, 7, 1)
         );
         assert_eq!(indexes(&out), (0..7).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn an_episode_with_a_value_that_is_not_finite_is_refused_by_name() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let out = tmp.path().join("ds");
+        let mut e = episode(3, 0.0);
+        assert_eq!(e.first_non_finite(), None);
+        e.push(&[1.0, 2.0, f32::NAN]);
+        assert_eq!(e.first_non_finite(), Some((1, 0, 3)));
+        let mut w = DatasetWriter::open(&out, spec()).expect("open");
+        let err = w
+            .write_episode("pick", &e)
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            err.contains("`action`, `c`") && err.contains("frame 3"),
+            "{err}"
+        );
+        let mut e = episode(2, 0.0);
+        e.push(&[1.0, f32::INFINITY, 0.0]);
+        assert_eq!(e.first_non_finite(), Some((0, 1, 2)));
+    }
+
+    #[test]
+    fn a_version_that_does_not_check_is_not_published() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let out = tmp.path().join("ds");
+        let mut w = DatasetWriter::open(&out, spec()).expect("open");
+        w.write_episode("pick", &episode(5, 0.0)).expect("e0");
+        w.commit().expect("commit");
+        let before = fs::read(out.join("meta/info.json")).expect("info");
+        // A stray data file in the staging folder: its rows belong to no episode.
+        let mut w = DatasetWriter::open(&out, spec()).expect("reopen");
+        w.write_episode("pick", &episode(2, 1.0)).expect("e1");
+        let stray = w.staging.join("data/chunk-000/file-007.parquet");
+        fs::copy(out.join("data/chunk-000/file-000.parquet"), &stray).expect("copy");
+        let staging = w.staging.clone();
+        let err = w.commit().expect_err("refused").to_string();
+        assert!(err.contains("rows per (chunk, file)"), "{err}");
+        assert_eq!(fs::read(out.join("meta/info.json")).expect("info"), before);
+        assert_eq!(check(&out).expect("check").total_frames, 5);
+        assert!(!staging.exists(), "the failed version is removed");
     }
 
     #[test]
