@@ -121,11 +121,14 @@ struct Variant {
     effort: fn(u64, usize) -> f32,
     /// Whether hand/tactile is recorded.
     tactile: bool,
+    /// Whether the hand profile is embedded (else the export finds it from the hand model).
+    profile: bool,
 }
 
 const REVO2: Variant = Variant {
     effort: |_, _| f32::NAN,
     tactile: true,
+    profile: true,
 };
 
 /// Writes the session: every side's topics and the marks, in log-time order, with the Revo2
@@ -137,7 +140,7 @@ fn write_recording(path: &Path, sides: &[Side]) {
 /// [`write_recording`] with the hands doing what `variant` says.
 fn write_variant(path: &Path, sides: &[Side], variant: Variant) {
     let profile = Sandbox::repo().join("config/hands/revo2.toml");
-    let metadata = vec![(
+    let mut metadata = vec![(
         "hand_profile".to_string(),
         BTreeMap::from([
             ("file".to_string(), profile.display().to_string()),
@@ -147,6 +150,9 @@ fn write_variant(path: &Path, sides: &[Side], variant: Variant) {
             ),
         ]),
     )];
+    if !variant.profile {
+        metadata.clear();
+    }
     let mut rec = Recorder::create(path, WriterOptions::default(), &metadata).unwrap();
     let name =
         |ns: Option<&str>, topic: &str| ns.map_or(topic.to_string(), |ns| format!("{ns}/{topic}"));
@@ -484,6 +490,29 @@ fn a_bimanual_recording_exports_both_sides_named_by_side() {
         "right/glove.little.force"
     );
 
+    // Without an embedded profile the hand model comes from the first side's command
+    // (left/hand/command: there is no unqualified one).
+    let bare = sandbox.dir.path().join("bimanual-bare.mcap");
+    write_variant(
+        &bare,
+        &[(Some("left"), 0.0), (Some("right"), 100.0)],
+        Variant {
+            profile: false,
+            ..REVO2
+        },
+    );
+    let bare_out = sandbox.dir.path().join("bare");
+    let (ok, stdout, stderr) = export(&sandbox, &bare, &bare_out, &["--with-force-command"]);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("2 episodes exported, 1 refused"),
+        "{stdout}"
+    );
+    let bare_info: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(bare_out.join("meta/info.json")).unwrap())
+            .unwrap();
+    assert_eq!(bare_info["features"], info["features"]);
+
     let Some(report) = check_lerobot(&out, Some(10)) else {
         return;
     };
@@ -611,7 +640,7 @@ fn gaps_non_finite_values_and_missing_topics_are_refused_by_name() {
                     seq as f32 * 0.01 + j as f32
                 }
             },
-            tactile: true,
+            ..REVO2
         },
     );
     let out = sandbox.dir.path().join("efforts");

@@ -468,8 +468,9 @@ pub(crate) fn recording_profile(
     }
     let model = messages
         .iter()
-        .filter(|m| m.topic == HandCommand::TOPIC)
-        .find_map(|m| m.decode::<HandCommand>())
+        // Any side's command (a bimanual recording has only qualified ones).
+        .filter(|m| split(&m.topic).is_some_and(|(_, t)| t.name == HandCommand::TOPIC))
+        .find_map(|m| HandCommand::from_bytes(&m.payload).ok())
         .map(|c| c.hand_model)
         .ok_or_else(|| {
             anyhow::anyhow!(
