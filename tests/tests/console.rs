@@ -3,7 +3,9 @@
 //! operator would, and checks both the screen and the topics: the e-stop key zeroes the glove
 //! forces and holds the hand, `r` then `y` releases it, `s` (with a typed task) and `k` start and
 //! stop an episode the recorder counts, the layout follows a resize to 80x24, and `q` gives the
-//! terminal back as it was (normal screen, canonical mode).
+//! terminal back as it was (normal screen, canonical mode), also when pressed right after the
+//! e-stop key (the e-stop is done first). With two sides: one key stops both, a pasted `ry`
+//! releases nothing, `r` and `y` release both, and SIGTERM ends the console as `q` does.
 #![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
@@ -201,7 +203,10 @@ fn the_console_shows_the_session_and_its_keys_act_on_it() {
             && s.contains("HOLDING")
             && forces_on_screen(s) == [0; 5]
     });
-    assert!(!screen.contains("engaging the e-stop..."), "{screen}");
+    assert!(
+        !screen.contains("ringing the e-stop's doorbells..."),
+        "{screen}"
+    );
     watch.until(&session, long, "zero glove forces flagged e-stop", |w| {
         w.force
             .latest()
@@ -271,8 +276,9 @@ fn the_console_shows_the_session_and_its_keys_act_on_it() {
     });
     assert!(screen.lines().all(|l| l.chars().count() <= 80), "{screen}");
 
-    // `q`: the console ends with success and the terminal is as it was.
-    tmux.keys(&["q"]);
+    // `q` right behind the e-stop key (one read of the keyboard): the console ends with success
+    // once the e-stop is done, and the terminal is as it was.
+    tmux.keys(&["e", "q"]);
     let screen = tmux.until(
         &session,
         long,
@@ -287,6 +293,21 @@ fn the_console_shows_the_session_and_its_keys_act_on_it() {
     assert!(
         !screen.contains("teleop top"),
         "the console's screen left behind: {screen}"
+    );
+    assert!(
+        teleop_runtime::latch_path(&sandbox.ipc, None).exists(),
+        "the console quit without latching the e-stop"
+    );
+    watch.until(
+        &session,
+        long,
+        "the e-stop engaged after the console",
+        |w| {
+            w.force
+                .latest()
+                .is_some_and(|f| f.force == [0; 5] && f.flags & force_flags::ESTOP != 0)
+                && w.state.latest().is_some_and(|s| s.holding == 1)
+        },
     );
 }
 
@@ -318,18 +339,38 @@ fn the_console_shows_both_sides_and_stops_both() {
             && s.contains("held by left/feedback")
             && forces_on_screen(s) == [0; 10]
     });
+    // A pasted `ry` (one read of the keyboard): the `y` never saw the question; the question
+    // closes and nothing is released.
+    tmux.type_text("ry");
+    let screen = tmux.until(&session, long, "the paste answered", |s| {
+        s.contains("release not asked: the `y` came with its `r`")
+    });
+    assert!(
+        screen.contains("E-STOP ENGAGED latched: (none)") && !screen.contains("releasing"),
+        "{screen}"
+    );
+    assert!(teleop_runtime::latch_path(&sandbox.ipc, None).exists());
     tmux.keys(&["r"]);
     tmux.until(&session, long, "the release confirmation", |s| {
         s.contains("y: release")
     });
     tmux.keys(&["y"]);
     tmux.until(&session, long, "both sides released", |s| {
-        s.contains("e-stop released") && s.contains("side left: hand revo2 link up, following")
+        s.contains("e-stop released")
+            && s.contains("side left: hand revo2 link up, following")
+            && s.contains("side right: hand revo2 link up, following")
+            && forces_on_screen(s).len() == 10
     });
-    tmux.keys(&["q"]);
-    tmux.until(&session, long, "the console gone", |s| {
-        s.contains("top exited 0")
+    // SIGTERM, as from a process manager: the console ends with success.
+    let pid = sandbox.pid_of("teleop-top").unwrap();
+    // SAFETY: kill(2) of the console this test started.
+    unsafe {
+        libc::kill(pid as libc::pid_t, libc::SIGTERM);
+    }
+    let screen = tmux.until(&session, long, "the console gone", |s| {
+        s.contains("top exited")
     });
+    assert!(screen.contains("top exited 0"), "{screen}");
 }
 
 #[test]

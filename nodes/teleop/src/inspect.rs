@@ -640,26 +640,104 @@ pub(crate) fn estop_action(
     namespaces: &[Namespace],
 ) -> anyhow::Result<EStopReport> {
     if !engage {
-        return release(ipc, namespaces);
+        // Nothing else in this process engages: nothing can abandon the release.
+        let requests = EngageRequests::default();
+        return release(ipc, namespaces, &requests, requests.count());
     }
-    let mut failures: Vec<String> = Vec::new();
-    // 1. The latches: they alone stop every node that obeys the e-stop.
-    let latches: Vec<Option<Namespace>> = if namespaces.is_empty() {
-        vec![None]
-    } else {
-        namespaces.iter().cloned().map(Some).collect()
-    };
-    let mut latched = Vec::new();
-    for ns in &latches {
+    Ok(ring_engaged(
+        ipc,
+        namespaces,
+        engage_latches(ipc, namespaces),
+    ))
+}
+
+/// The latches an engage wrote, and what it could not write.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Latched {
+    pub paths: Vec<std::path::PathBuf>,
+    pub failures: Vec<String>,
+}
+
+/// The first step of an engage: writes the latches of the namespaces given, or else the plain
+/// latch; they alone stop every node that obeys the e-stop (within
+/// `teleop_runtime::LATCH_POLL`).
+pub(crate) fn engage_latches(ipc: &IpcSettings, namespaces: &[Namespace]) -> Latched {
+    let mut latched = Latched::default();
+    for ns in latches_of(namespaces) {
         let path = latch_path(ipc, ns.as_ref());
         match set_latch(&path, true) {
-            Ok(()) => latched.push(path),
-            Err(e) => failures.push(format!(
+            Ok(()) => latched.paths.push(path),
+            Err(e) => latched.failures.push(format!(
                 "cannot write the e-stop latch {}: {e}",
                 path.display()
             )),
         }
     }
+    latched
+}
+
+/// The latches an engage of `namespaces` writes: theirs, or else the plain one.
+fn latches_of(namespaces: &[Namespace]) -> Vec<Option<Namespace>> {
+    if namespaces.is_empty() {
+        vec![None]
+    } else {
+        namespaces.iter().cloned().map(Some).collect()
+    }
+}
+
+/// The engages asked for in this process (the console's e-stop key), counted so that a release
+/// that started before one never undoes it: [`release`] takes the count from when it was asked
+/// for and gives up when the count moved.
+#[derive(Debug, Default)]
+pub(crate) struct EngageRequests(std::sync::atomic::AtomicU64);
+
+impl EngageRequests {
+    /// The engages asked for so far.
+    pub fn count(&self) -> u64 {
+        self.0.load(std::sync::atomic::Ordering::SeqCst)
+    }
+
+    /// Counts an engage, then writes its latches ([`engage_latches`]); counted first, so that a
+    /// release that removes a latch at the same moment sees the count moved afterwards and puts
+    /// its latch back.
+    pub fn engage(&self, ipc: &IpcSettings, namespaces: &[Namespace]) -> Latched {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        engage_latches(ipc, namespaces)
+    }
+}
+
+/// Why a release stopped before it was done: an engage was asked for since it was.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct ReleaseAbandoned {
+    /// Latches the release had removed before (the engage's latch stops their nodes again).
+    pub removed: usize,
+}
+
+impl std::fmt::Display for ReleaseAbandoned {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the e-stop was engaged after the release was asked for: the release stopped after \
+             removing {} latch(es); the engage's latches keep the e-stop engaged",
+            self.removed
+        )
+    }
+}
+
+impl std::error::Error for ReleaseAbandoned {}
+
+/// The second step of an engage: rings every doorbell (whatever happened to the latches) and
+/// waits for the acknowledgements.
+pub(crate) fn ring_engaged(
+    ipc: &IpcSettings,
+    namespaces: &[Namespace],
+    latched: Latched,
+) -> EStopReport {
+    let Latched {
+        paths: latched,
+        mut failures,
+    } = latched;
+    let latches = latches_of(namespaces);
     let mut rung_count = 0;
     // 2. The doorbells, whatever happened to the latches.
     let mut sides = Vec::new();
@@ -721,18 +799,26 @@ pub(crate) fn estop_action(
         }
         wait_for_acks(runtime, &mut sides, asked_at, true);
     }
-    Ok(EStopReport {
+    EStopReport {
         engage: true,
         latches: latched,
         rung: rung_count,
         acks: answers(sides),
         failures,
-    })
+    }
 }
 
 /// The release: strict, the first error ends it (the latches already removed stay removed; the
-/// rest stay engaged).
-fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<EStopReport> {
+/// rest stay engaged). Asked for when `requests` counted `since` engages: right before it
+/// removes each latch and before it rings each doorbell it checks that no engage was asked
+/// for since, and else stops with [`ReleaseAbandoned`]; a latch removed while an engage was
+/// asked for is put back.
+pub(crate) fn release(
+    ipc: &IpcSettings,
+    namespaces: &[Namespace],
+    requests: &EngageRequests,
+    since: u64,
+) -> anyhow::Result<EStopReport> {
     let runtime = NodeRuntime::new(CLI_NODE, ipc)?;
     let mut covered = covered(ipc, namespaces)?;
     if namespaces.is_empty() {
@@ -753,11 +839,27 @@ fn release(ipc: &IpcSettings, namespaces: &[Namespace]) -> anyhow::Result<EStopR
     }
     let asked_at = now_ns();
     let mut latches = Vec::with_capacity(sides.len());
+    let abandoned = |removed: usize| ReleaseAbandoned { removed };
     for ((ns, _, _), publisher) in sides.iter().zip(&mut doorbells) {
         let path = latch_path(ipc, ns.as_ref());
+        if requests.count() != since {
+            return Err(abandoned(latches.len()).into());
+        }
         set_latch(&path, false).map_err(|e| {
             anyhow::anyhow!("cannot release the e-stop latch {}: {e}", path.display())
         })?;
+        // An engage counted between the check and the removal may have written this very
+        // latch before it was removed: put it back.
+        if requests.count() != since {
+            set_latch(&path, true).map_err(|e| {
+                anyhow::anyhow!(
+                    "the e-stop was engaged while the release ran, and the latch {} it had \
+                     just removed could not be written again: {e}",
+                    path.display()
+                )
+            })?;
+            return Err(abandoned(latches.len()).into());
+        }
         publisher.publish(&EStop::default())?;
         latches.push(path);
     }

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use std::ffi::CString;
 use std::os::unix::ffi::OsStrExt;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -41,19 +41,29 @@ const NODE: &str = "teleop-top";
 /// The recorder's node name (in a namespace, `<ns>/recorder`).
 const RECORDER: &str = "recorder";
 
+/// With no new screen from the gathering for this long, the screen says its values are old.
+pub const STALE_AFTER: Duration = Duration::from_secs(1);
+/// How long after a failure the gathering is started again.
+pub const RESTART_AFTER: Duration = Duration::from_secs(1);
+/// How long dropping a [`Gatherer`] waits for its thread to end; a thread stuck longer (in
+/// iceoryx2) is left to end with the process.
+const JOIN_WAIT: Duration = Duration::from_millis(500);
+
 /// What the gathering tells the console.
 pub enum Update {
+    /// It subscribed to every side: screens follow.
+    Ready,
     /// What to show now.
     Screen(Box<Screen>),
-    /// SIGINT or SIGTERM: the console ends (successfully).
-    Signal,
-    /// The gathering failed and ended.
+    /// The gathering failed (at its start or later) and ended.
     Failed(String),
 }
 
-/// The gathering thread, seen from the console.
+/// The gathering thread, seen from the console. SIGINT and SIGTERM end the gathering's loop
+/// too; the console reads them itself (`teleop_runtime::stop_signal`).
 pub struct Gatherer {
-    /// A new screen every [`REFRESH`], or why the gathering ended.
+    /// [`Update::Ready`] or [`Update::Failed`] first, then a new screen every [`REFRESH`], or
+    /// why the gathering ended.
     pub updates: Receiver<Update>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -63,33 +73,118 @@ impl Gatherer {
     /// Starts gathering the namespaces `given`, or else the topics without a namespace and every
     /// namespace in use; returns once it subscribed (or could not).
     pub fn start(ipc: &IpcSettings, given: &[Namespace]) -> anyhow::Result<Self> {
-        let (tx, updates) = sync_channel(2);
-        let (ready_tx, ready) = sync_channel(1);
-        let stop = Arc::new(AtomicBool::new(false));
-        let thread = {
-            let (ipc, given, stop) = (ipc.clone(), given.to_vec(), stop.clone());
-            std::thread::Builder::new()
-                .name("top-gather".into())
-                .spawn(move || gather(&ipc, &given, &stop, &ready_tx, &tx))?
-        };
-        match ready.recv() {
-            Ok(Ok(())) => Ok(Self {
-                updates,
-                stop,
-                thread: Some(thread),
-            }),
-            Ok(Err(e)) => Err(anyhow::anyhow!(e)),
+        let gatherer = Self::spawn(ipc, given)?;
+        match gatherer.updates.recv() {
+            Ok(Update::Ready | Update::Screen(_)) => Ok(gatherer),
+            Ok(Update::Failed(e)) => Err(anyhow::anyhow!(e)),
             Err(_) => Err(anyhow::anyhow!(
                 "the console's gathering thread ended at its start"
             )),
         }
     }
+
+    /// Starts gathering as [`Gatherer::start`] does, without waiting: whether it could subscribe
+    /// comes as the first [`Update`].
+    pub fn spawn(ipc: &IpcSettings, given: &[Namespace]) -> std::io::Result<Self> {
+        let (tx, updates) = sync_channel(2);
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (ipc, given, stop) = (ipc.clone(), given.to_vec(), stop.clone());
+            std::thread::Builder::new()
+                .name("top-gather".into())
+                .spawn(move || gather(&ipc, &given, &stop, &tx))?
+        };
+        Ok(Self {
+            updates,
+            stop,
+            thread: Some(thread),
+        })
+    }
+}
+
+/// The gathering as the console's loop keeps it, never waiting for it: started again
+/// [`RESTART_AFTER`] a failure, and stale when no screen came for [`STALE_AFTER`].
+pub struct Gathering {
+    gatherer: Option<Gatherer>,
+    /// Why it failed, until a screen comes again.
+    pub failed: Option<String>,
+    restart_at: Instant,
+    last_screen: Instant,
+}
+
+impl Gathering {
+    /// The gathering of `gatherer`, started at `now`.
+    pub fn new(gatherer: Gatherer, now: Instant) -> Self {
+        Self {
+            gatherer: Some(gatherer),
+            failed: None,
+            restart_at: now,
+            last_screen: now,
+        }
+    }
+
+    /// Takes what the gathering sent without waiting: the newest screen, if one came, and whether
+    /// anything else changed (it failed or was started again). After a failure, at
+    /// [`RESTART_AFTER`], it starts a new gathering with `spawn`.
+    pub fn poll(
+        &mut self,
+        now: Instant,
+        spawn: impl FnOnce() -> std::io::Result<Gatherer>,
+    ) -> (Option<Screen>, bool) {
+        let Some(gatherer) = &self.gatherer else {
+            if now < self.restart_at {
+                return (None, false);
+            }
+            match spawn() {
+                Ok(g) => self.gatherer = Some(g),
+                Err(e) => self.failed = Some(format!("cannot start the gathering: {e}")),
+            }
+            self.restart_at = now + RESTART_AFTER;
+            return (None, true);
+        };
+        let mut newest = None;
+        let failed = loop {
+            match gatherer.updates.try_recv() {
+                Ok(Update::Ready) => {}
+                Ok(Update::Screen(screen)) => newest = Some(*screen),
+                Ok(Update::Failed(e)) => break Some(e),
+                Err(TryRecvError::Empty) => break None,
+                Err(TryRecvError::Disconnected) => break Some("the gathering thread ended".into()),
+            }
+        };
+        if newest.is_some() {
+            self.last_screen = now;
+            self.failed = None;
+        }
+        let changed = failed.is_some();
+        if let Some(e) = failed {
+            self.failed = Some(e);
+            self.gatherer = None;
+            self.restart_at = now + RESTART_AFTER;
+        }
+        (newest, changed)
+    }
+
+    /// Whole seconds without a new screen at `now`, once that is [`STALE_AFTER`] or more.
+    pub fn stale_s(&self, now: Instant) -> Option<u64> {
+        let since = now.saturating_duration_since(self.last_screen);
+        (since >= STALE_AFTER).then_some(since.as_secs())
+    }
 }
 
 impl Drop for Gatherer {
+    /// Asks the thread to stop and waits at most [`JOIN_WAIT`] for it: a gathering stuck in
+    /// iceoryx2 never keeps the console from quitting.
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
+        let Some(thread) = self.thread.take() else {
+            return;
+        };
+        let deadline = Instant::now() + JOIN_WAIT;
+        while !thread.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        if thread.is_finished() {
             // A gathering that panicked has said so on stderr; nothing more to do here.
             let _ = thread.join();
         }
@@ -117,13 +212,7 @@ struct Memory {
     tips: BTreeMap<u8, Vec<String>>,
 }
 
-fn gather(
-    ipc: &IpcSettings,
-    given: &[Namespace],
-    stop: &AtomicBool,
-    ready: &SyncSender<Result<(), String>>,
-    updates: &SyncSender<Update>,
-) {
+fn gather(ipc: &IpcSettings, given: &[Namespace], stop: &AtomicBool, updates: &SyncSender<Update>) {
     let opened = (|| -> anyhow::Result<(NodeRuntime, Vec<Side>)> {
         let runtime = NodeRuntime::new(NODE, ipc)?;
         let mut sides = Vec::new();
@@ -135,11 +224,11 @@ fn gather(
     let (runtime, mut sides) = match opened {
         Ok(opened) => opened,
         Err(e) => {
-            let _ = ready.send(Err(format!("{e:#}")));
+            let _ = updates.send(Update::Failed(format!("{e:#}")));
             return;
         }
     };
-    if ready.send(Ok(())).is_err() {
+    if updates.send(Update::Ready).is_err() {
         return;
     }
     let mut memory = Memory::default();
@@ -207,10 +296,8 @@ fn gather(
                     Err(e) => format!("{e:#}"),
                 }
             }
-            (Ok(_signal), None) => {
-                let _ = updates.send(Update::Signal);
-                return;
-            }
+            // SIGINT or SIGTERM: the console reads it and ends.
+            (Ok(_signal), None) => return,
             (Err(e), None) => format!("{e:#}"),
         };
         let _ = updates.send(Update::Failed(why));
@@ -450,7 +537,67 @@ fn trim_zeros(s: &str) -> String {
 
 #[cfg(test)]
 mod tests {
+    #![allow(clippy::unwrap_used)]
     use super::*;
+
+    /// A gatherer without a thread, fed by the test.
+    fn fed() -> (SyncSender<Update>, Gatherer) {
+        let (tx, updates) = sync_channel(4);
+        let gatherer = Gatherer {
+            updates,
+            stop: Arc::default(),
+            thread: None,
+        };
+        (tx, gatherer)
+    }
+
+    #[test]
+    fn a_failed_gathering_is_shown_and_started_again() {
+        let t0 = Instant::now();
+        let never = || -> std::io::Result<Gatherer> { panic!("started again too early") };
+        let (tx, gatherer) = fed();
+        let mut gathering = Gathering::new(gatherer, t0);
+        tx.send(Update::Ready).unwrap();
+        tx.send(Update::Screen(Box::default())).unwrap();
+        let (screen, changed) = gathering.poll(t0, never);
+        assert!(screen.is_some() && !changed);
+        tx.send(Update::Failed("no such service".into())).unwrap();
+        let failed_at = t0 + Duration::from_millis(10);
+        let (screen, changed) = gathering.poll(failed_at, never);
+        assert!(screen.is_none() && changed);
+        assert_eq!(gathering.failed.as_deref(), Some("no such service"));
+        let (screen, changed) = gathering.poll(failed_at + RESTART_AFTER / 2, never);
+        assert!(screen.is_none() && !changed);
+        // Started again; the failure stays shown until a screen comes.
+        let (tx, gatherer) = fed();
+        let (_, changed) = gathering.poll(failed_at + RESTART_AFTER, || Ok(gatherer));
+        assert!(changed && gathering.failed.is_some());
+        tx.send(Update::Screen(Box::default())).unwrap();
+        let (screen, _) = gathering.poll(failed_at + RESTART_AFTER, never);
+        assert!(screen.is_some() && gathering.failed.is_none());
+        // A gathering thread that ended (a panic) counts as a failure.
+        drop(tx);
+        let (_, changed) = gathering.poll(failed_at + RESTART_AFTER, never);
+        assert!(changed);
+        assert_eq!(
+            gathering.failed.as_deref(),
+            Some("the gathering thread ended")
+        );
+    }
+
+    #[test]
+    fn no_screen_for_a_second_is_stale() {
+        let t0 = Instant::now();
+        let (tx, gatherer) = fed();
+        let mut gathering = Gathering::new(gatherer, t0);
+        assert_eq!(gathering.stale_s(t0 + Duration::from_millis(999)), None);
+        assert_eq!(gathering.stale_s(t0 + STALE_AFTER), Some(1));
+        assert_eq!(gathering.stale_s(t0 + Duration::from_millis(7300)), Some(7));
+        tx.send(Update::Screen(Box::default())).unwrap();
+        let later = t0 + Duration::from_secs(8);
+        gathering.poll(later, || panic!("not failed"));
+        assert_eq!(gathering.stale_s(later + Duration::from_millis(500)), None);
+    }
 
     #[test]
     fn details_lose_their_trailing_zeros() {

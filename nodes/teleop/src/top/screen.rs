@@ -39,6 +39,11 @@ pub struct Screen {
     pub message: String,
     /// The prompt open, if any.
     pub prompt: Prompt,
+    /// Whole seconds since the last new screen, when that is long enough to say so: the values
+    /// shown are old (the gathering is stuck or failed).
+    pub stale_s: Option<u64>,
+    /// The gathering failed: why, and what the console does about it.
+    pub gathering: Option<String>,
 }
 
 /// The e-stop as the latches and the nodes' acknowledgements say.
@@ -185,18 +190,34 @@ pub fn draw(frame: &mut Frame, screen: &Screen) {
     frame.render_widget(Paragraph::new(footer_line(screen)), footer);
 }
 
+/// The title and the sides, or, while the values shown are old, a red banner saying so first.
 fn header_line(screen: &Screen) -> Line<'static> {
-    Line::from(vec![
-        Span::styled(
-            " teleop top ",
-            Style::default().add_modifier(Modifier::REVERSED),
-        ),
-        Span::raw(format!(
-            " sides: {}  rates over {:.1} s",
-            screen.sides.join(", "),
-            screen.window_s
-        )),
-    ])
+    let mut line = Line::from(Span::styled(
+        " teleop top ",
+        Style::default().add_modifier(Modifier::REVERSED),
+    ));
+    let mut warning = Vec::new();
+    if let Some(age) = screen.stale_s {
+        warning.push(format!("no update for {age} s: values are old"));
+    }
+    if let Some(gathering) = &screen.gathering {
+        warning.push(gathering.clone());
+    }
+    if !warning.is_empty() {
+        line.push_span(Span::styled(
+            format!(" {} ", warning.join("; ")),
+            Style::default()
+                .fg(Color::White)
+                .bg(Color::Red)
+                .add_modifier(Modifier::BOLD),
+        ));
+    }
+    line.push_span(Span::raw(format!(
+        " sides: {}  rates over {:.1} s",
+        screen.sides.join(", "),
+        screen.window_s
+    )));
+    line
 }
 
 fn status_lines(screen: &Screen) -> Vec<Line<'static>> {
@@ -579,6 +600,8 @@ mod tests {
             }],
             message: "e-stop released".into(),
             prompt: Prompt::None,
+            stale_s: None,
+            gathering: None,
         }
     }
 
@@ -706,5 +729,26 @@ mod tests {
         screen.prompt = Prompt::Task("pick the ball".into());
         let lines = drawn(&screen, 80, 24);
         assert!(lines[23].contains("Esc E-STOP") && lines[23].contains("pick the ball_"));
+    }
+
+    #[test]
+    fn old_values_and_a_failed_gathering_are_shown_first() {
+        let mut screen = session();
+        let lines = drawn(&screen, 80, 24);
+        assert!(!lines[0].contains("values are old"));
+        screen.stale_s = Some(3);
+        let lines = drawn(&screen, 80, 24);
+        assert!(
+            lines[0].starts_with(" teleop top  no update for 3 s: values are old "),
+            "{}",
+            lines[0]
+        );
+        screen.gathering = Some("gathering failed (gone); starting it again".into());
+        let lines = drawn(&screen, 120, 24);
+        assert!(
+            lines[0].contains("values are old; gathering failed (gone); starting it again"),
+            "{}",
+            lines[0]
+        );
     }
 }
