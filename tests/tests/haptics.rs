@@ -1,11 +1,10 @@
 //! The closed haptic loop across a delay (`teleop_e2e::haptics`), end to end through the
 //! pipeline's library code on a simulated clock: the benchmark's oscillating case (the loose
-//! operator on the rigid ball), cut down to one grasp, oscillates with plain force feedback; the
-//! passivity controller shrinks the finger's swing and the energy the channel generates, with
-//! and without delay (it does not stop the oscillation: a force buzz remains, see
-//! BENCHMARKS.md); without delay the controller leaves the default operator's felt force as it
-//! was. Behaviour, not timing: the loop's clock is simulated, so
-//! these hold on any machine.
+//! operator on the rigid ball), cut down to one grasp, oscillates with plain force feedback; with
+//! the passivity controller it does not, with and without delay, the finger's swing and the
+//! energy the channel generates shrink and force stays fresh; without delay the controller
+//! leaves the default operator's felt force as it was. Behaviour, not timing: the loop's clock
+//! is simulated, so these hold on any machine.
 
 use teleop_e2e::haptics::{
     analyse, loose_operator, run, Case, Feedback, Hold, Metrics, Object, Stations,
@@ -64,13 +63,13 @@ fn plain_feedback_oscillates_on_the_rigid_ball() {
     );
 }
 
-/// The controller cuts the push that throws the finger open: the swing shrinks at least
-/// fivefold and the energy the channel hands the operator at least halves, with no delay and
-/// across 100 ms, while the force stays fresh and felt. What it does not do is stop the
-/// oscillation: the felt force becomes a buzz (bench_haptics: 340 units at about 26 ms), so the
-/// limit cycle is not asserted away.
+/// The controller cuts the push that throws the finger open and lets it back slowly: the held
+/// grasp has no limit cycle, the swing shrinks at least fivefold and the energy the channel
+/// hands the operator at least halves, with no delay and across 100 ms, while the force stays
+/// fresh. (What it costs, the felt force of this loose operator on a rigid object, is in
+/// BENCHMARKS.md; the default operator's is kept, below.)
 #[test]
-fn the_passivity_controller_shrinks_the_throw_and_the_energy_it_generates() {
+fn the_passivity_controller_stops_the_oscillation() {
     let stations = Stations::repository().expect("the repository's configuration");
     for round_trip_ms in [OSCILLATING_RTT_MS, 100] {
         let run = |feedback| {
@@ -86,6 +85,10 @@ fn the_passivity_controller_shrinks_the_throw_and_the_energy_it_generates() {
         };
         let (plain, plain_hold) = run(Feedback::Plain);
         let (damped, damped_hold) = run(Feedback::Passivity);
+        assert_eq!(
+            damped_hold.cycle, None,
+            "{round_trip_ms} ms: a limit cycle with the controller on: {damped_hold:?}"
+        );
         assert!(
             damped_hold.finger_p2p * 5.0 <= plain_hold.finger_p2p,
             "{round_trip_ms} ms: the finger swings {} raw with the controller, {} without",
@@ -99,8 +102,8 @@ fn the_passivity_controller_shrinks_the_throw_and_the_energy_it_generates() {
             plain.generated
         );
         assert!(
-            damped_hold.felt_index > 0.0 && damped_hold.stale_share == 0.0,
-            "{round_trip_ms} ms: force is felt, and fresh: {damped_hold:?}"
+            damped_hold.stale_share == 0.0,
+            "{round_trip_ms} ms: the force stays fresh: {damped_hold:?}"
         );
     }
 }

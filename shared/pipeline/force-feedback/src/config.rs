@@ -306,6 +306,7 @@ impl FeedbackConfig {
         check_positive("passivity.reset_after_s", p.reset_after_s)?;
         check_non_negative("passivity.max_stored", p.max_stored)?;
         check_non_negative("passivity.tolerance", p.tolerance)?;
+        check_non_negative("passivity.recovery_per_s", p.recovery_per_s)?;
         for (i, &g) in self.finger_gain.iter().enumerate() {
             if !(g.is_finite() && (0.0..=2.0).contains(&g)) {
                 return Err(invalid(format!("finger_gain[{i}]"), g, "must be in [0, 2]"));

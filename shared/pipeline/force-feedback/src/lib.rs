@@ -66,10 +66,11 @@
 //!
 //! [passivity]                 # time-domain passivity per glove finger (see `Passivity`)
 //! mode = "auto"               # auto (while a bridge is in the path), on, off
-//! max_damping = 20000.0       # glove units per (travel per second)
+//! max_damping = 300.0         # glove units per (travel per second)
 //! reset_after_s = 0.2         # s without demand before a finger's energy sum restarts
 //! max_stored = 50.0           # glove units x travel the observer keeps at most
-//! tolerance = 10.0            # the deficit (glove units x travel) the controller lets pass
+//! tolerance = 0.0             # the deficit (glove units x travel) the controller lets pass
+//! recovery_per_s = 1000.0     # glove units per second the force climbs back after it acted
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
 //! assert_eq!(config, FeedbackConfig::default());
@@ -513,9 +514,10 @@ impl ForceFeedback {
             };
             self.output[finger] = value;
         }
-        // The passivity controller lowers what is commanded, and the rate limit climbs back
-        // from there: a force that jumped back to the law's value once the finger stops
-        // opening would throw it open again.
+        // The passivity controller lowers what is commanded, and the law restarts from there
+        // (the controller's own ceiling then brings the force back, slower than the rate
+        // limit): a force that jumped back to the law's value once the finger stops opening
+        // would throw it open again.
         let active = match self.config.passivity.mode {
             PassivityMode::On => true,
             PassivityMode::Off => false,

@@ -30,14 +30,39 @@
 //! When the energy at the end of the next glove sample would fall below the tolerance `-T`,
 //! `E + f v Δt < -T` (`Δt` the glove's sample interval), it adds a damper `alpha` to the
 //! commanded force, `f + alpha × v`, with `alpha = -(E + f v Δt + T) / (v² Δt)`, capped at
-//! `max_damping`: the sample then ends with the energy at `-T`. It acts only while the push
-//! drives the finger open, where the channel gives energy back: there the damper lowers the
-//! push, at most to zero, so the push gives back no more than the channel holds. Closing, the push absorbs energy by itself and the
-//! controller leaves it alone (a two-sided damper would have to push harder on a closing
-//! finger, and a glove that slams to full force throws the finger open again). The change
-//! always opposes the motion (`Δf × v >= 0`) and only lowers the force, so the controller
-//! never adds energy and never leaves the law's limits. While the energy is positive it leaves
-//! the force alone, so an undelayed contact feels as before.
+//! `max_damping`. It acts only while the push drives the finger open, where the channel gives
+//! energy back: there the damper lowers the push, at most to zero. Closing, the push absorbs
+//! energy by itself and the damper leaves it alone (a two-sided damper would have to push
+//! harder on a closing finger, and a glove that slams to full force throws the finger open
+//! again). While the energy stays above `-T` (and nothing it lowered earlier is still climbing
+//! back, below) it leaves the force alone, so an undelayed contact feels as before.
+//!
+//! Hannaford and Ryu's controller takes the whole deficit out in one sample; on a delayed rigid
+//! contact that is a chatter: the push is cut to zero as soon as the finger opens, climbs back
+//! at the law's rate limit while it closes, and throws it open again (bench_haptics, the loose
+//! operator: a 340-unit force buzz at about 26 ms at every delay). Two changes make the force
+//! smooth instead, in the spirit of the literature's remedies for this chattering, though
+//! neither paper's algorithm is implemented as such (Ryu, Preusche, Hannaford and Hirzinger,
+//! IEEE Transactions on Control Systems Technology 2005, "Time domain passivity control with
+//! reference energy following": dissipate gradually instead of all at once when the observer
+//! crosses its bound; Kim and Ryu, IEEE Haptics Symposium 2004, "Energy bounding algorithm
+//! based on passivity theorem for stable haptic interaction control": bound per sample what
+//! the force may do, so that the energy it can generate stays bounded):
+//!
+//! - the damper is capped low (`max_damping`, default 300 units per travel/s: a finger opening
+//!   at 0.1 travel/s loses 30 units a sample), so the deficit is taken out over several samples
+//!   while the finger opens, and what is left of it is carried in the sum to the next ones;
+//! - the force the damper left is a ceiling that climbs back at `recovery_per_s` (default 1000
+//!   units/s, against the default law's rate limit of 20000), not at the law's rate: the push
+//!   returns slowly enough for the finger to follow it without being thrown, and the ceiling is
+//!   lifted once it reaches the force limit or the finger's energy sum restarts.
+//!
+//! So the force is never above the law's and never outside the limits; where the damper acts,
+//! its change opposes the motion (`Δf × v >= 0`); elsewhere the force is the law's or the
+//! ceiling, which only climbs. What the controller gives up for it: with a loose operator on a
+//! rigid object across a delay, the finger has closed past where the delayed contact would have
+//! stopped it before any force arrives, and pushing it back out is exactly the energy a passive
+//! channel may not generate, so the felt force settles near zero there (BENCHMARKS.md).
 //!
 //! # Resets
 //!
@@ -71,8 +96,10 @@ pub enum PassivityMode {
 pub struct PassivityConfig {
     /// When the controller acts. Default `auto`.
     pub mode: PassivityMode,
-    /// Largest damping the controller adds, glove units per (travel per second). Default
-    /// 20000: at 0.05 travel/s (a slow drift) it can take out 1000, the whole force.
+    /// Largest damping the controller adds, glove units per (travel per second). Default 300:
+    /// a finger opening at 0.1 travel/s loses 30 units per sample, so a deficit is taken out
+    /// over several samples rather than by cutting the push to zero (with 20000 the force
+    /// chattered, bench_haptics: a 340-unit buzz at 26 ms with the loose operator).
     pub max_damping: f32,
     /// The observer's sum restarts after the finger's demand has been zero this long (s).
     /// Default 0.2.
@@ -80,23 +107,28 @@ pub struct PassivityConfig {
     /// Most energy the observer keeps (glove units × travel). Default 50: full-scale force over
     /// a twentieth of the travel, more than a firm grasp stores.
     pub max_stored: f32,
-    /// The deficit the controller lets pass (glove units × travel). Default 10: full-scale
-    /// force over 1.25 % of the travel, about 5 mJ. A contact force rising against a finger
-    /// that gives way under it does a little work on the finger, which the observer counts;
-    /// without a tolerance the controller cut every contact force as it rose (bench_haptics:
-    /// a steady grasp became a 280-unit sawtooth at 23 ms). An oscillation passes it within a
-    /// cycle.
+    /// The deficit the controller lets pass (glove units × travel). Default 0: with the low
+    /// damping cap and the slow recovery a contact force rising on a finger that gives way no
+    /// longer becomes a sawtooth, and any tolerance let a slow swing through the robot's
+    /// position loop persist (bench_haptics: 10 let a 42-unit, 15-raw swing of the loose
+    /// operator's finger on the rigid ball persist at 0 and 10 ms; 1 still did).
     pub tolerance: f32,
+    /// How fast the force climbs back after the controller lowered it, glove units per second.
+    /// Default 1000: from zero to the default saturation (800) in 0.8 s. The law's own rate
+    /// limit (20000) threw the finger open again as the push came back (bench_haptics: 4000
+    /// kept the buzz, 2000 left a 54-unit swing on the loose operator's thumb).
+    pub recovery_per_s: f32,
 }
 
 impl Default for PassivityConfig {
     fn default() -> Self {
         Self {
             mode: PassivityMode::Auto,
-            max_damping: 20_000.0,
+            max_damping: 300.0,
             reset_after_s: 0.2,
             max_stored: 50.0,
-            tolerance: 10.0,
+            tolerance: 0.0,
+            recovery_per_s: 1000.0,
         }
     }
 }
@@ -143,6 +175,9 @@ pub struct Passivity {
     applied: [f32; GLOVE_FINGERS],
     /// The force acting since the newest glove sample: the command newest when it came.
     latched: [f32; GLOVE_FINGERS],
+    /// Per finger, the most force allowed while it climbs back after the damper acted (glove
+    /// units); `None`: the law's force passes.
+    ceiling: [Option<f32>; GLOVE_FINGERS],
 }
 
 impl Passivity {
@@ -157,6 +192,7 @@ impl Passivity {
             idle_s: [0.0; GLOVE_FINGERS],
             applied: [0.0; GLOVE_FINGERS],
             latched: [0.0; GLOVE_FINGERS],
+            ceiling: [None; GLOVE_FINGERS],
         }
     }
 
@@ -217,10 +253,11 @@ impl Passivity {
 
     /// The force to command for each finger given the law's `force` (within `0..=max`), after
     /// `dt` seconds since the previous step: the controller's damper where the energy would
-    /// fall below the tolerance while the push opens the finger, if `active`; the force
-    /// unchanged elsewhere (only ever lowered, so a finger
-    /// ramping to zero on stale inputs still does). `demand` is the law's demand per finger,
-    /// for the reset. The result is rounded to whole glove units, as commanded.
+    /// fall below the tolerance while the push opens the finger, if `active`; elsewhere the
+    /// law's force, held below the ceiling the damper left while that climbs back at
+    /// `recovery_per_s` (only ever lowered, so a finger ramping to zero on stale inputs still
+    /// does). `demand` is the law's demand per finger, for the reset. The result is rounded to
+    /// whole glove units, as commanded.
     pub fn control(
         &mut self,
         force: [f32; GLOVE_FINGERS],
@@ -242,24 +279,39 @@ impl Passivity {
                 self.idle_s[f] += dt;
                 if self.idle_s[f] >= self.config.reset_after_s {
                     self.energy[f] = 0.0;
+                    self.ceiling[f] = None;
                 }
             }
+            // The ceiling climbs back; at the force limit there is nothing left to hold.
+            if let Some(ceiling) = self.ceiling[f] {
+                let climbed = ceiling + self.config.recovery_per_s * dt;
+                self.ceiling[f] = (climbed.is_finite() && climbed < max).then_some(climbed);
+            }
+            // A controller switched off (auto mode without a link) holds nothing back.
+            if !active {
+                self.ceiling[f] = None;
+            }
+            let allowed = self.ceiling[f].map_or(force[f], |c| force[f].min(c));
             // The energy at the end of the next sample if the law's force were applied at the
             // finger's present velocity (Hannaford and Ryu's observer includes the present
             // sample's f(n) v(n) before the controller acts on it).
             let (v, dt_sample) = (self.velocity[f], self.interval_s);
-            let predicted = self.energy[f] + force[f] * v * dt_sample + self.config.tolerance;
+            let predicted = self.energy[f] + allowed * v * dt_sample + self.config.tolerance;
             // Only while the push drives the finger open (v < 0): that is where the channel
             // gives energy back. Closing, the push itself absorbs energy and pays the deficit
             // back; a damper there would have to push harder, and a glove that slams to full
             // force on a closing finger throws it open again (the chatter a two-sided
             // controller showed in bench_haptics).
+            out[f] = allowed;
             if active && predicted < 0.0 && v < 0.0 && dt_sample > 0.0 {
                 let alpha = (-predicted / (v * v * dt_sample)).min(self.config.max_damping);
-                let damped = force[f] + alpha * v;
+                let damped = allowed + alpha * v;
                 if damped.is_finite() {
-                    out[f] = damped.clamp(0.0, force[f].clamp(0.0, max));
+                    out[f] = damped.clamp(0.0, allowed.clamp(0.0, max));
                 }
+                // What is left of the deficit stays in the sum for the next samples; the push
+                // comes back no faster than the recovery rate.
+                self.ceiling[f] = Some(out[f]);
             }
             out[f] = out[f].round();
             report.acted[f] = out[f] != force[f].round();
@@ -278,11 +330,14 @@ mod tests {
 
     const MS: u64 = 1_000_000;
 
-    /// A layer that keeps whatever energy it sees and tolerates no deficit.
+    /// A layer that keeps whatever energy it sees, tolerates no deficit and may take all of it
+    /// out in one sample (Hannaford and Ryu's controller: a damper cap high enough never to
+    /// bind here).
     fn exact() -> Passivity {
         Passivity::new(PassivityConfig {
             max_stored: f32::MAX,
             tolerance: 0.0,
+            max_damping: 1e6,
             ..PassivityConfig::default()
         })
     }
@@ -372,6 +427,72 @@ mod tests {
         assert_eq!((out[0], report.acted[0]), (600.0, false));
     }
 
+    /// With the shipped cap the deficit is taken out over several samples while the finger
+    /// opens, the rest carried in the sum; once it stops, the push climbs back at the recovery
+    /// rate, not at once, up to the law's force; the finger's reset lifts what is left.
+    #[test]
+    fn the_default_controller_spreads_the_deficit_and_the_push_climbs_back_slowly() {
+        let config = PassivityConfig::default();
+        let mut pc = Passivity::new(config.clone());
+        let mut t = 0;
+        pc.observe(&at(t, 0.5));
+        // Generated 5 while the finger opens at 1 travel/s under 500.
+        push_and_move(&mut pc, &mut t, 500.0, 0.5, 0.51, 10);
+        assert!((pc.energy()[0] + 5.0).abs() < 1e-3, "{:?}", pc.energy());
+        // The finger keeps opening, now at 0.1 travel/s: each sample lowers the push by the cap
+        // times the velocity (30), so it falls in steps, not at once; meanwhile the lowered
+        // pushes give back a little more (what is not taken out stays in the sum).
+        let mut position = 0.5101;
+        t += 1;
+        pc.observe(&at(t, position));
+        let mut force = 600.0;
+        let mut steps = 0;
+        while force > 0.0 {
+            let (out, report) = pc.control([600.0; 5], [600.0; 5], 800.0, 0.001, true);
+            assert!(report.acted[0], "{out:?}");
+            assert!(
+                out[0] < force && out[0] >= force - 31.0,
+                "{force} -> {}",
+                out[0]
+            );
+            force = out[0];
+            t += 1;
+            position += 0.0001;
+            pc.observe(&at(t, position));
+            steps += 1;
+        }
+        assert!(steps >= 20, "{steps} samples");
+        // 500 over the first two 0.0001 (the glove takes a command in its next exchange), then
+        // 570, 540, ... 30 over 0.0001 each: 0.67 more (within the f32 positions' rounding).
+        assert!((pc.energy()[0] + 5.67).abs() < 0.05, "{:?}", pc.energy());
+        // Still: the push climbs back by the recovery rate (1 per ms) up to the law's 600.
+        let mut before = 0.0;
+        for _ in 0..1000 {
+            t += 1;
+            pc.observe(&at(t, position));
+            let (out, _) = pc.control([600.0; 5], [600.0; 5], 800.0, 0.001, true);
+            let climb = config.recovery_per_s * 0.001;
+            assert!(
+                out[0] >= before && out[0] <= before + climb + 1.0,
+                "{before} -> {out:?}"
+            );
+            before = out[0];
+        }
+        assert_eq!(before, 600.0);
+        // Lowered again, then no demand for the reset time: the next contact starts afresh.
+        t += 1;
+        pc.observe(&at(t, position + 0.001));
+        let (out, _) = pc.control([600.0; 5], [600.0; 5], 800.0, 0.001, true);
+        assert!(out[0] < 600.0, "{out:?}");
+        for _ in 0..250 {
+            pc.control([0.0; 5], [0.0; 5], 800.0, 0.001, true);
+        }
+        t += 1;
+        pc.observe(&at(t, position + 0.001));
+        let (out, report) = pc.control([600.0; 5], [600.0; 5], 800.0, 0.001, true);
+        assert_eq!((out[0], report.acted[0]), (600.0, false));
+    }
+
     #[test]
     fn the_sum_restarts_after_a_finger_has_had_no_demand() {
         let mut pc = exact();
@@ -397,19 +518,24 @@ mod tests {
     }
 
     proptest! {
-        /// Whatever the motion, forces and energy, the controller's change opposes the finger's
-        /// velocity (it only dissipates) and only lowers the force, so it stays within the
-        /// limits (a finger ramping to zero keeps ramping).
+        /// Whatever the motion, forces and energy, the controller only lowers the force, so it
+        /// stays within the limits (a finger ramping to zero keeps ramping), and it lowers the
+        /// push only while the finger opens: on a finger closing or still, the force is never
+        /// below the previous one plus the recovery (or the law's, if that is lower), so the
+        /// controller never takes a push away from a finger that presses into it.
         #[test]
-        fn prop_the_controller_never_adds_energy_nor_exceeds_the_limits(
+        fn prop_the_controller_only_dissipates_and_never_exceeds_the_limits(
             samples in prop::collection::vec(
                 (prop::array::uniform5(-0.2f32..1.2), prop::array::uniform5(0.0f32..=800.0),
                  1u64..20),
                 1..100),
             max in 0.0f32..=1000.0,
         ) {
-            let mut pc = Passivity::new(PassivityConfig::default());
+            let config = PassivityConfig::default();
+            let climb = config.recovery_per_s * 0.001;
+            let mut pc = Passivity::new(config);
             let mut t = 0;
+            let mut before = [0.0f32; GLOVE_FINGERS];
             for (position, force, gap) in samples {
                 t += gap;
                 pc.observe(&at(t, 0.0)); // reference the filter on the first sample
@@ -418,12 +544,15 @@ mod tests {
                 let (out, report) = pc.control(force, force, max, 0.001, true);
                 for f in 0..GLOVE_FINGERS {
                     prop_assert!((0.0..=max.round()).contains(&out[f]), "{out:?} max {max}");
-                    let change = out[f] - force[f].round();
-                    prop_assert!(change * pc.velocity[f] >= 0.0,
-                        "finger {f}: change {change} at closing velocity {}", pc.velocity[f]);
                     prop_assert!(out[f] <= force[f].round(), "only ever lowered");
+                    if pc.velocity[f] >= 0.0 {
+                        let least = force[f].round().min(before[f] + climb - 1.0);
+                        prop_assert!(out[f] >= least,
+                            "finger {f} not opening: {} -> {} (law {})", before[f], out[f], force[f]);
+                    }
                     prop_assert!(report.energy[f].is_finite());
                 }
+                before = out;
             }
         }
     }
