@@ -69,7 +69,7 @@
 //! max_damping = 300.0         # glove units per (travel per second)
 //! reset_after_s = 0.2         # s without demand before a finger's energy sum restarts
 //! max_stored = 50.0           # glove units x travel the observer keeps at most
-//! tolerance = 0.0             # the deficit (glove units x travel) the controller lets pass
+//! tolerance = 10.0            # the deficit (glove units x travel) the controller lets pass
 //! recovery_per_s = 1000.0     # glove units per second the force climbs back after it acted
 //! "#;
 //! let config = FeedbackConfig::from_toml_str(text, "feedback.toml")?;
