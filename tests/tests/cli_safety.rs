@@ -123,7 +123,8 @@ fn echo_into_a_closed_pipe_ends_quietly_with_success() {
         std::thread::sleep(Duration::from_millis(5));
     };
     let line = head.join().unwrap();
-    assert!(line.contains("GloveState"), "{line}");
+    // The first line of echo's first YAML document.
+    assert_eq!(line, "---\n", "{line}");
     let mut err = String::new();
     std::io::Read::read_to_string(&mut echo.stderr.take().unwrap(), &mut err).unwrap();
     assert!(status.success(), "{status}: {err}");
