@@ -35,8 +35,9 @@ use std::collections::{HashMap, HashSet};
 use glam::Vec3;
 use teleop_hand_profile::TipSensor;
 use teleop_msgs::{
-    control_mode, device_model, units, DeviceInfo, GloveDiagnostics, GloveForceCommand, GloveState,
-    HandCommand, HandState, Message, NodeHealth, Tactile, GLOVE_CHANNELS,
+    control_mode, device_model, episode_event, episode_outcome, units, DeviceInfo, Episode,
+    GloveDiagnostics, GloveForceCommand, GloveState, HandCommand, HandState, Message, NodeHealth,
+    Tactile, GLOVE_CHANNELS,
 };
 
 use crate::kinematics::{
@@ -761,6 +762,7 @@ impl Scene {
             Sample::EStopAck(m) => {
                 entries.push(Entry::scalar("health/estop_ack", f64::from(m.engaged)));
             }
+            Sample::Episode(m) => episode_mark(m, &mut entries),
         }
         let picked = !had_robot && self.robot.is_some();
         Some(Frame {
@@ -1137,6 +1139,17 @@ fn node_health(m: &NodeHealth, out: &mut Vec<Entry>) {
             value,
         ));
     }
+}
+
+/// An operator's episode mark, as a line of text at the time it was made.
+fn episode_mark(m: &Episode, out: &mut Vec<Entry>) {
+    let text = match m.event {
+        episode_event::START => format!("**episode started**: {}", m.task()),
+        episode_event::STOP => format!("**episode stopped**: {}", episode_outcome::name(m.outcome)),
+        episode_event::DISCARD => "**episode discarded**".to_string(),
+        other => format!("episode mark {other}"),
+    };
+    out.push(Entry::new("episode", Visual::Markdown(text)));
 }
 
 fn device_info(m: &DeviceInfo, out: &mut Vec<Entry>) {

@@ -2,8 +2,8 @@
 //! sources (live subscribers and recordings) hand the content layer the same thing.
 
 use teleop_msgs::{
-    DeviceInfo, EStop, EStopAck, GloveDiagnostics, GloveForceCommand, GloveState, HandCommand,
-    HandState, Message, NodeHealth, SampleHeader, Tactile,
+    DeviceInfo, EStop, EStopAck, Episode, GloveDiagnostics, GloveForceCommand, GloveState,
+    HandCommand, HandState, Message, NodeHealth, SampleHeader, Tactile,
 };
 
 /// One sample of a contract topic. Fixed size and heap free, so that it travels through the
@@ -31,6 +31,8 @@ pub enum Sample {
     DeviceInfo(DeviceInfo),
     /// `estop/ack`.
     EStopAck(EStopAck),
+    /// `episode`.
+    Episode(Episode),
 }
 
 fn decode_as<M: Message>(payload: &[u8], wrap: fn(M) -> Sample) -> Option<Sample> {
@@ -53,6 +55,7 @@ impl Sample {
             EStop::TOPIC => decode_as(payload, Self::EStop),
             DeviceInfo::TOPIC => decode_as(payload, Self::DeviceInfo),
             EStopAck::TOPIC => decode_as(payload, Self::EStopAck),
+            Episode::TOPIC => decode_as(payload, Self::Episode),
             _ => None,
         }
     }
@@ -70,6 +73,7 @@ impl Sample {
             Self::EStop(_) => EStop::TOPIC,
             Self::DeviceInfo(_) => DeviceInfo::TOPIC,
             Self::EStopAck(_) => EStopAck::TOPIC,
+            Self::Episode(_) => Episode::TOPIC,
         }
     }
 
@@ -86,6 +90,7 @@ impl Sample {
             Self::EStop(m) => m.header(),
             Self::DeviceInfo(m) => m.header(),
             Self::EStopAck(m) => m.header(),
+            Self::Episode(m) => m.header(),
         }
     }
 }
