@@ -3,7 +3,7 @@
 //! is killed (`teleop recordings repair` keeps them); its restarted successor continues the
 //! episode left open.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use teleop_e2e::dataset::{check_lerobot, load_with_lerobot};
@@ -28,6 +28,18 @@ fn recordings(sandbox: &Sandbox) -> Vec<PathBuf> {
     files.retain(|p| p.extension().is_some_and(|e| e == "mcap"));
     files.sort();
     files
+}
+
+/// The newest sample of `M` in `file` stamped at or before `at` (what the export's zero-order
+/// hold takes for a frame at `at`).
+fn newest_before<M: Message>(file: &Path, at: u64) -> M {
+    let read = teleop_recording::read_samples::<M>(file, None).expect("the recording reads");
+    assert_eq!(read.undecodable, 0, "{}", M::TOPIC);
+    read.samples
+        .into_iter()
+        .filter(|s| s.header().stamp_ns <= at)
+        .max_by_key(|s| s.header().stamp_ns)
+        .unwrap_or_else(|| panic!("no {} before the episode", M::TOPIC))
 }
 
 #[test]
@@ -210,23 +222,7 @@ fn three_episodes_through_the_cli_survive_a_killed_recorder() {
     // Frame 0 is episode 1's start (every topic had spoken long before it): each value is the
     // newest recorded sample at or before that instant.
     let at = first.start_ns;
-    let newest = |topic: &str| -> Vec<u8> {
-        let mut found = None;
-        for m in
-            teleop_recording::read_messages(&repaired, &teleop_recording::Filter::topics([topic]))
-                .unwrap()
-        {
-            let m = m.unwrap();
-            let stamp = u64::from_le_bytes(m.payload[8..16].try_into().unwrap());
-            if stamp <= at && found.as_ref().is_none_or(|(s, _)| stamp >= *s) {
-                found = Some((stamp, m.payload));
-            }
-        }
-        found
-            .unwrap_or_else(|| panic!("no {topic} before the episode"))
-            .1
-    };
-    let glove = GloveState::from_bytes(&newest(GloveState::TOPIC)).unwrap();
+    let glove: GloveState = newest_before(&repaired, at);
     for (c, channel) in GLOVE_CHANNELS.iter().enumerate() {
         assert_eq!(
             value("observation.state", &format!("glove.{channel}.pos")),
@@ -234,19 +230,11 @@ fn three_episodes_through_the_cli_survive_a_killed_recorder() {
             "glove {channel}"
         );
     }
-    let state = HandState::from_bytes(&newest(HandState::TOPIC)).unwrap();
-    let command = HandCommand::from_bytes(&newest(HandCommand::TOPIC)).unwrap();
-    for (j, joint) in [
-        "thumb_flex",
-        "thumb_abduct",
-        "index",
-        "middle",
-        "ring",
-        "pinky",
-    ]
-    .iter()
-    .enumerate()
-    {
+    let state: HandState = newest_before(&repaired, at);
+    let command: HandCommand = newest_before(&repaired, at);
+    // The Revo2's joints, in its profile's order (the session's hand).
+    let profile = teleop_hand_profile::HandProfile::builtin("revo2").expect("the Revo2 profile");
+    for (j, joint) in profile.joints.iter().map(|j| &j.name).enumerate() {
         assert_eq!(
             value("observation.state", &format!("{joint}.pos")),
             state.joints[j].position,

@@ -454,6 +454,10 @@ fn bad_arguments_are_refused_by_name() {
     assert!(!ok && stderr.contains("nope.mcap"), "{stderr}");
     let (ok, _, stderr) = export(&sandbox, &rec, &out, &["--namespace", "left"]);
     assert!(!ok && stderr.contains("left/"), "{stderr}");
+    // One file given twice (here by another path to it) would export its episodes twice.
+    let again = sandbox.dir.path().join(".").join("session.mcap");
+    let (ok, _, stderr) = export(&sandbox, &rec, &out, &[again.to_str().unwrap()]);
+    assert!(!ok && stderr.contains("is given twice"), "{stderr}");
     assert!(!out.exists(), "no dataset from refused exports");
 }
 

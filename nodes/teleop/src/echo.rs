@@ -400,15 +400,7 @@ impl Echo {
             entry("up", s.link_up != 0),
             entry(
                 "kind",
-                named(
-                    s.link_kind,
-                    &[
-                        (link_kind::NONE, "none"),
-                        (link_kind::ETHERCAT, "ethercat"),
-                        (link_kind::CAN, "can"),
-                        (link_kind::SERIAL, "serial"),
-                    ],
-                ),
+                link_kind::name(s.link_kind).map_or(Value::from(s.link_kind), Value::from),
             ),
             entry("bus_state", s.bus_state),
             entry("error_code", s.link_error_code),

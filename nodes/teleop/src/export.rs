@@ -372,18 +372,30 @@ fn measures_efforts(
 
 /// A recording's file and what it holds.
 type RecordingFile = (PathBuf, RecordingInfo);
+/// A metadata record's fields.
+type Metadata = std::collections::BTreeMap<String, String>;
 
 /// The recordings grouped into sessions (see the module's documentation): each group's files
 /// in the order they started, the groups in the order their first files were given.
 fn sessions(recordings: &[PathBuf]) -> anyhow::Result<Vec<Vec<RecordingFile>>> {
-    let mut groups: Vec<(Option<String>, Vec<RecordingFile>)> = Vec::new();
+    let mut groups: Vec<(Option<Metadata>, Vec<RecordingFile>)> = Vec::new();
+    let mut seen = Vec::with_capacity(recordings.len());
     for path in recordings {
+        // The same file twice would export its episodes twice.
+        let real = std::fs::canonicalize(path)
+            .with_context(|| format!("{}: cannot open the recording", path.display()))?;
+        anyhow::ensure!(
+            !seen.contains(&real),
+            "{} is given twice: each recording is exported once",
+            path.display()
+        );
+        seen.push(real);
         let info = recording_info(path)?;
         let session = info
             .metadata
             .iter()
             .find(|(name, _)| name == teleop_recorder::SESSION_METADATA)
-            .map(|(_, fields)| format!("{fields:?}"));
+            .map(|(_, fields)| fields.clone());
         match groups
             .iter_mut()
             .find(|(s, _)| session.is_some() && *s == session)

@@ -100,12 +100,7 @@ impl Finding {
 pub fn run(file: &Path, ipc: &IpcSettings) -> anyhow::Result<ExitCode> {
     let launch = crate::launch::config::load(file)?;
     let plan = plan::plan(&launch);
-    let hardware: Vec<&str> = plan
-        .processes
-        .iter()
-        .filter(|p| !p.endpoints.is_empty())
-        .map(|p| p.name.as_str())
-        .collect();
+    let hardware: Vec<&str> = plan.hardware_processes().collect();
     if hardware.is_empty() {
         out!(
             "{}: a simulated session (no process opens a real device): refused real-time \

@@ -85,7 +85,15 @@ impl Plan {
     /// Whether any process opens a real device: then the launch file's real-time keys are
     /// requirements, not wishes.
     pub fn hardware(&self) -> bool {
-        self.processes.iter().any(|p| !p.endpoints.is_empty())
+        self.hardware_processes().next().is_some()
+    }
+
+    /// The names of the processes that open a real device.
+    pub fn hardware_processes(&self) -> impl Iterator<Item = &str> {
+        self.processes
+            .iter()
+            .filter(|p| !p.endpoints.is_empty())
+            .map(|p| p.name.as_str())
     }
 }
 

@@ -136,6 +136,18 @@ pub mod link_kind {
     /// A serial line (the glove: USB serial, Bluetooth SPP or the simulator's pseudo-terminal;
     /// the LEAP Hand's Dynamixel bus through a USB adapter such as the U2D2).
     pub const SERIAL: u8 = 3;
+
+    /// The kind's short name (`none`, `ethercat`, `can`, `serial`); `None` for a value not
+    /// listed here.
+    pub fn name(kind: u8) -> Option<&'static str> {
+        match kind {
+            NONE => Some("none"),
+            ETHERCAT => Some("ethercat"),
+            CAN => Some("can"),
+            SERIAL => Some("serial"),
+            _ => None,
+        }
+    }
 }
 
 /// Values of [`HandState::bus_state`]; which ones apply depends on [`HandState::link_kind`].
@@ -651,11 +663,9 @@ impl DeviceInfo {
     /// identity serial only when there is one): what the recorder writes as metadata and the
     /// viewer shows.
     pub fn named_fields(&self) -> Vec<(&'static str, String)> {
-        let link_kind = match self.link_kind {
-            link_kind::ETHERCAT => "ethercat",
-            link_kind::CAN => "can",
-            link_kind::SERIAL => "serial",
-            _ => "",
+        let link_kind = match link_kind::name(self.link_kind) {
+            Some("none") | None => "",
+            Some(name) => name,
         };
         let mut fields = vec![
             (
