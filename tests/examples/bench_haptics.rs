@@ -167,9 +167,16 @@ fn bench() -> Result<(), String> {
     );
     println!(
         "- operator station: FeedbackEngine, config/revo2/feedback.toml (gain {} per N above \
-         {} N, max {}), passivity mode off (plain) or on (passivity); its force commands to \
-         the glove without delay.",
-        law.gain_per_n, law.contact_threshold_n, law.max_force
+         {} N, max {}, hysteresis {}), passivity mode off (plain) or on (passivity: tolerance \
+         {}, max_damping {}, recovery_per_s {}); its force commands to the glove without \
+         delay.",
+        law.gain_per_n,
+        law.contact_threshold_n,
+        law.max_force,
+        law.hysteresis,
+        law.passivity.tolerance,
+        law.passivity.max_damping,
+        law.passivity.recovery_per_s
     );
     println!("- rates and limits: {}.", stations.describe());
     println!();

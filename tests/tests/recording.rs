@@ -197,7 +197,14 @@ fn reprocess_is_deterministic_and_detects_a_changed_gain() {
     let sample = root.join("recordings/grasp.sample.mcap");
     assert!(sample.is_file(), "{} is missing", sample.display());
     let retarget = root.join("config/revo2/retarget.toml");
-    let feedback = root.join("config/revo2/feedback.toml");
+    // The law the sample was recorded with had no hysteresis (added later); with the shipped
+    // 35 units every held force of the sample would differ by up to that much.
+    let shipped = std::fs::read_to_string(root.join("config/revo2/feedback.toml")).unwrap();
+    assert!(shipped.contains("hysteresis = 35.0"), "{shipped}");
+    let feedback = sandbox.write(
+        "feedback-as-recorded.toml",
+        &shipped.replace("hysteresis = 35.0", "hysteresis = 0.0"),
+    );
     let run = |out: &str, feedback: &std::path::Path, retarget: &std::path::Path| {
         let out = sandbox.dir.path().join(out);
         let r = sandbox.run_teleop(&[

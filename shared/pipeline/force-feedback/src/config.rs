@@ -38,6 +38,18 @@ pub struct FeedbackConfig {
     /// `max_force / stale_ramp_s` units per second, so from `max_force` it
     /// reaches zero within this time (s). Default 0.1; must be > 0.
     pub stale_ramp_s: f32,
+    /// Backlash on each finger's demand, glove units: the demand passed on trails the law's
+    /// by up to this much and holds still while the law's turns back within it, so the force
+    /// does not hunt between neighbouring values of a quantised contact force; a demand at or
+    /// below it is passed exactly, so a contact that ends still goes to zero. What it costs:
+    /// the felt force is up to this much off the law's (below it after a rise). Default 0
+    /// (off). With a position-controlled hand, set it to about the force one step of the
+    /// retargeting's deadband makes on a rigid object: the Revo2's 5 per mille at 0.03 N per
+    /// unit of position error is about 0.14 N, 34 units at the default gain, and an operator
+    /// whose finger gives way more than a step's travel under 34 units hunts between the two
+    /// (bench_haptics, the loose operator on the rigid ball: a 42-unit, 15-raw swing at 0 and
+    /// 10 ms round trip without it; a slower 27-unit one with 20; none with 35).
+    pub hysteresis: f32,
     /// Contact estimation from joint state, used when tactile data is absent
     /// or invalid for a finger.
     pub estimate: EstimateConfig,
@@ -87,6 +99,7 @@ impl Default for FeedbackConfig {
             rate_limit_per_s: 20_000.0,
             smoothing_tau_s: 0.01,
             stale_ramp_s: 0.1,
+            hysteresis: 0.0,
             estimate: EstimateConfig::default(),
             finger_gain: [1.0; GLOVE_FINGERS],
             pst: PstConfig::default(),
@@ -279,6 +292,7 @@ impl FeedbackConfig {
         check_positive("rate_limit_per_s", self.rate_limit_per_s)?;
         check_non_negative("smoothing_tau_s", self.smoothing_tau_s)?;
         check_positive("stale_ramp_s", self.stale_ramp_s)?;
+        check_non_negative("hysteresis", self.hysteresis)?;
         let e = &self.estimate;
         check_non_negative(
             "estimate.position_error_threshold",

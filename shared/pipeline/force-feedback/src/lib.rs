@@ -48,6 +48,7 @@
 //! rate_limit_per_s = 20000.0  # glove units per second
 //! smoothing_tau_s = 0.01      # s, 0 disables the low-pass
 //! stale_ramp_s = 0.1          # s from max_force to 0 when inputs are stale
+//! hysteresis = 0.0            # glove units of backlash on the demand (0: off)
 //! finger_gain = [1.0, 1.0, 1.0, 1.0, 1.0]  # glove order, each in [0, 2]
 //!
 //! [estimate]                  # fallback when tactile is absent/invalid
@@ -217,6 +218,8 @@ pub struct ForceFeedback {
     closing: [f32; MAX_JOINTS],
     /// Low-pass filter state per glove finger, in `[0, max_force]`.
     filtered: [f32; GLOVE_FINGERS],
+    /// Each finger's demand after the backlash (`hysteresis`).
+    held: [f32; GLOVE_FINGERS],
     /// Rate-limited output per glove finger, in `[0, max_force]`.
     output: [f32; GLOVE_FINGERS],
     /// Timestamp of the previous step.
@@ -269,6 +272,7 @@ impl ForceFeedback {
             sources,
             closing,
             filtered: [0.0; GLOVE_FINGERS],
+            held: [0.0; GLOVE_FINGERS],
             output: [0.0; GLOVE_FINGERS],
             last_t_ns: None,
         })
@@ -283,6 +287,7 @@ impl ForceFeedback {
     /// as the first (`dt = 0`).
     pub fn reset(&mut self) {
         self.filtered = [0.0; GLOVE_FINGERS];
+        self.held = [0.0; GLOVE_FINGERS];
         self.output = [0.0; GLOVE_FINGERS];
         self.last_t_ns = None;
         self.passivity.reset();
@@ -411,7 +416,8 @@ impl ForceFeedback {
     /// fingertip), or no hand state when it is needed, the force ramps to
     /// zero at
     /// `max_force / stale_ramp_s` per second. A demand is scaled by
-    /// `finger_gain`, saturated to `[0, max_force]`, low-pass filtered
+    /// `finger_gain`, saturated to `[0, max_force]`, held within `hysteresis` of
+    /// where it last went (see [`backlash`]), low-pass filtered
     /// (`smoothing_tau_s`) and rate limited (`rate_limit_per_s`).
     ///
     /// Saturation is applied to the demand before the filter (anti-windup:
@@ -426,6 +432,7 @@ impl ForceFeedback {
 
         if inputs.estop {
             self.filtered = [0.0; GLOVE_FINGERS];
+            self.held = [0.0; GLOVE_FINGERS];
             self.output = [0.0; GLOVE_FINGERS];
             self.passivity.reset();
             return FeedbackOutput {
@@ -479,6 +486,7 @@ impl ForceFeedback {
                     let next = positive_or_zero(self.output[finger] - ramp_step);
                     // Bumpless restart: the filter resumes from the output.
                     self.filtered[finger] = next;
+                    self.held[finger] = next;
                     out.source[finger] = ContactSource::Ramping;
                     out.stale = true;
                     next
@@ -492,6 +500,8 @@ impl ForceFeedback {
                         out.clamped += 1;
                     }
                     *wanted = d;
+                    let d = backlash(self.held[finger], d, self.config.hysteresis);
+                    self.held[finger] = d;
                     // Written as a weighted sum so it is monotone in both
                     // arguments even with float rounding.
                     let f = (1.0 - alpha) * self.filtered[finger] + alpha * d;
@@ -532,5 +542,21 @@ impl ForceFeedback {
         }
         out.passivity = report;
         out
+    }
+}
+
+/// A demand `d` through a backlash of width `h` that last gave `held`: unchanged while `d` stays
+/// within `h` of it, else trailing `d` by `h`, and never below `h` (so more demand never gives
+/// less force than a demand of `h`); a demand at or below `h` is passed as it is, so a contact
+/// that ends gives zero. Total: a non-finite result gives `d`.
+fn backlash(held: f32, d: f32, h: f32) -> f32 {
+    if !h.is_finite() || h <= 0.0 || d <= h {
+        return d;
+    }
+    let out = held.max(d - h).min(d + h).max(h);
+    if out.is_finite() {
+        out
+    } else {
+        d
     }
 }

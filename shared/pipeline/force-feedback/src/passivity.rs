@@ -112,8 +112,10 @@ pub struct PassivityConfig {
     /// gives way under it does a little work on the finger; the tolerance lets that pass, so
     /// the simulator's operator feels the whole force at every delay up to 500 ms round trip
     /// (bench_haptics: with 0, the index on the sponge at 500 ms lost 98 % of its force and the
-    /// fingers' mean on the rigid ball 20 %). What it costs: the loose operator's finger keeps
-    /// a 42-unit, 15-raw swing on the rigid ball at 0 and 10 ms (none with 0).
+    /// fingers' mean on the rigid ball 20 %). What it lets through: a deficit that grows a
+    /// little each cycle (a contact force hunting between two quantised values drains a few
+    /// tenths of a unit a cycle) is taken out only once it reaches the tolerance; the law's
+    /// `hysteresis` is what keeps such hunting from starting.
     pub tolerance: f32,
     /// How fast the force climbs back after the controller lowered it, glove units per second.
     /// Default 1000: from zero to the default saturation (800) in 0.8 s. The law's own rate

@@ -384,6 +384,56 @@ fn saturate(ff: &mut ForceFeedback, t: &mut u64) {
     assert_eq!(out.force, [max; 5]);
 }
 
+/// The hysteresis: a contact force flipping between two neighbouring values (one step of a
+/// position-controlled hand's quantised force, 34 units apart here) leaves the force still once
+/// it has risen; a larger change is followed, trailing by the hysteresis; light contacts and a
+/// contact that ends are passed exactly; without it every flip is followed.
+#[test]
+fn the_hysteresis_holds_the_force_still_while_the_contact_force_flips_by_one_step() {
+    // 0.3 N threshold, 250 units per N: 2.0 N is 425 units, 2.136 N 459.
+    let newtons = |demand: f32| 0.3 + demand / 250.0;
+    let at = |demand: f32| {
+        let mut n = [0.0; MAX_FINGERTIPS];
+        n[GLOVE_TO_TACTILE[3]] = newtons(demand);
+        fresh(n)
+    };
+    for hysteresis in [0.0, 35.0] {
+        let mut ff = law(FeedbackConfig {
+            hysteresis,
+            ..direct_config()
+        });
+        let mut t = 0;
+        let index = |ff: &mut ForceFeedback, t: &mut u64, demand: f32| {
+            f32::from(run(ff, t, 3, |t| inputs(t, at(demand), None)).force[3])
+        };
+        // Light contact: passed as it is.
+        assert!((index(&mut ff, &mut t, 20.0) - 20.0).abs() <= 1.0);
+        // A rise: followed, trailing by the hysteresis.
+        let risen = index(&mut ff, &mut t, 459.0);
+        assert!((risen - (459.0 - hysteresis)).abs() <= 1.0, "{risen}");
+        // The contact force flips by one step and back, over and over.
+        let mut seen = vec![];
+        for _ in 0..5 {
+            seen.push(index(&mut ff, &mut t, 425.0));
+            seen.push(index(&mut ff, &mut t, 459.0));
+        }
+        let swing = seen.iter().copied().fold(f32::MIN, f32::max)
+            - seen.iter().copied().fold(f32::MAX, f32::min);
+        if hysteresis > 0.0 {
+            assert!(swing <= 1.0, "held still: {seen:?}");
+        } else {
+            assert!(swing >= 33.0, "every flip followed: {seen:?}");
+        }
+        // A fall of more than the hysteresis is followed, above it by the hysteresis.
+        let fallen = index(&mut ff, &mut t, 300.0);
+        assert!((fallen - (300.0 + hysteresis)).abs() <= 1.0, "{fallen}");
+        // A contact that ends gives no force at all.
+        assert_eq!(index(&mut ff, &mut t, 0.0), 0.0);
+        // More demand never gives less force than a demand of the hysteresis itself.
+        assert!(index(&mut ff, &mut t, hysteresis + 5.0) >= hysteresis.min(40.0) - 1.0);
+    }
+}
+
 /// The passivity controller inside the law: a saturated push that drives the fingers open
 /// generates energy, so the controller (on) cuts it; once the fingers stop, the force climbs
 /// back at the controller's recovery rate, slower than the law's rate limit; with the
@@ -770,15 +820,17 @@ fn any_config() -> BoxedStrategy<FeedbackConfig> {
         positive(1e-4, 1.0),
         estimate_config(),
         proptest::array::uniform5(prop_oneof![Just(0.0_f32), Just(2.0_f32), 0.0_f32..=2.0]),
+        prop_oneof![Just(0.0_f32), 0.0_f32..100.0, Just(f32::MAX)],
     )
         .prop_map(
-            |(thr, gain, max, rate, tau, ramp, estimate, fg)| FeedbackConfig {
+            |(thr, gain, max, rate, tau, ramp, estimate, fg, hysteresis)| FeedbackConfig {
                 contact_threshold_n: thr,
                 gain_per_n: gain,
                 max_force: max,
                 rate_limit_per_s: rate,
                 smoothing_tau_s: tau,
                 stale_ramp_s: ramp,
+                hysteresis,
                 estimate,
                 finger_gain: fg,
                 pst: PstConfig::default(),
