@@ -11,11 +11,11 @@ use teleop_e2e::haptics::{
 };
 use teleop_sim_glove::hand::HandModel;
 
-/// The smallest round trip at which plain feedback oscillates on the rigid object in every grasp
-/// of `bench_haptics` (with the loose operator: the default one never does), ms; below it, at 0
-/// and 10 ms, in one or two grasps of three, from the loop's own lags (the tactile sensor's
-/// 10 ms, the law's smoothing, the glove's exchange, the robot finger's response). From 50 ms on
-/// the swing is the glove's whole reach.
+/// A round trip at which plain feedback oscillates on the rigid object in every grasp of
+/// `bench_haptics` with the loose operator (the default one never does): it does from 10 ms on,
+/// and at 0 ms in one grasp of three, from the loop's own lags (the tactile sensor's 10 ms, the
+/// law's smoothing, the glove's exchange, the robot finger's response); from 50 ms on the swing
+/// is the glove's whole reach.
 const OSCILLATING_RTT_MS: u64 = 50;
 
 /// One grasp of the loop by `operator`: its figures.

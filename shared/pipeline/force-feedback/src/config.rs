@@ -41,14 +41,18 @@ pub struct FeedbackConfig {
     /// Backlash on each finger's demand, glove units: the demand passed on trails the law's
     /// by up to this much and holds still while the law's turns back within it, so the force
     /// does not hunt between neighbouring values of a quantised contact force; a demand at or
-    /// below it is passed exactly, so a contact that ends still goes to zero. What it costs:
-    /// the felt force is up to this much off the law's (below it after a rise). Default 0
-    /// (off). With a position-controlled hand, set it to about the force one step of the
-    /// retargeting's deadband makes on a rigid object: the Revo2's 5 per mille at 0.03 N per
-    /// unit of position error is about 0.14 N, 34 units at the default gain, and an operator
-    /// whose finger gives way more than a step's travel under 34 units hunts between the two
-    /// (bench_haptics, the loose operator on the rigid ball: a 42-unit, 15-raw swing at 0 and
-    /// 10 ms round trip without it; a slower 27-unit one with 20; none with 35).
+    /// below it, and a saturated one, is passed exactly, so a contact that ends still goes to
+    /// zero and a firm grasp is felt at `max_force`. What it costs: below saturation the felt
+    /// force is up to this much off the law's (below it after a rise). Default 0 (off); else
+    /// below `max_force`. With a position-controlled hand, set it to about the force one step
+    /// of the retargeting's deadband makes on a rigid object: in bench_haptics the Revo2
+    /// simulator's force on the rigid ball moved in steps of 0.134-0.16 N (34-40 units at the
+    /// default gain) as the retargeting's 5 per mille deadband let the target move, and the
+    /// loose operator's finger, giving way more than a step's travel under one step's force,
+    /// made it hunt between two steps with the passivity controller on (a 42-unit, 15-raw
+    /// swing at 0 and 10 ms round trip without hysteresis; a slower 27-unit one with 20; none
+    /// with 35). It does not stop plain feedback's delay-driven cycles: that is the passivity
+    /// controller's work.
     pub hysteresis: f32,
     /// Contact estimation from joint state, used when tactile data is absent
     /// or invalid for a finger.
@@ -280,7 +284,8 @@ impl FeedbackConfig {
 
     /// Checks every value is in range: all floats finite, thresholds and
     /// gains `>= 0`, `rate_limit_per_s > 0`, `stale_ramp_s > 0`,
-    /// `max_force` in `0..=1000`, each `finger_gain` in `[0, 2]`.
+    /// `max_force` in `0..=1000`, `hysteresis` 0 or in `(0, max_force)`, each
+    /// `finger_gain` in `[0, 2]`.
     ///
     /// Errors carry the origin [`IN_MEMORY_ORIGIN`].
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -293,6 +298,13 @@ impl FeedbackConfig {
         check_non_negative("smoothing_tau_s", self.smoothing_tau_s)?;
         check_positive("stale_ramp_s", self.stale_ramp_s)?;
         check_non_negative("hysteresis", self.hysteresis)?;
+        if self.hysteresis > 0.0 && self.hysteresis >= f32::from(self.max_force) {
+            return Err(invalid(
+                "hysteresis",
+                self.hysteresis,
+                "must be below max_force (or 0): every demand would pass unchanged",
+            ));
+        }
         let e = &self.estimate;
         check_non_negative(
             "estimate.position_error_threshold",

@@ -8,8 +8,8 @@
 //!
 //! Only the pure control law ([`ForceFeedback::step`]) and its configuration
 //! ([`FeedbackConfig`]): contact thresholds and gains, the joint-state contact
-//! estimate (position error, motor current, joint effort), smoothing, rate
-//! limiting, saturation, the stale-input ramp and the e-stop, applied through
+//! estimate (position error, motor current, joint effort), the hysteresis,
+//! smoothing, rate limiting, saturation, the stale-input ramp and the e-stop, applied through
 //! the profile's per-glove-finger [`FeedbackSource`]s; and the time-domain
 //! passivity layer on its output ([`Passivity`]). It does no I/O,
 //! reads no clock and does no IPC: the caller hands in configuration text
@@ -500,7 +500,7 @@ impl ForceFeedback {
                         out.clamped += 1;
                     }
                     *wanted = d;
-                    let d = backlash(self.held[finger], d, self.config.hysteresis);
+                    let d = backlash(self.held[finger], d, self.config.hysteresis, max);
                     self.held[finger] = d;
                     // Written as a weighted sum so it is monotone in both
                     // arguments even with float rounding.
@@ -545,12 +545,13 @@ impl ForceFeedback {
     }
 }
 
-/// A demand `d` through a backlash of width `h` that last gave `held`: unchanged while `d` stays
-/// within `h` of it, else trailing `d` by `h`, and never below `h` (so more demand never gives
-/// less force than a demand of `h`); a demand at or below `h` is passed as it is, so a contact
-/// that ends gives zero. Total: a non-finite result gives `d`.
-fn backlash(held: f32, d: f32, h: f32) -> f32 {
-    if !h.is_finite() || h <= 0.0 || d <= h {
+/// A demand `d` (within `0..=max`) through a backlash of width `h` that last gave `held`:
+/// unchanged while `d` stays within `h` of it, else trailing `d` by `h`, and never below `h` (so
+/// more demand never gives less force than a demand of `h`); a demand at or below `h` is passed
+/// as it is, so a contact that ends gives zero, and a saturated one (`max`) too, so a firm grasp
+/// is felt at full force. Total: a non-finite result gives `d`.
+fn backlash(held: f32, d: f32, h: f32, max: f32) -> f32 {
+    if !h.is_finite() || h <= 0.0 || d <= h || d >= max {
         return d;
     }
     let out = held.max(d - h).min(d + h).max(h);

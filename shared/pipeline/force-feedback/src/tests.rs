@@ -92,6 +92,7 @@ fn defaults_validate_and_match_documented_values() {
     assert_eq!(c.rate_limit_per_s, 20_000.0);
     assert_eq!(c.smoothing_tau_s, 0.01);
     assert_eq!(c.stale_ramp_s, 0.1);
+    assert_eq!(c.hysteresis, 0.0);
     assert_eq!(c.finger_gain, [1.0; 5]);
     assert!(c.estimate.use_position_error && c.estimate.use_current);
     assert_eq!(c.estimate.position_error_threshold, 0.05);
@@ -174,6 +175,9 @@ fn toml_out_of_range_values_name_origin_and_field() {
         ("rate_limit_per_s = nan", "rate_limit_per_s"),
         ("smoothing_tau_s = inf", "smoothing_tau_s"),
         ("stale_ramp_s = 0.0", "stale_ramp_s"),
+        ("hysteresis = -1.0", "hysteresis"),
+        ("hysteresis = 800.0", "hysteresis"),
+        ("max_force = 30\nhysteresis = 35.0", "hysteresis"),
         ("finger_gain = [1.0, 1.0, 2.5, 1.0, 1.0]", "finger_gain[2]"),
         ("finger_gain = [1.0, 1.0, 1.0, 1.0, -0.5]", "finger_gain[4]"),
         ("[estimate]\nposition_gain = -4.0", "estimate.position_gain"),
@@ -429,8 +433,58 @@ fn the_hysteresis_holds_the_force_still_while_the_contact_force_flips_by_one_ste
         assert!((fallen - (300.0 + hysteresis)).abs() <= 1.0, "{fallen}");
         // A contact that ends gives no force at all.
         assert_eq!(index(&mut ff, &mut t, 0.0), 0.0);
-        // More demand never gives less force than a demand of the hysteresis itself.
-        assert!(index(&mut ff, &mut t, hysteresis + 5.0) >= hysteresis.min(40.0) - 1.0);
+        // A saturated demand is felt at the saturation, not below it.
+        assert_eq!(index(&mut ff, &mut t, 2000.0), 1000.0);
+        assert_eq!(index(&mut ff, &mut t, 0.0), 0.0);
+        if hysteresis > 0.0 {
+            // More demand never gives less force than a demand of the hysteresis itself.
+            assert_eq!(index(&mut ff, &mut t, hysteresis), hysteresis);
+            assert_eq!(index(&mut ff, &mut t, hysteresis + 5.0), hysteresis);
+        }
+    }
+}
+
+/// What the hysteresis held is forgotten with everything else: after the e-stop, a reset or
+/// a stale ramp to zero, a demand gives what it gives a law that never held anything.
+#[test]
+fn the_hysteresis_starts_afresh_after_an_estop_a_reset_and_a_stale_ramp() {
+    let config = FeedbackConfig {
+        hysteresis: 35.0,
+        ..direct_config()
+    };
+    let mut index_n = [0.0; MAX_FINGERTIPS];
+    index_n[GLOVE_TO_TACTILE[3]] = 0.3 + 100.0 / 250.0;
+    let mut fresh_law = law(config.clone());
+    let mut t = 0;
+    let expected = run(&mut fresh_law, &mut t, 3, |t| {
+        inputs(t, fresh(index_n), None)
+    })
+    .force[3];
+    assert_eq!(
+        expected, 65,
+        "a rise from nothing to 100 trails by the hysteresis"
+    );
+    let mut high = [0.0; MAX_FINGERTIPS];
+    high[GLOVE_TO_TACTILE[3]] = 0.3 + 600.0 / 250.0;
+    for how in ["estop", "reset", "stale"] {
+        let mut ff = law(config.clone());
+        let mut t = 0;
+        run(&mut ff, &mut t, 3, |t| inputs(t, fresh(high), None));
+        match how {
+            "estop" => {
+                run(&mut ff, &mut t, 3, |t| Inputs {
+                    estop: true,
+                    ..inputs(t, fresh(high), None)
+                });
+            }
+            "reset" => ff.reset(),
+            _ => {
+                let out = run(&mut ff, &mut t, 200, |t| inputs(t, Tactile::Stale, None));
+                assert_eq!(out.force, [0; GLOVE_FINGERS], "ramped to zero");
+            }
+        }
+        let out = run(&mut ff, &mut t, 3, |t| inputs(t, fresh(index_n), None));
+        assert_eq!(out.force[3], expected, "after {how}");
     }
 }
 
@@ -820,7 +874,7 @@ fn any_config() -> BoxedStrategy<FeedbackConfig> {
         positive(1e-4, 1.0),
         estimate_config(),
         proptest::array::uniform5(prop_oneof![Just(0.0_f32), Just(2.0_f32), 0.0_f32..=2.0]),
-        prop_oneof![Just(0.0_f32), 0.0_f32..100.0, Just(f32::MAX)],
+        prop_oneof![Just(0.0_f32), 0.0_f32..100.0],
     )
         .prop_map(
             |(thr, gain, max, rate, tau, ramp, estimate, fg, hysteresis)| FeedbackConfig {
@@ -830,7 +884,12 @@ fn any_config() -> BoxedStrategy<FeedbackConfig> {
                 rate_limit_per_s: rate,
                 smoothing_tau_s: tau,
                 stale_ramp_s: ramp,
-                hysteresis,
+                // Valid only below the saturation.
+                hysteresis: if hysteresis < f32::from(max) {
+                    hysteresis
+                } else {
+                    0.0
+                },
                 estimate,
                 finger_gain: fg,
                 pst: PstConfig::default(),
