@@ -5,13 +5,13 @@
 //! does not drive the hand after the retargeting node restarts.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Output;
+use std::process::{Output, Stdio};
 use std::time::{Duration, Instant};
 
 use teleop_e2e::{node_process, wait_for, with_profile, Sandbox, FEEDBACK_TOML};
 use teleop_msgs::{device_model, force_flags, units, GloveForceCommand, GloveState, HandCommand};
 use teleop_msgs::{HandState, NodeHealth, Tactile};
-use teleop_runtime::{now_ns, NodeRuntime, Publisher, Subscriber};
+use teleop_runtime::{now_ns, EStopInput, NodeRuntime, Publisher, Subscriber};
 
 /// One node `name` ([`node_process`]), restarted 1.5 s after it dies (long enough to send an
 /// e-stop while it is down).
@@ -189,6 +189,88 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
 
     // Only --release releases.
     release(&sandbox, &mut hand, &[]);
+}
+
+/// A node that reads its doorbell late (starved of the CPU) still takes a release that it reads
+/// within the release's wait; one that reads it after the command ended stays engaged (the safe
+/// side), and `teleop estop --release` says so and fails instead of reporting the e-stop
+/// released because another node answered.
+#[test]
+fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
+    let sandbox = Sandbox::new();
+    let launch = feedback_launch(&sandbox);
+    let _session = sandbox.launch(&launch);
+    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
+    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    // A second node that obeys the e-stop, run by the test: it reads its doorbell only when the
+    // test lets it.
+    let slow_node = NodeRuntime::new("e2e-slow", &sandbox.ipc).unwrap();
+    let slow = EStopInput::new(&slow_node).unwrap();
+    let said = estop(
+        &sandbox,
+        &[],
+        true,
+        &["ENGAGED", "acknowledged by feedback; 1 more that obey"],
+    );
+    // It stops all the same, on the latch.
+    std::thread::sleep(teleop_runtime::LATCH_POLL);
+    slow.update().unwrap();
+    assert!(slow.engaged(), "{said}");
+    hand.until(Duration::from_secs(2), "e-stop", stopped);
+
+    let spawn_release = || {
+        sandbox
+            .teleop()
+            .args(["estop", "--release"])
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    // 2 s late (the release used to wait 1 s): the release waits for it.
+    let release = spawn_release();
+    std::thread::sleep(Duration::from_secs(2));
+    slow.update().unwrap();
+    assert!(!slow.engaged(), "the slow node took the release");
+    let out = release.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("acknowledged by e2e-slow, feedback"),
+        "{}",
+        text(&out)
+    );
+    hand.until(Duration::from_secs(3), "forces after release", pushing);
+
+    // Later than the release's whole wait: not released, and said so.
+    estop(&sandbox, &[], true, &["ENGAGED"]);
+    std::thread::sleep(teleop_runtime::LATCH_POLL);
+    slow.update().unwrap();
+    assert!(slow.engaged());
+    hand.until(Duration::from_secs(2), "e-stop", stopped);
+    estop(
+        &sandbox,
+        &["--release"],
+        false,
+        &[
+            "NOT released by every node",
+            "acknowledged by feedback; 1 more that obey the e-stop did not answer",
+            "did not reach 1 node(s)",
+            "run `teleop estop --release` again",
+        ],
+    );
+    slow.update().unwrap();
+    assert!(
+        slow.engaged(),
+        "a node that missed the release's doorbell released on its own"
+    );
+    // Another release reaches it.
+    let release = spawn_release();
+    std::thread::sleep(Duration::from_millis(300));
+    slow.update().unwrap();
+    assert!(!slow.engaged());
+    let out = release.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", text(&out));
 }
 
 const RETARGET_TOML: &str = r#"

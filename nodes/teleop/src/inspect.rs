@@ -502,8 +502,16 @@ fn health_table(latest: &BTreeMap<String, NodeHealth>) -> String {
     out
 }
 
-/// How long `teleop estop` waits for the nodes that obey the e-stop to acknowledge it.
+/// How long `teleop estop` waits for the nodes that obey the e-stop to acknowledge an engage
+/// (a node that misses the doorbell still stops: it reads the latch every
+/// `teleop_runtime::LATCH_POLL`).
 const ESTOP_ACK_WAIT: Duration = Duration::from_secs(1);
+
+/// How long `teleop estop --release` waits for every node that obeys the e-stop to take the
+/// release. A node releases only on the doorbell's sample (never on a missing latch alone), and
+/// iceoryx2 takes the sample back when the command's publisher goes: a node starved of the CPU
+/// for longer than this stays engaged, and the command says so (exit 1).
+const ESTOP_RELEASE_WAIT: Duration = Duration::from_secs(5);
 
 /// What one `teleop estop` (or the console's e-stop key) did.
 #[derive(Debug, Clone, PartialEq)]
@@ -516,6 +524,9 @@ pub(crate) struct EStopReport {
     pub rung: usize,
     /// Per namespace, the nodes that acknowledged, sorted.
     pub acks: Vec<(Option<Namespace>, Vec<String>)>,
+    /// Per namespace where fewer nodes answered than obey the e-stop there (each has one
+    /// `estop/ack` publisher), how many did not answer within the wait.
+    pub unanswered: Vec<(Option<Namespace>, usize)>,
     /// What could not be done (engaging goes on past a failure).
     pub failures: Vec<String>,
 }
@@ -529,6 +540,10 @@ impl EStopReport {
     /// The first line `teleop estop` prints: what state the pipeline is now in.
     pub fn headline(&self) -> &'static str {
         match (self.engage, self.latches.is_empty(), self.rung) {
+            (false, ..) if self.silent() > 0 => {
+                "e-stop latches cleared, but NOT released by every node: those that did not \
+                 answer stay engaged"
+            }
             (false, ..) => "e-stop released",
             (true, true, 0) => "e-stop COULD NOT BE ENGAGED: no latch written, no doorbell rung",
             (true, true, _) => {
@@ -542,10 +557,25 @@ impl EStopReport {
         }
     }
 
-    /// Who acknowledged, per namespace: `namespace (none): acknowledged by feedback, revo2`.
+    /// How many nodes that obey the e-stop did not answer, over every namespace.
+    fn silent(&self) -> usize {
+        self.unanswered.iter().map(|(_, n)| n).sum()
+    }
+
+    /// How long this action waited for the acknowledgements.
+    fn waited(&self) -> Duration {
+        if self.engage {
+            ESTOP_ACK_WAIT
+        } else {
+            ESTOP_RELEASE_WAIT
+        }
+    }
+
+    /// Who acknowledged, per namespace: `namespace (none): acknowledged by feedback, revo2`,
+    /// and how many more obey the e-stop there and did not answer.
     pub fn ack_lines(&self) -> impl Iterator<Item = String> + '_ {
         self.acks.iter().map(|(ns, answered)| {
-            format!(
+            let mut line = format!(
                 "namespace {}: acknowledged by {}",
                 shown(ns.as_ref()),
                 if answered.is_empty() {
@@ -553,7 +583,14 @@ impl EStopReport {
                 } else {
                     answered.join(", ")
                 }
-            )
+            );
+            if let Some((_, n)) = self.unanswered.iter().find(|(other, _)| other == ns) {
+                line.push_str(&format!(
+                    "; {n} more that obey the e-stop did not answer within {} ms",
+                    self.waited().as_millis()
+                ));
+            }
+            line
         })
     }
 
@@ -566,8 +603,26 @@ impl EStopReport {
             }
             return Some(text);
         }
+        if !self.engage && self.silent() > 0 {
+            return Some(format!(
+                "the release did not reach {} node(s) that obey the e-stop within {} ms: they \
+                 stay engaged (glove forces at zero, hands holding) until a release reaches \
+                 them; the latch is cleared: run `teleop estop --release` again",
+                self.silent(),
+                ESTOP_RELEASE_WAIT.as_millis(),
+            ));
+        }
         if self.acknowledged() > 0 {
             return None;
+        }
+        if self.silent() > 0 {
+            return Some(format!(
+                "no node acknowledged the e-stop within {} ms, though {} obey it: the latch is \
+                 set, and each stops within {} ms of running",
+                ESTOP_ACK_WAIT.as_millis(),
+                self.silent(),
+                teleop_runtime::LATCH_POLL.as_millis(),
+            ));
         }
         Some(if self.engage {
             format!(
@@ -795,15 +850,17 @@ pub(crate) fn ring_engaged(
                     shown(ns.as_ref())
                 )),
             }
-            sides.push((ns, acks, Vec::<String>::new()));
+            sides.push((ns, acks, Vec::<String>::new(), 0));
         }
         wait_for_acks(runtime, &mut sides, asked_at, true);
     }
+    let (acks, unanswered) = answers(sides);
     EStopReport {
         engage: true,
         latches: latched,
         rung: rung_count,
-        acks: answers(sides),
+        acks,
+        unanswered,
         failures,
     }
 }
@@ -835,12 +892,12 @@ pub(crate) fn release(
         // Subscribe to the answers before asking.
         let acks = runtime.subscriber_in::<EStopAck>(ns.as_ref())?;
         doorbells.push(runtime.publisher_in::<EStop>(ns.as_ref())?);
-        sides.push((ns, Some(acks), Vec::<String>::new()));
+        sides.push((ns, Some(acks), Vec::<String>::new(), 0));
     }
     let asked_at = now_ns();
     let mut latches = Vec::with_capacity(sides.len());
     let abandoned = |removed: usize| ReleaseAbandoned { removed };
-    for ((ns, _, _), publisher) in sides.iter().zip(&mut doorbells) {
+    for ((ns, ..), publisher) in sides.iter().zip(&mut doorbells) {
         let path = latch_path(ipc, ns.as_ref());
         if requests.count() != since {
             return Err(abandoned(latches.len()).into());
@@ -864,28 +921,41 @@ pub(crate) fn release(
         latches.push(path);
     }
     wait_for_acks(&runtime, &mut sides, asked_at, false);
+    let (acks, unanswered) = answers(sides);
     Ok(EStopReport {
         engage: false,
         latches,
         rung: doorbells.len(),
-        acks: answers(sides),
+        acks,
+        unanswered,
         failures: Vec::new(),
     })
 }
 
-/// One namespace of `teleop estop`: its acknowledgements (if they could be read) and the nodes
-/// that answered.
-type Side = (Option<Namespace>, Option<Subscriber<EStopAck>>, Vec<String>);
+/// One namespace of `teleop estop`: its acknowledgements (if they could be read), the nodes
+/// that answered, and how many obey the e-stop there (`estop/ack` publishers, last counted).
+type Side = (
+    Option<Namespace>,
+    Option<Subscriber<EStopAck>>,
+    Vec<String>,
+    usize,
+);
 
 /// Waits until every node that obeys the e-stop (each has one `estop/ack` publisher) answered
-/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`] (the whole time for a side
-/// whose acknowledgements cannot be read). The doorbells' publishers must live until then:
-/// iceoryx2 takes back the samples of a publisher that is gone.
+/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`] (engage) or
+/// [`ESTOP_RELEASE_WAIT`] (release; the whole time for a side whose acknowledgements cannot be
+/// read). The doorbells' publishers must live until then: iceoryx2 takes back the samples of a
+/// publisher that is gone.
 fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engage: bool) {
-    let deadline = Instant::now() + ESTOP_ACK_WAIT;
+    let deadline = Instant::now()
+        + if engage {
+            ESTOP_ACK_WAIT
+        } else {
+            ESTOP_RELEASE_WAIT
+        };
     loop {
         let mut all = true;
-        for (ns, acks, answered) in sides.iter_mut() {
+        for (ns, acks, answered, expected) in sides.iter_mut() {
             let Some(acks) = acks else {
                 // Who answered cannot be seen: wait the whole time, so that the doorbell's
                 // publisher (and with it the sample) outlives the nodes' reading it.
@@ -901,10 +971,10 @@ fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engag
                     answered.push(name);
                 }
             });
-            let expected = runtime
+            *expected = runtime
                 .topic_ports_in::<EStopAck>(ns.as_ref())
                 .map_or(0, |(publishers, _)| publishers);
-            all &= answered.len() >= expected;
+            all &= answered.len() >= *expected;
         }
         if all || Instant::now() >= deadline {
             break;
@@ -913,21 +983,66 @@ fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engag
     }
 }
 
-/// Who answered, per namespace, sorted.
-fn answers(sides: Vec<Side>) -> Vec<(Option<Namespace>, Vec<String>)> {
-    sides
-        .into_iter()
-        .map(|(ns, _, mut answered)| {
-            answered.sort();
-            (ns, answered)
-        })
-        .collect()
+/// Per namespace, who answered, and how many did not (see [`EStopReport`]).
+type Answers = (
+    Vec<(Option<Namespace>, Vec<String>)>,
+    Vec<(Option<Namespace>, usize)>,
+);
+
+/// Who answered, per namespace, sorted; and where fewer answered than obey the e-stop, how
+/// many did not (unknown, so not counted, where the acknowledgements could not be read).
+fn answers(sides: Vec<Side>) -> Answers {
+    let mut acks = Vec::with_capacity(sides.len());
+    let mut unanswered = Vec::new();
+    for (ns, readable, mut answered, expected) in sides {
+        answered.sort();
+        if readable.is_some() && expected > answered.len() {
+            unanswered.push((ns.clone(), expected - answered.len()));
+        }
+        acks.push((ns, answered));
+    }
+    (acks, unanswered)
 }
 
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
+
+    #[test]
+    fn a_release_that_missed_a_node_fails_and_an_engage_says_who_did_not_answer() {
+        let report = |engage: bool, answered: &[&str], silent: usize| EStopReport {
+            engage,
+            latches: vec!["/r/p_estop".into()],
+            rung: 1,
+            acks: vec![(None, answered.iter().map(|a| a.to_string()).collect())],
+            unanswered: if silent > 0 {
+                vec![(None, silent)]
+            } else {
+                vec![]
+            },
+            failures: vec![],
+        };
+        let missed = report(false, &["feedback"], 1);
+        assert!(missed.headline().contains("NOT released by every node"));
+        let problem = missed.problem().unwrap();
+        assert!(problem.contains("did not reach 1 node(s)"), "{problem}");
+        let line: Vec<String> = missed.ack_lines().collect();
+        assert_eq!(
+            line,
+            [
+                "namespace (none): acknowledged by feedback; 1 more that obey the e-stop did not \
+              answer within 5000 ms"
+            ]
+        );
+        let released = report(false, &["feedback"], 0);
+        assert_eq!(released.headline(), "e-stop released");
+        assert_eq!(released.problem(), None);
+        // An engage that one node answered holds: the others read the latch.
+        assert_eq!(report(true, &["feedback"], 1).problem(), None);
+        let nobody = report(true, &[], 2).problem().unwrap();
+        assert!(nobody.contains("though 2 obey it"), "{nobody}");
+    }
 
     #[test]
     fn health_table_shows_counters_and_details_by_name() {

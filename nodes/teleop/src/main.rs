@@ -119,7 +119,8 @@ enum Command {
     },
     /// Engage (or release) the emergency stop, latched until `--release`: all glove forces go
     /// to zero and the hands hold their last target, on every side. Lists the nodes that
-    /// acknowledged it; exits 1 when none did.
+    /// acknowledged it; exits 1 when none did, or when a release did not reach every node that
+    /// obeys the e-stop within 5 s (those stay engaged).
     Estop {
         /// Release instead of engage.
         #[arg(long)]
