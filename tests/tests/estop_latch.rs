@@ -193,7 +193,7 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
 
 /// A node that reads its doorbell late (starved of the CPU) still takes a release that it reads
 /// within the release's wait; one that reads it after the command ended stays engaged (the safe
-/// side), and `teleop estop --release` says so and fails instead of reporting the e-stop
+/// side), and `teleop estop --release` names it and fails instead of reporting the e-stop
 /// released because another node answered.
 #[test]
 fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
@@ -206,11 +206,15 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     // test lets it.
     let slow_node = NodeRuntime::new("e2e-slow", &sandbox.ipc).unwrap();
     let slow = EStopInput::new(&slow_node).unwrap();
+    let latch = teleop_runtime::latch_path(&sandbox.ipc, None);
     let said = estop(
         &sandbox,
         &[],
         true,
-        &["ENGAGED", "acknowledged by feedback; 1 more that obey"],
+        &[
+            "ENGAGED",
+            "acknowledged by feedback; did not answer within 1000 ms: e2e-slow",
+        ],
     );
     // It stops all the same, on the latch.
     std::thread::sleep(teleop_runtime::LATCH_POLL);
@@ -228,8 +232,16 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
             .spawn()
             .unwrap()
     };
-    // 2 s late (the release used to wait 1 s): the release waits for it.
+    let latch_removed = || {
+        wait_for(
+            Duration::from_secs(10),
+            "the release to remove the latch",
+            || (!latch.exists()).then_some(()),
+        )
+    };
+    // Read 2 s after the release rang (it used to wait 1 s): the release waits for it.
     let release = spawn_release();
+    latch_removed();
     std::thread::sleep(Duration::from_secs(2));
     slow.update().unwrap();
     assert!(!slow.engaged(), "the slow node took the release");
@@ -242,7 +254,7 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     );
     hand.until(Duration::from_secs(3), "forces after release", pushing);
 
-    // Later than the release's whole wait: not released, and said so.
+    // Read after the release's whole wait: not released, and said so.
     estop(&sandbox, &[], true, &["ENGAGED"]);
     std::thread::sleep(teleop_runtime::LATCH_POLL);
     slow.update().unwrap();
@@ -254,7 +266,7 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
         false,
         &[
             "NOT released by every node",
-            "acknowledged by feedback; 1 more that obey the e-stop did not answer",
+            "acknowledged by feedback; did not answer within 5000 ms: e2e-slow",
             "did not reach 1 node(s)",
             "run `teleop estop --release` again",
         ],
@@ -266,9 +278,10 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     );
     // Another release reaches it.
     let release = spawn_release();
-    std::thread::sleep(Duration::from_millis(300));
-    slow.update().unwrap();
-    assert!(!slow.engaged());
+    wait_for(Duration::from_secs(4), "the slow node released", || {
+        slow.update().unwrap();
+        (!slow.engaged()).then_some(())
+    });
     let out = release.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", text(&out));
 }

@@ -43,6 +43,11 @@ pub(crate) fn covered(
 }
 
 /// A namespace for people: its name, or `(none)` for the topics without a namespace.
+/// How many nodes a per-namespace list names.
+fn total(list: &[(Option<Namespace>, Vec<String>)]) -> usize {
+    list.iter().map(|(_, who)| who.len()).sum()
+}
+
 pub(crate) fn shown(namespace: Option<&Namespace>) -> &str {
     namespace.map_or("(none)", Namespace::as_str)
 }
@@ -524,9 +529,12 @@ pub(crate) struct EStopReport {
     pub rung: usize,
     /// Per namespace, the nodes that acknowledged, sorted.
     pub acks: Vec<(Option<Namespace>, Vec<String>)>,
-    /// Per namespace where fewer nodes answered than obey the e-stop there (each has one
-    /// `estop/ack` publisher), how many did not answer within the wait.
-    pub unanswered: Vec<(Option<Namespace>, usize)>,
+    /// Per namespace, the nodes that obey the e-stop there (a live node with an `estop/ack`
+    /// publisher) and did not answer within the wait, sorted; only namespaces with some.
+    pub unanswered: Vec<(Option<Namespace>, Vec<String>)>,
+    /// A release only: per namespace, the nodes that took it and answered still engaged
+    /// (another latch holds them), sorted; only namespaces with some.
+    pub still_engaged: Vec<(Option<Namespace>, Vec<String>)>,
     /// What could not be done (engaging goes on past a failure).
     pub failures: Vec<String>,
 }
@@ -540,9 +548,8 @@ impl EStopReport {
     /// The first line `teleop estop` prints: what state the pipeline is now in.
     pub fn headline(&self) -> &'static str {
         match (self.engage, self.latches.is_empty(), self.rung) {
-            (false, ..) if self.silent() > 0 => {
-                "e-stop latches cleared, but NOT released by every node: those that did not \
-                 answer stay engaged"
+            (false, ..) if total(&self.unanswered) + total(&self.still_engaged) > 0 => {
+                "e-stop latches cleared, but NOT released by every node: see below"
             }
             (false, ..) => "e-stop released",
             (true, true, 0) => "e-stop COULD NOT BE ENGAGED: no latch written, no doorbell rung",
@@ -557,11 +564,6 @@ impl EStopReport {
         }
     }
 
-    /// How many nodes that obey the e-stop did not answer, over every namespace.
-    fn silent(&self) -> usize {
-        self.unanswered.iter().map(|(_, n)| n).sum()
-    }
-
     /// How long this action waited for the acknowledgements.
     fn waited(&self) -> Duration {
         if self.engage {
@@ -572,7 +574,8 @@ impl EStopReport {
     }
 
     /// Who acknowledged, per namespace: `namespace (none): acknowledged by feedback, revo2`,
-    /// and how many more obey the e-stop there and did not answer.
+    /// then who obeys the e-stop there and did not answer, and who answered a release still
+    /// engaged.
     pub fn ack_lines(&self) -> impl Iterator<Item = String> + '_ {
         self.acks.iter().map(|(ns, answered)| {
             let mut line = format!(
@@ -584,11 +587,16 @@ impl EStopReport {
                     answered.join(", ")
                 }
             );
-            if let Some((_, n)) = self.unanswered.iter().find(|(other, _)| other == ns) {
-                line.push_str(&format!(
-                    "; {n} more that obey the e-stop did not answer within {} ms",
-                    self.waited().as_millis()
-                ));
+            for (what, list) in [
+                (
+                    format!("did not answer within {} ms", self.waited().as_millis()),
+                    &self.unanswered,
+                ),
+                ("answered still engaged".to_string(), &self.still_engaged),
+            ] {
+                if let Some((_, who)) = list.iter().find(|(other, _)| other == ns) {
+                    line.push_str(&format!("; {what}: {}", who.join(", ")));
+                }
             }
             line
         })
@@ -603,24 +611,32 @@ impl EStopReport {
             }
             return Some(text);
         }
-        if !self.engage && self.silent() > 0 {
+        if !self.engage && total(&self.still_engaged) > 0 {
+            return Some(format!(
+                "{} node(s) took the release and stay engaged: another latch holds them (the \
+                 plain one, set by `teleop estop` without `--namespace`, or an engage since); \
+                 release without `--namespace`",
+                total(&self.still_engaged),
+            ));
+        }
+        if !self.engage && total(&self.unanswered) > 0 {
             return Some(format!(
                 "the release did not reach {} node(s) that obey the e-stop within {} ms: they \
                  stay engaged (glove forces at zero, hands holding) until a release reaches \
-                 them; the latch is cleared: run `teleop estop --release` again",
-                self.silent(),
+                 them or they restart (the latch is cleared): run `teleop estop --release` again",
+                total(&self.unanswered),
                 ESTOP_RELEASE_WAIT.as_millis(),
             ));
         }
         if self.acknowledged() > 0 {
             return None;
         }
-        if self.silent() > 0 {
+        if total(&self.unanswered) > 0 {
             return Some(format!(
                 "no node acknowledged the e-stop within {} ms, though {} obey it: the latch is \
                  set, and each stops within {} ms of running",
                 ESTOP_ACK_WAIT.as_millis(),
-                self.silent(),
+                total(&self.unanswered),
                 teleop_runtime::LATCH_POLL.as_millis(),
             ));
         }
@@ -631,11 +647,9 @@ impl EStopReport {
                 ESTOP_ACK_WAIT.as_millis(),
             )
         } else {
-            format!(
-                "no node acknowledged the release within {} ms: none that obeys the e-stop is \
-                 running; the latch is cleared",
-                ESTOP_ACK_WAIT.as_millis(),
-            )
+            "no node acknowledged the release: none that obeys the e-stop is running; the latch \
+             is cleared"
+                .to_string()
         })
     }
 }
@@ -850,17 +864,18 @@ pub(crate) fn ring_engaged(
                     shown(ns.as_ref())
                 )),
             }
-            sides.push((ns, acks, Vec::<String>::new(), 0));
+            sides.push(Side::new(ns, acks));
         }
-        wait_for_acks(runtime, &mut sides, asked_at, true);
+        wait_for_acks(runtime, &mut sides, asked_at, true, &|| false);
     }
-    let (acks, unanswered) = answers(sides);
+    let answers = answers(sides);
     EStopReport {
         engage: true,
         latches: latched,
         rung: rung_count,
-        acks,
-        unanswered,
+        acks: answers.acks,
+        unanswered: answers.unanswered,
+        still_engaged: answers.still_engaged,
         failures,
     }
 }
@@ -892,13 +907,13 @@ pub(crate) fn release(
         // Subscribe to the answers before asking.
         let acks = runtime.subscriber_in::<EStopAck>(ns.as_ref())?;
         doorbells.push(runtime.publisher_in::<EStop>(ns.as_ref())?);
-        sides.push((ns, Some(acks), Vec::<String>::new(), 0));
+        sides.push(Side::new(ns, Some(acks)));
     }
     let asked_at = now_ns();
     let mut latches = Vec::with_capacity(sides.len());
     let abandoned = |removed: usize| ReleaseAbandoned { removed };
-    for ((ns, ..), publisher) in sides.iter().zip(&mut doorbells) {
-        let path = latch_path(ipc, ns.as_ref());
+    for (side, publisher) in sides.iter().zip(&mut doorbells) {
+        let path = latch_path(ipc, side.namespace.as_ref());
         if requests.count() != since {
             return Err(abandoned(latches.len()).into());
         }
@@ -920,33 +935,61 @@ pub(crate) fn release(
         publisher.publish(&EStop::default())?;
         latches.push(path);
     }
-    wait_for_acks(&runtime, &mut sides, asked_at, false);
-    let (acks, unanswered) = answers(sides);
+    // An engage asked for while it waits ends the wait: its report would come after the
+    // engage's and read as the state.
+    let engaged_since = || requests.count() != since;
+    if wait_for_acks(&runtime, &mut sides, asked_at, false, &engaged_since) {
+        return Err(abandoned(latches.len()).into());
+    }
+    let answers = answers(sides);
     Ok(EStopReport {
         engage: false,
         latches,
         rung: doorbells.len(),
-        acks,
-        unanswered,
+        acks: answers.acks,
+        unanswered: answers.unanswered,
+        still_engaged: answers.still_engaged,
         failures: Vec::new(),
     })
 }
 
-/// One namespace of `teleop estop`: its acknowledgements (if they could be read), the nodes
-/// that answered, and how many obey the e-stop there (`estop/ack` publishers, last counted).
-type Side = (
-    Option<Namespace>,
-    Option<Subscriber<EStopAck>>,
-    Vec<String>,
-    usize,
-);
+/// One namespace of `teleop estop`.
+struct Side {
+    namespace: Option<Namespace>,
+    /// The acknowledgements, if they can be read.
+    acks: Option<Subscriber<EStopAck>>,
+    /// The nodes that answered the state asked for.
+    answered: Vec<String>,
+    /// A release: the nodes that answered still engaged.
+    still: Vec<String>,
+    /// The nodes that obey the e-stop (live, with an `estop/ack` publisher), last listed.
+    obeying: Vec<String>,
+}
 
-/// Waits until every node that obeys the e-stop (each has one `estop/ack` publisher) answered
-/// `engage` since `asked_at`, or for at most [`ESTOP_ACK_WAIT`] (engage) or
+impl Side {
+    fn new(namespace: Option<Namespace>, acks: Option<Subscriber<EStopAck>>) -> Self {
+        Self {
+            namespace,
+            acks,
+            answered: Vec::new(),
+            still: Vec::new(),
+            obeying: Vec::new(),
+        }
+    }
+}
+
+/// Waits until every node that obeys the e-stop answered since `asked_at` (`engage`, or a
+/// release: released, or still engaged), or for at most [`ESTOP_ACK_WAIT`] (engage) or
 /// [`ESTOP_RELEASE_WAIT`] (release; the whole time for a side whose acknowledgements cannot be
-/// read). The doorbells' publishers must live until then: iceoryx2 takes back the samples of a
-/// publisher that is gone.
-fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engage: bool) {
+/// read), or until `give_up` (then true). The doorbells' publishers must live until then:
+/// iceoryx2 takes back the samples of a publisher that is gone.
+fn wait_for_acks(
+    runtime: &NodeRuntime,
+    sides: &mut [Side],
+    asked_at: u64,
+    engage: bool,
+    give_up: &dyn Fn() -> bool,
+) -> bool {
     let deadline = Instant::now()
         + if engage {
             ESTOP_ACK_WAIT
@@ -954,54 +997,82 @@ fn wait_for_acks(runtime: &NodeRuntime, sides: &mut [Side], asked_at: u64, engag
             ESTOP_RELEASE_WAIT
         };
     loop {
+        if give_up() {
+            return true;
+        }
         let mut all = true;
-        for (ns, acks, answered, expected) in sides.iter_mut() {
-            let Some(acks) = acks else {
+        for side in sides.iter_mut() {
+            let Some(acks) = &side.acks else {
                 // Who answered cannot be seen: wait the whole time, so that the doorbell's
                 // publisher (and with it the sample) outlives the nodes' reading it.
                 all = false;
                 continue;
             };
+            let (answered, still) = (&mut side.answered, &mut side.still);
             acks.drain(|a| {
                 let name = text_of(&a.node_name);
-                if a.header.stamp_ns >= asked_at
-                    && (a.engaged != 0) == engage
-                    && !answered.contains(&name)
-                {
-                    answered.push(name);
+                if a.header.stamp_ns < asked_at {
+                    return;
+                }
+                if (a.engaged != 0) == engage {
+                    still.retain(|n| *n != name);
+                    if !answered.contains(&name) {
+                        answered.push(name);
+                    }
+                } else if !engage && !answered.contains(&name) && !still.contains(&name) {
+                    still.push(name);
                 }
             });
-            *expected = runtime
-                .topic_ports_in::<EStopAck>(ns.as_ref())
-                .map_or(0, |(publishers, _)| publishers);
-            all &= answered.len() >= *expected;
+            side.obeying = runtime
+                .topic_publisher_nodes_in::<EStopAck>(side.namespace.as_ref())
+                .unwrap_or_default();
+            all &= side
+                .obeying
+                .iter()
+                .all(|n| side.answered.contains(n) || side.still.contains(n));
         }
         if all || Instant::now() >= deadline {
-            break;
+            return false;
         }
         std::thread::sleep(Duration::from_millis(10));
     }
 }
 
-/// Per namespace, who answered, and how many did not (see [`EStopReport`]).
-type Answers = (
-    Vec<(Option<Namespace>, Vec<String>)>,
-    Vec<(Option<Namespace>, usize)>,
-);
+/// What the nodes answered, per namespace (see [`EStopReport`]).
+struct Answers {
+    acks: Vec<(Option<Namespace>, Vec<String>)>,
+    unanswered: Vec<(Option<Namespace>, Vec<String>)>,
+    still_engaged: Vec<(Option<Namespace>, Vec<String>)>,
+}
 
-/// Who answered, per namespace, sorted; and where fewer answered than obey the e-stop, how
-/// many did not (unknown, so not counted, where the acknowledgements could not be read).
+/// Who answered, per namespace, sorted; who obeys the e-stop and did not answer (not known,
+/// so not listed, where the acknowledgements could not be read); who answered a release still
+/// engaged.
 fn answers(sides: Vec<Side>) -> Answers {
-    let mut acks = Vec::with_capacity(sides.len());
-    let mut unanswered = Vec::new();
-    for (ns, readable, mut answered, expected) in sides {
-        answered.sort();
-        if readable.is_some() && expected > answered.len() {
-            unanswered.push((ns.clone(), expected - answered.len()));
+    let mut out = Answers {
+        acks: Vec::with_capacity(sides.len()),
+        unanswered: Vec::new(),
+        still_engaged: Vec::new(),
+    };
+    for mut side in sides {
+        side.answered.sort();
+        side.still.sort();
+        if side.acks.is_some() {
+            let silent: Vec<String> = side
+                .obeying
+                .into_iter()
+                .filter(|n| !side.answered.contains(n) && !side.still.contains(n))
+                .collect();
+            if !silent.is_empty() {
+                out.unanswered.push((side.namespace.clone(), silent));
+            }
         }
-        acks.push((ns, answered));
+        if !side.still.is_empty() {
+            out.still_engaged.push((side.namespace.clone(), side.still));
+        }
+        out.acks.push((side.namespace, side.answered));
     }
-    (acks, unanswered)
+    out
 }
 
 #[cfg(test)]
@@ -1011,36 +1082,55 @@ mod tests {
 
     #[test]
     fn a_release_that_missed_a_node_fails_and_an_engage_says_who_did_not_answer() {
-        let report = |engage: bool, answered: &[&str], silent: usize| EStopReport {
-            engage,
-            latches: vec!["/r/p_estop".into()],
-            rung: 1,
-            acks: vec![(None, answered.iter().map(|a| a.to_string()).collect())],
-            unanswered: if silent > 0 {
-                vec![(None, silent)]
-            } else {
-                vec![]
-            },
-            failures: vec![],
+        let names = |n: &[&str]| n.iter().map(|a| a.to_string()).collect::<Vec<_>>();
+        let report = |engage: bool, answered: &[&str], silent: &[&str], still: &[&str]| {
+            let per_ns = |n: &[&str]| {
+                if n.is_empty() {
+                    vec![]
+                } else {
+                    vec![(None, names(n))]
+                }
+            };
+            EStopReport {
+                engage,
+                latches: vec!["/r/p_estop".into()],
+                rung: 1,
+                acks: vec![(None, names(answered))],
+                unanswered: per_ns(silent),
+                still_engaged: per_ns(still),
+                failures: vec![],
+            }
         };
-        let missed = report(false, &["feedback"], 1);
+        let missed = report(false, &["feedback"], &["revo2"], &[]);
         assert!(missed.headline().contains("NOT released by every node"));
         let problem = missed.problem().unwrap();
         assert!(problem.contains("did not reach 1 node(s)"), "{problem}");
-        let line: Vec<String> = missed.ack_lines().collect();
+        let lines: Vec<String> = missed.ack_lines().collect();
         assert_eq!(
-            line,
-            [
-                "namespace (none): acknowledged by feedback; 1 more that obey the e-stop did not \
-              answer within 5000 ms"
-            ]
+            lines,
+            ["namespace (none): acknowledged by feedback; did not answer within 5000 ms: revo2"]
         );
-        let released = report(false, &["feedback"], 0);
+        // Held by another latch: released again it would stay so; said how to release it.
+        let held = report(false, &["feedback"], &[], &["left/revo2"]);
+        assert!(held.headline().contains("NOT released by every node"));
+        let problem = held.problem().unwrap();
+        assert!(
+            problem.contains("release without `--namespace`"),
+            "{problem}"
+        );
+        assert!(held
+            .ack_lines()
+            .next()
+            .unwrap()
+            .ends_with("answered still engaged: left/revo2"));
+        let released = report(false, &["feedback"], &[], &[]);
         assert_eq!(released.headline(), "e-stop released");
         assert_eq!(released.problem(), None);
         // An engage that one node answered holds: the others read the latch.
-        assert_eq!(report(true, &["feedback"], 1).problem(), None);
-        let nobody = report(true, &[], 2).problem().unwrap();
+        assert_eq!(report(true, &["feedback"], &["revo2"], &[]).problem(), None);
+        let nobody = report(true, &[], &["glove", "revo2"], &[])
+            .problem()
+            .unwrap();
         assert!(nobody.contains("though 2 obey it"), "{nobody}");
     }
 

@@ -363,6 +363,23 @@ impl BridgeConfig {
                     ),
                 ));
             }
+            // The e-stop crosses stations by the `estop` key (each station's own latch); as a
+            // bridged topic a remote station's doorbell or acknowledgements would pose as this
+            // station's nodes (`teleop estop` counts the nodes that acknowledge).
+            if [
+                <teleop_msgs::EStop as teleop_msgs::Message>::TOPIC,
+                <teleop_msgs::EStopAck as teleop_msgs::Message>::TOPIC,
+            ]
+            .contains(&topic.name.as_str())
+            {
+                return Err(invalid(
+                    &field,
+                    format!(
+                        "{:?} is not bridged: the e-stop crosses stations by the `estop` key",
+                        topic.name
+                    ),
+                ));
+            }
             if seen.contains(&topic.name.as_str()) {
                 return Err(invalid(&field, format!("{:?} is listed twice", topic.name)));
             }
@@ -552,6 +569,15 @@ max_age_ms = 100
         );
         let e = refusal(|t| t.replace("hand/state", "hand/command"));
         assert!(e.contains("listed twice"), "{e}");
+        for estop in ["estop", "estop/ack"] {
+            let e = refusal(|t| t.replace("\"hand/state\"", &format!("{estop:?}")));
+            assert!(
+                e.contains(&format!(
+                    "topic[1].name: {estop:?} is not bridged: the e-stop crosses stations"
+                )),
+                "{e}"
+            );
+        }
         let e = refusal(|t| format!("{t}\nspeed = 3\n"));
         assert!(e.contains("unknown field `speed`"), "{e}");
         let e = refusal(|t| t.replace("connect = [\"quic/192.0.2.2:7447\"]", ""));

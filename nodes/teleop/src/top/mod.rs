@@ -29,9 +29,10 @@ use crate::episode::{self, Mark};
 use keys::{Action, Keys, Read};
 use screen::Screen;
 
-/// How long quitting waits for the e-stop's actions under way (each waits at most a second for
-/// its acknowledgements).
-const QUIT_WAIT: Duration = Duration::from_secs(10);
+/// How long quitting waits for the e-stop's actions under way (an engage waits at most a second
+/// for its acknowledgements, a release five: a release, an engage and another release queued
+/// take about 11 s).
+const QUIT_WAIT: Duration = Duration::from_secs(15);
 
 /// Runs the console until `q` (or Ctrl-C, SIGINT, SIGTERM): the namespaces `given`, or else every side found;
 /// `task` is the task `s` starts episodes of (without it, `s` asks).

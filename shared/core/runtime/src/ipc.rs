@@ -514,6 +514,54 @@ impl NodeRuntime {
         ))
     }
 
+    /// The names of the live nodes that have a publisher of `M`'s topic in `namespace`, sorted,
+    /// each once; `None` when the topic does not exist (yet). A dead node's publishers are left
+    /// out (its process is gone); a node whose state or name cannot be read is listed by its
+    /// iceoryx2 id. Creates nothing.
+    pub fn topic_publisher_nodes_in<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Option<Vec<String>> {
+        use iceoryx2::node::{NodeState, NodeView};
+        use iceoryx2::prelude::{CallbackProgression, PortFactory};
+        let (service, _) = service_name::<M>(namespace).ok()?;
+        let pubsub = self
+            .node
+            .service_builder(&service)
+            .publish_subscribe::<M>()
+            .open()
+            .ok()?;
+        let mut ids = Vec::new();
+        pubsub.dynamic_config().list_publishers(|p| {
+            ids.push(p.node_id);
+            CallbackProgression::Continue
+        });
+        let mut names = Vec::new();
+        let listed = Node::<Service>::list(self.node.config(), |state| {
+            let (id, name) = match &state {
+                NodeState::Alive(view) => (
+                    *view.id(),
+                    view.details()
+                        .as_ref()
+                        .map(|d| d.name().as_str().to_string()),
+                ),
+                NodeState::Dead(_) => return CallbackProgression::Continue,
+                NodeState::Inaccessible(id) | NodeState::Undefined(id) => (*id, None),
+            };
+            if ids.contains(&id) {
+                names.push(name.unwrap_or_else(|| format!("iceoryx2 node {id}")));
+            }
+            CallbackProgression::Continue
+        });
+        if listed.is_err() {
+            // The nodes cannot be listed: every publisher counts, unnamed.
+            names = ids.iter().map(|id| format!("iceoryx2 node {id}")).collect();
+        }
+        names.sort();
+        names.dedup();
+        Some(names)
+    }
+
     fn pubsub<M: Message>(
         &self,
         service: &ServiceName,
