@@ -64,23 +64,35 @@ use teleop_recording::{
 };
 use teleop_runtime::{qualified, split, Namespace};
 
-/// The export's choices (`teleop export` arguments).
+/// The export's choices: `teleop export`'s options (flattened into its arguments).
+#[derive(clap::Args, Debug)]
 pub struct ExportOptions {
     /// Frames per second.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub fps: u32,
-    /// The dataset's folder.
+    /// The dataset's folder (created, or appended to).
+    #[arg(long)]
     pub out: PathBuf,
-    /// Only episodes stopped with `--success`.
+    /// Only episodes stopped with --success.
+    #[arg(long)]
     pub only_success: bool,
-    /// Refuse an episode whose key topic's rate is below this fraction of the recording's.
+    /// Refuse an episode whose glove/state, hand/state or hand/command rate within it is
+    /// below this fraction of the topic's rate over the whole recording.
+    #[arg(long, default_value_t = 0.9)]
     pub min_rate_ratio: f64,
-    /// Refuse an episode in which a key topic is silent for longer than this (ms).
+    /// Refuse an episode in which glove/state, hand/state or hand/command is silent for
+    /// longer than this (ms): its frames would repeat a stale value.
+    #[arg(long, default_value_t = 100)]
     pub max_gap_ms: u64,
-    /// Add `glove.force_command`.
+    /// Add the glove's force command (5 forces) as the feature `glove.force_command`.
+    #[arg(long)]
     pub with_force_command: bool,
-    /// The sides to export (none: the recording's).
+    /// The sides to export (repeatable); without it, every side with a hand/state channel.
+    #[arg(long = "namespace", value_name = "NS")]
     pub namespaces: Vec<Namespace>,
-    /// The hand profile (none: the recording's).
+    /// Hand profile (default: the one embedded in the recording, else the shipped profile of
+    /// the recorded hand model).
+    #[arg(long)]
     pub profile: Option<PathBuf>,
 }
 

@@ -262,33 +262,8 @@ enum Command {
         /// The dataset format.
         #[arg(long, value_enum)]
         format: ExportFormat,
-        /// Frames per second.
-        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
-        fps: u32,
-        /// The dataset's folder (created, or appended to).
-        #[arg(long)]
-        out: PathBuf,
-        /// Only episodes stopped with --success.
-        #[arg(long)]
-        only_success: bool,
-        /// Refuse an episode whose glove/state, hand/state or hand/command rate within it is
-        /// below this fraction of the topic's rate over the whole recording.
-        #[arg(long, default_value_t = 0.9)]
-        min_rate_ratio: f64,
-        /// Refuse an episode in which glove/state, hand/state or hand/command is silent for
-        /// longer than this (ms): its frames would repeat a stale value.
-        #[arg(long, default_value_t = 100)]
-        max_gap_ms: u64,
-        /// Add the glove's force command (5 forces) as the feature `glove.force_command`.
-        #[arg(long)]
-        with_force_command: bool,
-        /// The sides to export (repeatable); without it, every side with a hand/state channel.
-        #[arg(long = "namespace", value_name = "NS")]
-        namespaces: Vec<Namespace>,
-        /// Hand profile (default: the one embedded in the recording, else the shipped profile of
-        /// the recorded hand model).
-        #[arg(long)]
-        profile: Option<PathBuf>,
+        #[command(flatten)]
+        options: export::ExportOptions,
     },
     /// Run retargeting and force feedback over a recording's inputs and compare with its outputs.
     Reprocess {
@@ -587,27 +562,8 @@ fn main() -> ExitCode {
         Command::Export {
             recordings,
             format: ExportFormat::Lerobot,
-            fps,
-            out,
-            only_success,
-            min_rate_ratio,
-            max_gap_ms,
-            with_force_command,
-            namespaces,
-            profile,
-        } => export::run(
-            &recordings,
-            &export::ExportOptions {
-                fps,
-                out,
-                only_success,
-                min_rate_ratio,
-                max_gap_ms,
-                with_force_command,
-                namespaces,
-                profile,
-            },
-        ),
+            options,
+        } => export::run(&recordings, &options),
         Command::Episode { command } => {
             let mark = match command {
                 EpisodeCommand::Start { task } => episode::Mark::Start { task },
