@@ -286,6 +286,82 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     assert!(out.status.success(), "{}", text(&out));
 }
 
+/// A release of one namespace reaches its node, but the plain latch (an e-stop of every side)
+/// still holds it: the node answers still engaged, and `teleop estop --release --namespace`
+/// says so and how to release it, instead of telling the operator to run the same release
+/// again.
+#[test]
+fn a_namespaced_release_names_a_node_the_plain_latch_still_holds() {
+    let sandbox = Sandbox::new();
+    let mut ipc = sandbox.ipc.clone();
+    ipc.namespace = Some("left".to_string());
+    let left_node = NodeRuntime::new("e2e-left", &ipc).unwrap();
+    let left = EStopInput::new(&left_node).unwrap();
+    // Nobody answers the engage here (the node reads only when the test lets it): exit 1,
+    // engaged all the same.
+    estop(
+        &sandbox,
+        &[],
+        false,
+        &[
+            "ENGAGED (latched)",
+            "did not answer within 1000 ms: left/e2e-left",
+            "though 1 obey it",
+        ],
+    );
+    wait_for(Duration::from_secs(5), "the left node engaged", || {
+        left.update().unwrap();
+        left.engaged().then_some(())
+    });
+    let release = sandbox
+        .teleop()
+        .args(["estop", "--release", "--namespace", "left"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The node reads every doorbell while the release waits.
+    let mut release = Some(release);
+    let mut out = None;
+    wait_for(Duration::from_secs(15), "the release to end", || {
+        left.update().unwrap();
+        let child = release.as_mut()?;
+        if child.try_wait().unwrap().is_some() {
+            out = Some(release.take()?.wait_with_output().unwrap());
+            return Some(());
+        }
+        std::thread::sleep(Duration::from_millis(5));
+        None
+    });
+    let out = out.unwrap();
+    let said = text(&out);
+    assert!(!out.status.success(), "{said}");
+    for words in [
+        "NOT released by every node",
+        "answered still engaged: left/e2e-left",
+        "release without `--namespace`",
+    ] {
+        assert!(said.contains(words), "{words:?} not said: {said}");
+    }
+    assert!(left.engaged(), "the plain latch holds it");
+    // Without the namespace the release removes the plain latch too.
+    let release = sandbox
+        .teleop()
+        .args(["estop", "--release"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for(Duration::from_secs(5), "the left node released", || {
+        left.update().unwrap();
+        (!left.engaged()).then_some(())
+    });
+    let out = release.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+}
+
 const RETARGET_TOML: &str = r#"
 glove_timeout_ms = 100
 "#;
