@@ -302,6 +302,54 @@ restart_delay_ms = 200
     )
 }
 
+/// `ready_timeout_ms`: the process after the recorder starts once the recorder records (its
+/// first health report, about 90 ms after it started here), so the recording holds the session
+/// from its first sample: the next process lists the topics as it starts and finds the
+/// recorder subscribed to the glove's, and the launcher says it waited. (The listing alone
+/// does not tell: `teleop topics` takes longer to start than the recorder to subscribe.)
+#[test]
+fn the_process_after_the_recorder_starts_once_it_records() {
+    let sandbox = Sandbox::new();
+    let dir = sandbox.dir.path().join("rec");
+    let listing = sandbox.dir.path().join("topics-at-start.txt");
+    let launch = recorder_session(
+        &sandbox,
+        &dir,
+        &format!(
+            "ready_timeout_ms = 5000\n\n[[process]]\nname = \"look\"\nprogram = \"sh\"\nargs = \
+             [\"-c\", \"{} topics > {}.part && mv {}.part {}; sleep 60\"]\nnode = \"\"\n\
+             required = false\n",
+            bin("teleop").display(),
+            listing.display(),
+            listing.display(),
+            listing.display()
+        ),
+    );
+    let session = sandbox.launch(&launch);
+    let text = wait_for(Duration::from_secs(20), "the listing", || {
+        std::fs::read_to_string(&listing).ok()
+    });
+    // The launcher's own watch subscribes to every topic; the recorder (`--topics
+    // glove/state`) to the glove's only.
+    let subscribers = |topic: &str| -> u32 {
+        text.lines()
+            .find(|l| l.starts_with(&format!("{topic} ")))
+            .and_then(|l| l.split_whitespace().nth(4)?.parse().ok())
+            .unwrap_or_else(|| panic!("no {topic} line:\n{text}\n{}", session.log()))
+    };
+    assert_eq!(
+        subscribers("glove/state"),
+        subscribers("glove/diagnostics") + 1,
+        "the recorder was not subscribed when the next process started:\n{text}\n{}",
+        session.log()
+    );
+    assert!(
+        session.log().contains("ready: starting the next process"),
+        "{}",
+        session.log()
+    );
+}
+
 /// Publishes glove samples every millisecond for `how_long`; returns the last seq.
 fn publish_for(publisher: &mut teleop_runtime::Publisher<GloveState>, how_long: Duration) -> u64 {
     let start = Instant::now();

@@ -23,7 +23,7 @@
 //! recorded like any sample (channel `episode`, once, without a namespace); when an episode
 //! closes or is discarded the recorder writes its record `episode.<n>` with its health (see
 //! `episode`) and syncs the chunk, so a killed recorder keeps every closed episode. Its own
-//! `health` report (every 500 ms and at once after a mark) says the current episode
+//! `health` report (once it records, every 500 ms and at once after a mark) says the current episode
 //! (`episode`, `episode_open`, `episode_s`), the episodes kept and the marks taken and ignored.
 //! A recorder restarted in the same session continues its predecessor's episodes.
 //!
@@ -484,7 +484,9 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
     let mut last_report = std::time::Instant::now();
     let mut failure: Option<anyhow::Error> = None;
     let mut health = Health::new(runtime)?;
-    let mut last_health = std::time::Instant::now();
+    // The first report goes out at once: it tells `teleop launch` the recorder is recording
+    // (`ready_timeout_ms`), so the next process starts.
+    let mut last_health: Option<std::time::Instant> = None;
     let channels: Vec<String> = taps.iter().map(|t| t.channel().to_string()).collect();
     let channels: Vec<&str> = channels.iter().map(String::as_str).collect();
     let mut inputs: Vec<Input> = taps.iter().map(|t| Input::new(t.listener())).collect();
@@ -501,8 +503,8 @@ pub fn record(runtime: &NodeRuntime, options: &RecordOptions) -> anyhow::Result<
         let changed = matches!(result, Ok(true));
         let result = result.map(|_| ());
         health.count_loop();
-        if changed || last_health.elapsed() >= HEALTH_PERIOD {
-            last_health = std::time::Instant::now();
+        if changed || last_health.is_none_or(|t| t.elapsed() >= HEALTH_PERIOD) {
+            last_health = Some(std::time::Instant::now());
             for (name, value) in book.details(now_ns()) {
                 health.set_detail(name, value);
             }

@@ -64,6 +64,8 @@ struct RawProcess {
     restart_window_s: Spanned<u64>,
     #[serde(default = "default_health_timeout_ms")]
     health_timeout_ms: Spanned<u64>,
+    #[serde(default = "default_ready_timeout_ms")]
+    ready_timeout_ms: Spanned<u64>,
     #[serde(default = "default_true")]
     required: bool,
     node: Option<String>,
@@ -95,6 +97,9 @@ fn default_restart_window_s() -> Spanned<u64> {
 }
 fn default_health_timeout_ms() -> Spanned<u64> {
     Spanned::new(0..0, 3000)
+}
+fn default_ready_timeout_ms() -> Spanned<u64> {
+    Spanned::new(0..0, 0)
 }
 
 /// Longest accepted time setting (one day): larger values are surely typos, and would overflow
@@ -136,6 +141,9 @@ pub struct Process {
     /// A process whose node published health and then published none for this long is hung:
     /// it is killed and restarted per its policy (0: never).
     pub health_timeout_ms: u64,
+    /// Before the next process starts, wait until this one's node reported its health (it is
+    /// up: the recorder has subscribed to every topic), at most this long (0: do not wait).
+    pub ready_timeout_ms: u64,
     /// When it fails for good, the whole session stops with a failure.
     pub required: bool,
     /// The iceoryx2 node name it creates, with its namespace (`left/glove`; None: it creates
@@ -237,6 +245,14 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
         let restart_backoff_max_ms = time(&p.restart_backoff_max_ms, "restart_backoff_max_ms", 1)?;
         let restart_window_s = time(&p.restart_window_s, "restart_window_s", 1000)?;
         let health_timeout_ms = time(&p.health_timeout_ms, "health_timeout_ms", 1)?;
+        let ready_timeout_ms = time(&p.ready_timeout_ms, "ready_timeout_ms", 1)?;
+        if ready_timeout_ms > 0 && p.node.as_deref() == Some("") {
+            anyhow::bail!(
+                "{origin}:{}: process.ready_timeout_ms of {name:?}: it has no node (`node = \"\"`) \
+                 to report its health",
+                at(p.ready_timeout_ms.span())
+            );
+        }
         // What `teleop launch` itself sets is not the launch file's to change: another IPC
         // prefix or root would take the process out of the session (and out of its one-writer
         // checks and its e-stop), another namespace out of its side.
@@ -266,6 +282,7 @@ pub fn parse(text: &str, path: &Path) -> anyhow::Result<Launch> {
             restart_backoff_max_ms,
             restart_window_s,
             health_timeout_ms,
+            ready_timeout_ms,
             required: p.required,
             env: p.env,
             realtime,
@@ -591,6 +608,20 @@ mod tests {
         assert_eq!(d.restart_delay(0).as_millis(), 500);
         assert_eq!(d.restart_delay(9).as_millis(), 10_000);
         assert_eq!((d.restart_window_s, d.health_timeout_ms), (60, 3000));
+        // Not waited for unless asked; a process without a node cannot be.
+        assert_eq!(d.ready_timeout_ms, 0);
+        let r = parse_str("[[process]]\nname = \"a\"\nprogram = \"x\"\nready_timeout_ms = 5000\n")
+            .unwrap();
+        assert_eq!(r.processes[0].ready_timeout_ms, 5000);
+        let e = parse_str(
+            "[[process]]\nname = \"a\"\nprogram = \"x\"\nnode = \"\"\nready_timeout_ms = 5000\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("dir/launch.toml:5: process.ready_timeout_ms of \"a\": it has no node"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -600,6 +631,7 @@ mod tests {
             ("restart_backoff_max_ms", "86400001"),
             ("restart_window_s", "86401"),
             ("health_timeout_ms", "9999999999999"),
+            ("ready_timeout_ms", "86400001"),
         ] {
             let e = parse_str(&format!(
                 "[[process]]\nname = \"a\"\nprogram = \"x\"\n{field} = {value}\n"

@@ -78,6 +78,9 @@ pub fn run(
             warned_no_node: false,
             last_exit: None,
         });
+        if let Some(slot) = slots.last_mut() {
+            wait_ready(&mut watch, slot);
+        }
     }
     tracing::info!(
         file = %launch.path.display(),
@@ -179,6 +182,41 @@ fn stop_all(slots: &mut [Slot], timeout: Duration) {
         if let Some(child) = slot.child.take() {
             stop(&slot.process.name, child, timeout);
         }
+    }
+}
+
+/// Waits until the process just started reported its node's health, at most its
+/// `ready_timeout_ms` (a process without it, or without a node, is not waited for); gives up
+/// early on a stop signal or when the process exits, and warns when it went on without it.
+fn wait_ready(watch: &mut super::summary::SessionWatch, slot: &mut Slot) {
+    let p = slot.process;
+    let Some(node) = p.node.as_deref().filter(|_| p.ready_timeout_ms > 0) else {
+        return;
+    };
+    let deadline = slot.started + Duration::from_millis(p.ready_timeout_ms);
+    loop {
+        watch.poll();
+        if watch.last_health(node).is_some_and(|t| t >= slot.started) {
+            tracing::info!(process = %p.name, "ready: starting the next process");
+            return;
+        }
+        let exited = slot
+            .child
+            .as_mut()
+            .is_none_or(|c| c.try_wait().ok().flatten().is_some());
+        if exited || teleop_runtime::stop_signal().is_some() {
+            return;
+        }
+        if Instant::now() >= deadline {
+            tracing::warn!(
+                process = %p.name,
+                "no health report within ready_timeout_ms = {}: starting the next process \
+                 without it",
+                p.ready_timeout_ms
+            );
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
     }
 }
 
