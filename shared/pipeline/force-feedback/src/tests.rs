@@ -1071,6 +1071,36 @@ proptest! {
             }
         }
     }
+
+    /// The same for contact forces that change every step (the hysteresis and the filter keep
+    /// state): two instances fed A(t) >= B(t) per finger at 1 kHz.
+    #[test]
+    fn prop_monotone_in_changing_contact_force(
+        config in any_config(),
+        steps in prop::collection::vec(
+            (
+                proptest::array::uniform5(-1.0_f32..10.0),
+                proptest::array::uniform5(prop_oneof![3 => 0.0_f32..3.0, 1 => Just(0.0_f32)]),
+            ),
+            1..300,
+        ),
+    ) {
+        let mut ff_a = law(config.clone());
+        let mut ff_b = law(config);
+        for (k, (b, extra)) in steps.into_iter().enumerate() {
+            let a: [f32; 5] = std::array::from_fn(|i| b[i] + extra[i]);
+            let t = k as u64 * MS;
+            let out_a = ff_a.step(&inputs(t, fresh(a), None));
+            let out_b = ff_b.step(&inputs(t, fresh(b), None));
+            for f in 0..GLOVE_FINGERS {
+                prop_assert!(
+                    out_a.force[f] >= out_b.force[f],
+                    "step {k} finger {f}: A {:?} -> {:?}, B {:?} -> {:?}",
+                    a, out_a.force, b, out_b.force
+                );
+            }
+        }
+    }
 }
 
 #[test]
