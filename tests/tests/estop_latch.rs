@@ -8,7 +8,7 @@
 use std::process::{Output, Stdio};
 use std::time::{Duration, Instant};
 
-use teleop_e2e::{node_process, wait_for, with_profile, Sandbox, FEEDBACK_TOML};
+use teleop_e2e::{node_process, wait_for, with_profile, Sandbox, Session, FEEDBACK_TOML};
 use teleop_msgs::{device_model, force_flags, units, GloveForceCommand, GloveState, HandCommand};
 use teleop_msgs::{HandState, NodeHealth, Tactile};
 use teleop_runtime::{now_ns, EStopInput, NodeRuntime, Publisher, Subscriber};
@@ -28,6 +28,15 @@ fn launch_one(name: &str) -> String {
 fn alone(sandbox: &Sandbox, name: &str, config: &str) -> std::path::PathBuf {
     sandbox.write(&format!("{name}.toml"), &with_profile(config));
     sandbox.write("launch.toml", &launch_one(name))
+}
+
+/// The feedback node alone in the sandbox ([`feedback_launch`]), running, and the test playing
+/// its hand ([`hand_in`]) until the glove's force comes back from the contact.
+fn feedback_pushing(sandbox: &Sandbox) -> (Session, NodeRuntime, Hand) {
+    let session = sandbox.launch(&feedback_launch(sandbox));
+    let (node, mut hand) = hand_in(sandbox, None, "e2e-hand");
+    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    (session, node, hand)
 }
 
 /// The feedback node alone in the sandbox ([`alone`]).
@@ -129,6 +138,19 @@ fn estop(sandbox: &Sandbox, args: &[&str], succeeds: bool, says: &[&str]) -> Str
     said
 }
 
+/// Starts `teleop estop` with `args` in the background, its output captured.
+fn spawn_estop(sandbox: &Sandbox, args: &[&str]) -> std::process::Child {
+    sandbox
+        .teleop()
+        .arg("estop")
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// `teleop estop --release` succeeds saying each of `says`, and `hand`'s forces return.
 fn release(sandbox: &Sandbox, hand: &mut Hand, says: &[&str]) {
     estop(sandbox, &["--release"], true, says);
@@ -153,10 +175,7 @@ fn restarted(sandbox: &Sandbox, name: &str, old: u32) -> u32 {
 #[test]
 fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release() {
     let sandbox = Sandbox::new();
-    let launch = feedback_launch(&sandbox);
-    let _session = sandbox.launch(&launch);
-    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
-    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    let (_session, _node, mut hand) = feedback_pushing(&sandbox);
 
     // Engaged: the CLI names the node that acknowledged; forces zero.
     estop(
@@ -198,10 +217,7 @@ fn estop_latches_through_restarts_is_acknowledged_and_releases_only_on_release()
 #[test]
 fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     let sandbox = Sandbox::new();
-    let launch = feedback_launch(&sandbox);
-    let _session = sandbox.launch(&launch);
-    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
-    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    let (_session, _node, mut hand) = feedback_pushing(&sandbox);
     // A second node that obeys the e-stop, run by the test: it reads its doorbell only when the
     // test lets it.
     let slow_node = NodeRuntime::new("e2e-slow", &sandbox.ipc).unwrap();
@@ -222,16 +238,7 @@ fn a_release_waits_for_a_slow_node_and_fails_when_it_does_not_reach_it() {
     assert!(slow.engaged(), "{said}");
     hand.until(Duration::from_secs(2), "e-stop", stopped);
 
-    let spawn_release = || {
-        sandbox
-            .teleop()
-            .args(["estop", "--release"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap()
-    };
+    let spawn_release = || spawn_estop(&sandbox, &["--release"]);
     let latch_removed = || {
         wait_for(
             Duration::from_secs(10),
@@ -313,14 +320,7 @@ fn a_namespaced_release_names_a_node_the_plain_latch_still_holds() {
         left.update().unwrap();
         left.engaged().then_some(())
     });
-    let release = sandbox
-        .teleop()
-        .args(["estop", "--release", "--namespace", "left"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let release = spawn_estop(&sandbox, &["--release", "--namespace", "left"]);
     // The node reads every doorbell while the release waits.
     let mut release = Some(release);
     let mut out = None;
@@ -346,14 +346,7 @@ fn a_namespaced_release_names_a_node_the_plain_latch_still_holds() {
     }
     assert!(left.engaged(), "the plain latch holds it");
     // Without the namespace the release removes the plain latch too.
-    let release = sandbox
-        .teleop()
-        .args(["estop", "--release"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let release = spawn_estop(&sandbox, &["--release"]);
     wait_for(Duration::from_secs(5), "the left node released", || {
         left.update().unwrap();
         (!left.engaged()).then_some(())
@@ -640,10 +633,7 @@ fn estop_with_a_full_ipc_root_still_stops_the_running_nodes() {
     let mut sandbox = Sandbox::new();
     let mount = Tmpfs::mount(sandbox.dir.path().join("ipcfs"), "16m");
     sandbox.ipc = teleop_runtime::IpcSettings::isolated(&mount.0);
-    let launch = feedback_launch(&sandbox);
-    let session = sandbox.launch(&launch);
-    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
-    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    let (session, _node, mut hand) = feedback_pushing(&sandbox);
 
     // The disk of the IPC root fills up: `teleop estop` cannot make its iceoryx2 node.
     let fill = mount.0.join("fill");
@@ -671,10 +661,7 @@ fn estop_with_an_unwritable_latch_still_rings_every_doorbell() {
         return;
     }
     let sandbox = Sandbox::new();
-    let launch = feedback_launch(&sandbox);
-    let _session = sandbox.launch(&launch);
-    let (_node, mut hand) = hand_in(&sandbox, None, "e2e-hand");
-    hand.until(Duration::from_secs(20), "glove force from contact", pushing);
+    let (_session, _node, mut hand) = feedback_pushing(&sandbox);
 
     // No file can be made in the IPC root any more (iceoryx2's own files live in folders below
     // it, so its ports still work): the latch cannot be written.

@@ -391,9 +391,7 @@ fn episodes_export_to_a_lerobot_dataset_that_pyarrow_reads_back() {
             "frame {index}"
         );
     }
-    let info: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
-            .unwrap();
+    let info = info_json(&out);
     let names = info["features"]["observation.state"]["names"]
         .as_array()
         .unwrap();
@@ -474,9 +472,7 @@ fn a_bimanual_recording_exports_both_sides_named_by_side() {
         "{stdout}"
     );
     assert!(stdout.contains("refused: left/hand/state at"), "{stdout}");
-    let info: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
-            .unwrap();
+    let info = info_json(&out);
     assert_eq!(info["robot_type"], "revo2_bimanual");
     let names = info["features"]["observation.state"]["names"]
         .as_array()
@@ -549,9 +545,7 @@ fn an_export_that_dies_at_each_crash_point_leaves_a_dataset_that_reads_right() {
     let (ok, stdout, stderr) = export(&sandbox, &rec, &out, &[]);
     assert!(ok, "{stdout}\n{stderr}");
     let total_episodes = || -> u64 {
-        let info: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
-                .unwrap();
+        let info = info_json(&out);
         info["total_episodes"].as_u64().unwrap()
     };
     let mut episodes = 2;
@@ -660,9 +654,7 @@ fn gaps_non_finite_values_and_missing_topics_are_refused_by_name() {
         stdout.contains("1 episodes exported, 2 refused"),
         "{stdout}"
     );
-    let info: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap())
-            .unwrap();
+    let info = info_json(&out);
     let names = info["features"]["observation.state"]["names"]
         .as_array()
         .unwrap();
@@ -699,4 +691,9 @@ fn gaps_non_finite_values_and_missing_topics_are_refused_by_name() {
         "refused once, not per episode: {stdout}"
     );
     assert!(!out.exists());
+}
+
+/// The dataset's `meta/info.json` at `out`, parsed.
+fn info_json(out: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("meta/info.json")).unwrap()).unwrap()
 }

@@ -1079,6 +1079,14 @@ mod tests {
         (header, rows)
     }
 
+    /// The joints named by a CSV header's position columns, in order.
+    fn joint_columns(header: &[String]) -> Vec<&str> {
+        header
+            .iter()
+            .filter_map(|c| c.strip_prefix("joints.")?.strip_suffix(".position"))
+            .collect()
+    }
+
     #[test]
     fn hand_states_show_each_hands_used_joints_by_name_in_every_format() {
         for hand in HANDS {
@@ -1117,10 +1125,7 @@ mod tests {
             let text = show(Format::Csv, &s);
             let (header, rows) = csv(&text);
             assert_eq!(rows.len(), 1, "{text}");
-            let joint_columns: Vec<&str> = header
-                .iter()
-                .filter_map(|c| c.strip_prefix("joints.")?.strip_suffix(".position"))
-                .collect();
+            let joint_columns = joint_columns(&header);
             assert_eq!(joint_columns, names, "{hand}: {text}");
             let cell = |column: &str| {
                 let at = header.iter().position(|c| c == column).unwrap();
@@ -1526,10 +1531,7 @@ mod tests {
         );
         let (header, rows) = csv(&text);
         assert_eq!(rows.len(), 3, "one header: {text}");
-        let joint_columns: Vec<&str> = header
-            .iter()
-            .filter_map(|c| c.strip_prefix("joints.")?.strip_suffix(".position"))
-            .collect();
+        let joint_columns = joint_columns(&header);
         assert_eq!(
             joint_columns, names,
             "the profile's, from the first row: {text}"

@@ -976,6 +976,27 @@ impl Side {
             obeying: Vec::new(),
         }
     }
+
+    /// The nodes that obey the e-stop and have not answered, sorted; a name that more than one
+    /// node has is always among them (their answers, which carry only the name, cannot be told
+    /// apart, so an answer from one of them must not count for the other).
+    fn silent(&self) -> Vec<String> {
+        let mut silent: Vec<String> = Vec::new();
+        for name in &self.obeying {
+            let nodes = self.obeying.iter().filter(|n| *n == name).count();
+            let who = if nodes > 1 {
+                format!("{name} ({nodes} nodes of this name)")
+            } else if self.answered.contains(name) || self.still.contains(name) {
+                continue;
+            } else {
+                name.clone()
+            };
+            if !silent.contains(&who) {
+                silent.push(who);
+            }
+        }
+        silent
+    }
 }
 
 /// Waits until every node that obeys the e-stop answered since `asked_at` (`engage`, or a
@@ -1026,10 +1047,7 @@ fn wait_for_acks(
             side.obeying = runtime
                 .topic_publisher_nodes_in::<EStopAck>(side.namespace.as_ref())
                 .unwrap_or_default();
-            all &= side
-                .obeying
-                .iter()
-                .all(|n| side.answered.contains(n) || side.still.contains(n));
+            all &= side.silent().is_empty();
         }
         if all || Instant::now() >= deadline {
             return false;
@@ -1058,11 +1076,7 @@ fn answers(sides: Vec<Side>) -> Answers {
         side.answered.sort();
         side.still.sort();
         if side.acks.is_some() {
-            let silent: Vec<String> = side
-                .obeying
-                .into_iter()
-                .filter(|n| !side.answered.contains(n) && !side.still.contains(n))
-                .collect();
+            let silent = side.silent();
             if !silent.is_empty() {
                 out.unanswered.push((side.namespace.clone(), silent));
             }
@@ -1132,6 +1146,19 @@ mod tests {
             .problem()
             .unwrap();
         assert!(nobody.contains("though 2 obey it"), "{nobody}");
+    }
+
+    #[test]
+    fn two_nodes_of_one_name_never_count_as_answered() {
+        let mut side = Side::new(None, None);
+        side.obeying = vec!["feedback".into(), "revo2".into(), "revo2".into()];
+        side.answered = vec!["feedback".into(), "revo2".into()];
+        assert_eq!(side.silent(), ["revo2 (2 nodes of this name)"]);
+        side.obeying = vec!["feedback".into(), "revo2".into()];
+        assert!(side.silent().is_empty());
+        side.answered.clear();
+        side.still = vec!["revo2".into()];
+        assert_eq!(side.silent(), ["feedback"]);
     }
 
     #[test]

@@ -216,7 +216,7 @@ enum Command {
         /// Replay only these channels (e.g. `glove/state` to drive the hand from a recorded
         /// operator; `left/glove/state` in a recording of several sides). Without it, the
         /// sensor topics (glove/state, glove/diagnostics, hand/state, hand/tactile, device/info),
-        /// never the commands, `estop` or node health.
+        /// never the commands or node health; `estop` and `estop/ack` never at all.
         #[arg(long, num_args = 1..)]
         topics: Option<Vec<String>>,
         /// Seconds from the start of the recording to begin at.

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use teleop_feedback::{Event, FeedbackEngine};
 use teleop_hand_profile::{HandProfile, RECORDING_METADATA};
 use teleop_msgs::{
-    source_id, visit_topic, DeviceInfo, EStop, GloveDiagnostics, GloveForceCommand, GloveState,
-    HandCommand, HandState, Message, NodeHealth, Tactile, TopicVisitor,
+    source_id, visit_topic, DeviceInfo, EStop, EStopAck, GloveDiagnostics, GloveForceCommand,
+    GloveState, HandCommand, HandState, Message, NodeHealth, Tactile, TopicVisitor,
 };
 use teleop_recorder::{record, report, standard_metadata, Output, RecordOptions};
 use teleop_recording::{
@@ -283,9 +283,15 @@ fn replayed_channels(
             .collect());
     };
     for name in given {
-        if split(name).is_none() {
+        let Some((_, topic)) = split(name) else {
             return Err(crate::inspect::unknown_topic(name));
-        }
+        };
+        anyhow::ensure!(
+            ![EStop::TOPIC, EStopAck::TOPIC].contains(&topic.name),
+            "--topics {name}: the e-stop is never replayed: a recorded release would release a \
+             live pipeline and recorded acknowledgements would pose as its nodes (use `teleop \
+             estop`)"
+        );
         anyhow::ensure!(
             recorded.contains(name),
             "--topics {name}: not in the recording; its channels are: {}",
@@ -861,6 +867,14 @@ mod namespace_tests {
         );
         let err = replayed_channels(&recorded, Some(&["hand/comand".to_string()])).unwrap_err();
         assert!(err.to_string().contains("\"hand/comand\""), "{err}");
+        for estop in ["estop", "left/estop/ack"] {
+            let err = replayed_channels(&recorded, Some(&[estop.to_string()])).unwrap_err();
+            assert!(
+                err.to_string()
+                    .starts_with(&format!("--topics {estop}: the e-stop is never replayed")),
+                "{err}"
+            );
+        }
     }
 
     #[test]

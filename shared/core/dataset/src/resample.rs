@@ -317,17 +317,23 @@ mod tests {
             .collect()
     }
 
+    /// A resampler of two one-value slots at `fps` over one window from `start_ms` to
+    /// `stop_ms`.
+    fn two_slots(fps: u32, start_ms: u64, stop_ms: u64) -> Resampler {
+        Resampler::new(
+            &[1, 1],
+            fps,
+            vec![Window {
+                start_ns: start_ms * MS,
+                stop_ns: stop_ms * MS,
+            }],
+        )
+    }
+
     #[test]
     fn zero_order_hold_takes_the_newest_sample_at_or_before_each_frame() {
         // 10 fps over [100, 400] ms; slot 0 at 7 ms steps, slot 1 at 50 ms steps.
-        let mut r = Resampler::new(
-            &[1, 1],
-            10,
-            vec![Window {
-                start_ns: 100 * MS,
-                stop_ns: 400 * MS,
-            }],
-        );
+        let mut r = two_slots(10, 100, 400);
         let mut samples: Vec<(u64, usize)> = (0..80).map(|i| (i * 7, 0)).collect();
         samples.extend((0..12).map(|i| (i * 50, 1)));
         samples.sort();
@@ -437,14 +443,7 @@ mod tests {
 
     #[test]
     fn a_sample_older_than_the_held_one_never_takes_its_place() {
-        let mut r = Resampler::new(
-            &[1, 1],
-            10,
-            vec![Window {
-                start_ns: 0,
-                stop_ns: 3_000 * MS,
-            }],
-        );
+        let mut r = two_slots(10, 0, 3_000);
         r.push(0, 0, 0, &[0.0]);
         r.push(1, 0, 0, &[0.0]);
         r.push(0, 250 * MS, 250 * MS, &[250.0]);
@@ -466,14 +465,7 @@ mod tests {
 
     #[test]
     fn a_sample_logged_late_still_counts_and_a_silent_topic_does_not_stall() {
-        let mut r = Resampler::new(
-            &[1, 1],
-            10,
-            vec![Window {
-                start_ns: 0,
-                stop_ns: 2_000 * MS,
-            }],
-        );
+        let mut r = two_slots(10, 0, 2_000);
         r.push(0, 0, 0, &[0.0]);
         r.push(1, 0, 0, &[0.0]);
         // Slot 0 runs on; slot 1's sample stamped 95 ms is logged after slot 0's 150 ms.

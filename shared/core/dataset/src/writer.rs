@@ -1260,14 +1260,19 @@ mod tests {
         assert_eq!(check(&out).expect("check").total_episodes, 1);
     }
 
+    /// Writes a dataset of one 5-frame episode at `out`; returns its `meta/info.json`.
+    fn one_episode_dataset(out: &Path) -> Vec<u8> {
+        let mut w = DatasetWriter::open(out, spec()).expect("open");
+        w.write_episode("pick", &episode(5, 0.0)).expect("e0");
+        w.commit().expect("commit");
+        fs::read(out.join("meta/info.json")).expect("info")
+    }
+
     #[test]
     fn a_crashed_export_leaves_the_dataset_readable_and_is_cleaned_up() {
         let tmp = tempfile::tempdir().expect("tmp");
         let out = tmp.path().join("ds");
-        let mut w = DatasetWriter::open(&out, spec()).expect("open");
-        w.write_episode("pick", &episode(5, 0.0)).expect("e0");
-        w.commit().expect("commit");
-        let before = fs::read(out.join("meta/info.json")).expect("info");
+        let before = one_episode_dataset(&out);
 
         // An export that dies after writing frames, before its commit (no destructor runs).
         let mut w = DatasetWriter::open(&out, spec()).expect("reopen");
@@ -1327,10 +1332,7 @@ mod tests {
     fn a_version_that_does_not_check_is_not_published() {
         let tmp = tempfile::tempdir().expect("tmp");
         let out = tmp.path().join("ds");
-        let mut w = DatasetWriter::open(&out, spec()).expect("open");
-        w.write_episode("pick", &episode(5, 0.0)).expect("e0");
-        w.commit().expect("commit");
-        let before = fs::read(out.join("meta/info.json")).expect("info");
+        let before = one_episode_dataset(&out);
         // A stray data file in the staging folder: its rows belong to no episode.
         let mut w = DatasetWriter::open(&out, spec()).expect("reopen");
         w.write_episode("pick", &episode(2, 1.0)).expect("e1");

@@ -493,6 +493,20 @@ impl NodeRuntime {
         self.topic_ports_in::<M>(self.namespace.as_ref())
     }
 
+    /// `M`'s publish-subscribe service in `namespace`, if it exists (nothing is created).
+    fn existing_pubsub<M: Message>(
+        &self,
+        namespace: Option<&Namespace>,
+    ) -> Option<iceoryx2::service::port_factory::publish_subscribe::PortFactory<Service, M, ()>>
+    {
+        let (service, _) = service_name::<M>(namespace).ok()?;
+        self.node
+            .service_builder(&service)
+            .publish_subscribe::<M>()
+            .open()
+            .ok()
+    }
+
     /// Publishers and subscribers of `M`'s topic in `namespace`, `None` when the topic does not
     /// exist (yet). Does not create anything.
     pub fn topic_ports_in<M: Message>(
@@ -500,13 +514,7 @@ impl NodeRuntime {
         namespace: Option<&Namespace>,
     ) -> Option<(usize, usize)> {
         use iceoryx2::prelude::PortFactory;
-        let (service, _) = service_name::<M>(namespace).ok()?;
-        let pubsub = self
-            .node
-            .service_builder(&service)
-            .publish_subscribe::<M>()
-            .open()
-            .ok()?;
+        let pubsub = self.existing_pubsub::<M>(namespace)?;
         let dynamic = pubsub.dynamic_config();
         Some((
             dynamic.number_of_publishers(),
@@ -515,25 +523,21 @@ impl NodeRuntime {
     }
 
     /// The names of the live nodes that have a publisher of `M`'s topic in `namespace`, sorted,
-    /// each once; `None` when the topic does not exist (yet). A dead node's publishers are left
-    /// out (its process is gone); a node whose state or name cannot be read is listed by its
-    /// iceoryx2 id. Creates nothing.
+    /// one entry per node (two nodes of one name give the name twice); `None` when the topic
+    /// does not exist (yet). A dead node's publishers are left out (its process is gone); a node
+    /// whose state or name cannot be read is listed by its iceoryx2 id. Creates nothing.
     pub fn topic_publisher_nodes_in<M: Message>(
         &self,
         namespace: Option<&Namespace>,
     ) -> Option<Vec<String>> {
         use iceoryx2::node::{NodeState, NodeView};
         use iceoryx2::prelude::{CallbackProgression, PortFactory};
-        let (service, _) = service_name::<M>(namespace).ok()?;
-        let pubsub = self
-            .node
-            .service_builder(&service)
-            .publish_subscribe::<M>()
-            .open()
-            .ok()?;
+        let pubsub = self.existing_pubsub::<M>(namespace)?;
         let mut ids = Vec::new();
         pubsub.dynamic_config().list_publishers(|p| {
-            ids.push(p.node_id);
+            if !ids.contains(&p.node_id) {
+                ids.push(p.node_id);
+            }
             CallbackProgression::Continue
         });
         let mut names = Vec::new();
@@ -558,7 +562,6 @@ impl NodeRuntime {
             names = ids.iter().map(|id| format!("iceoryx2 node {id}")).collect();
         }
         names.sort();
-        names.dedup();
         Some(names)
     }
 

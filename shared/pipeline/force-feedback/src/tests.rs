@@ -1055,21 +1055,8 @@ proptest! {
         t0 in 0_u64..u64::MAX / 2,
         n in 1_usize..400,
     ) {
-        let a: [f32; 5] = std::array::from_fn(|i| b[i] + extra[i]);
-        let mut ff_a = law(config.clone());
-        let mut ff_b = law(config);
-        for k in 0..n {
-            let t = t0 + k as u64 * MS;
-            let out_a = ff_a.step(&inputs(t, fresh(a), None));
-            let out_b = ff_b.step(&inputs(t, fresh(b), None));
-            for f in 0..GLOVE_FINGERS {
-                prop_assert!(
-                    out_a.force[f] >= out_b.force[f],
-                    "step {k} finger {f}: A {:?} -> {:?}, B {:?} -> {:?}",
-                    a, out_a.force, b, out_b.force
-                );
-            }
-        }
+        let steps = (0..n).map(|k| (t0 + k as u64 * MS, b, extra));
+        assert_more_force_never_less_feedback(config, steps)?;
     }
 
     /// The same for contact forces that change every step (the hysteresis and the filter keep
@@ -1085,22 +1072,38 @@ proptest! {
             1..300,
         ),
     ) {
-        let mut ff_a = law(config.clone());
-        let mut ff_b = law(config);
-        for (k, (b, extra)) in steps.into_iter().enumerate() {
-            let a: [f32; 5] = std::array::from_fn(|i| b[i] + extra[i]);
-            let t = k as u64 * MS;
-            let out_a = ff_a.step(&inputs(t, fresh(a), None));
-            let out_b = ff_b.step(&inputs(t, fresh(b), None));
-            for f in 0..GLOVE_FINGERS {
-                prop_assert!(
-                    out_a.force[f] >= out_b.force[f],
-                    "step {k} finger {f}: A {:?} -> {:?}, B {:?} -> {:?}",
-                    a, out_a.force, b, out_b.force
-                );
-            }
+        let steps = steps
+            .into_iter()
+            .enumerate()
+            .map(|(k, (b, extra))| (k as u64 * MS, b, extra));
+        assert_more_force_never_less_feedback(config, steps)?;
+    }
+}
+
+/// Feeds two fresh laws of `config`, at each step's time, the fingertip forces `b` and
+/// `b + extra` (`extra >= 0`): the second's force is never below the first's on any finger.
+fn assert_more_force_never_less_feedback(
+    config: FeedbackConfig,
+    steps: impl Iterator<Item = (u64, [f32; 5], [f32; 5])>,
+) -> Result<(), TestCaseError> {
+    let mut ff_a = law(config.clone());
+    let mut ff_b = law(config);
+    for (k, (t, b, extra)) in steps.enumerate() {
+        let a: [f32; 5] = std::array::from_fn(|i| b[i] + extra[i]);
+        let out_a = ff_a.step(&inputs(t, fresh(a), None));
+        let out_b = ff_b.step(&inputs(t, fresh(b), None));
+        for f in 0..GLOVE_FINGERS {
+            prop_assert!(
+                out_a.force[f] >= out_b.force[f],
+                "step {k} finger {f}: A {:?} -> {:?}, B {:?} -> {:?}",
+                a,
+                out_a.force,
+                b,
+                out_b.force
+            );
         }
     }
+    Ok(())
 }
 
 #[test]
